@@ -1,0 +1,99 @@
+//! The autopilot mission of one UAV, independent of file format.
+
+use serde::{Deserialize, Serialize};
+
+/// MAVLink command ids used in exported missions.
+pub mod cmd {
+    pub const NAV_WAYPOINT: u16 = 16;
+    pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
+    pub const NAV_TAKEOFF: u16 = 22;
+    pub const DO_CHANGE_SPEED: u16 = 178;
+    pub const DO_SET_CAM_TRIGG_DIST: u16 = 206;
+    pub const NAV_FENCE_POLYGON_VERTEX_INCLUSION: u16 = 5001;
+    pub const NAV_FENCE_POLYGON_VERTEX_EXCLUSION: u16 = 5002;
+}
+
+/// MAV_FRAME values.
+pub mod frame {
+    pub const GLOBAL: u8 = 0;
+    pub const MISSION: u8 = 2;
+    pub const GLOBAL_RELATIVE_ALT: u8 = 3;
+    pub const GLOBAL_TERRAIN_ALT: u8 = 10;
+}
+
+/// How mission altitudes are expressed (SPEC §2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AltitudeFrame {
+    /// Above home (MAV_FRAME_GLOBAL_RELATIVE_ALT = 3).
+    #[default]
+    Relative,
+    /// Above mean sea level (MAV_FRAME_GLOBAL = 0); assumes an orthometric DEM.
+    Amsl,
+    /// Above terrain, followed by the autopilot (MAV_FRAME_GLOBAL_TERRAIN_ALT = 10).
+    Terrain,
+}
+
+impl AltitudeFrame {
+    pub fn mav_frame(self) -> u8 {
+        match self {
+            AltitudeFrame::Relative => frame::GLOBAL_RELATIVE_ALT,
+            AltitudeFrame::Amsl => frame::GLOBAL,
+            AltitudeFrame::Terrain => frame::GLOBAL_TERRAIN_ALT,
+        }
+    }
+}
+
+/// A WGS84 position with an altitude in the mission's frame (metres).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeoPoint {
+    pub lon: f64,
+    pub lat: f64,
+    pub alt: f64,
+}
+
+/// One step of a mission, in flight order.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum MissionItem {
+    /// Climb to `alt` above the launch point.
+    Takeoff { alt: f64 },
+    /// Set the ground speed.
+    ChangeSpeed { speed_m_s: f64 },
+    /// Fly to a point.
+    Waypoint(GeoPoint),
+    /// Trigger the camera every `distance_m` metres (0 stops triggering).
+    CameraTriggerDistance { distance_m: f64 },
+    /// Fly home and land.
+    ReturnToLaunch,
+}
+
+/// A complete mission for one vehicle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mission {
+    /// Launch point; `alt` is metres above mean sea level (0 without a DEM).
+    pub home: GeoPoint,
+    /// Frame of every altitude in `items` (not of `home`).
+    pub frame: AltitudeFrame,
+    pub cruise_speed_m_s: f64,
+    pub items: Vec<MissionItem>,
+}
+
+impl Mission {
+    /// The positions flown, home first, as (lon, lat, alt).
+    pub fn waypoints(&self) -> impl Iterator<Item = &GeoPoint> {
+        self.items.iter().filter_map(|i| match i {
+            MissionItem::Waypoint(p) => Some(p),
+            _ => None,
+        })
+    }
+}
+
+/// A fence polygon: an inclusion area the vehicle must stay in, or an
+/// exclusion area (a no-fly zone) it must stay out of. Rings are lon/lat,
+/// not closed (the first vertex is not repeated).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FencePolygon {
+    pub inclusion: bool,
+    pub vertices: Vec<[f64; 2]>,
+}

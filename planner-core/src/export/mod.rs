@@ -1,0 +1,10 @@
+//! Export stage: missions and their file formats (SPEC §3.6).
+
+pub mod geojson;
+pub mod mission;
+pub mod qgc_plan;
+pub mod waypoints;
+
+pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};
+pub use qgc_plan::write_plan;
+pub use waypoints::{write_fence, write_waypoints};

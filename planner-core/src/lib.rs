@@ -1,0 +1,14 @@
+//! terraplan's planning algorithms, one module per pipeline stage.
+//!
+//! The stages know nothing of HTTP or storage: `server` translates requests
+//! and files into calls of this API.
+//!
+//! All planning geometry is in metres in a UTM zone (see [`geo::UtmProjection`]);
+//! WGS84 lon/lat only appears at the edges (input parsing and export).
+
+pub mod coverage;
+pub mod decompose;
+pub mod export;
+pub mod flock;
+pub mod geo;
+

@@ -1,0 +1,815 @@
+//! The survey pipeline: area → free space → cells → lanes → tour → mission,
+//! stage by stage (SPEC §3). The CLI and the service both call
+//! [`plan_survey`] and write [`SurveyPlan::files`].
+
+use geo::{Area, BooleanOps, ConvexHull, Euclidean, Length, MultiPoint};
+use geo_types::{Coord, MultiPolygon, Point, Polygon};
+use serde::{Deserialize, Deserializer, Serialize};
+use serde_json::{Map, Value, json};
+
+use crate::coverage::{self, Camera, CellPlan, SurveyGeometry};
+use crate::decompose;
+use crate::export::{
+    self, AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem, geojson as gj,
+};
+use crate::flock::{ObstacleMap, plan_tour};
+use crate::geo::{GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area};
+
+/// Free space smaller than this (m²) is treated as nothing left to survey.
+const MIN_FREE_AREA_M2: f64 = 1.0;
+/// A heading change above this many degrees counts as a turn.
+const TURN_THRESHOLD_DEG: f64 = 10.0;
+/// How many slice angles `auto` tries at most: every 15° plus the bearings
+/// of the longest boundary edges, where the fewest turns usually are.
+const AUTO_EDGE_CANDIDATES: usize = 12;
+const AUTO_STEP_DEG: f64 = 15.0;
+
+/// Slice-line bearing: a fixed angle or `"auto"` (fewest turns in total).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum SliceAngle {
+    #[default]
+    Auto,
+    Degrees(f64),
+}
+
+impl Serialize for SliceAngle {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            SliceAngle::Auto => s.serialize_str("auto"),
+            SliceAngle::Degrees(d) => s.serialize_f64(*d),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for SliceAngle {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Num(f64),
+            Str(String),
+        }
+        match Raw::deserialize(d).map_err(|_| {
+            serde::de::Error::custom("slice_angle_deg must be a number of degrees or \"auto\"")
+        })? {
+            Raw::Num(v) => Ok(SliceAngle::Degrees(v)),
+            Raw::Str(s) if s == "auto" => Ok(SliceAngle::Auto),
+            Raw::Str(s) => Err(serde::de::Error::custom(format!(
+                "slice_angle_deg must be a number of degrees or \"auto\", found {s:?}"
+            ))),
+        }
+    }
+}
+
+/// One UAV of the flock.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UavSpec {
+    pub id: String,
+    /// Take-off and landing point, [lon, lat].
+    pub start: [f64; 2],
+}
+
+/// Survey request parameters: the fields of the params file and of the API
+/// request body. Ranges are checked by [`SurveyParams::validate`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SurveyParams {
+    /// Flight height above ground, m, in [1, 1000]; default 60 unless
+    /// `gsd_cm_px` is given.
+    pub altitude_m: Option<f64>,
+    /// Target ground sample distance, cm/px, in [0.05, 100]; sets the altitude.
+    pub gsd_cm_px: Option<f64>,
+    /// Camera; default [`Camera::default`].
+    pub camera: Option<Camera>,
+    /// Name of a camera preset (see [`coverage::PRESETS`]); exclusive with `camera`.
+    pub camera_preset: Option<String>,
+    /// Side overlap of neighbouring lanes' footprints, [0, 0.95]; default 0.7.
+    pub side_overlap: f64,
+    /// Front overlap of consecutive photos, [0, 0.95]; default 0.8.
+    pub front_overlap: f64,
+    /// Direct line spacing, m, in [0.5, 2000]; overrides the side overlap.
+    pub line_spacing_m: Option<f64>,
+    /// Bearing of the slice lines, degrees in [0, 180), or "auto"; default auto.
+    pub slice_angle_deg: SliceAngle,
+    /// Ground speed, m/s, in (0, 50]; default 10.
+    pub speed_m_s: f64,
+    /// Time charged per turn in the flight-time estimate, s, in [0, 120]; default 2.
+    pub turn_penalty_s: f64,
+    /// UAVs; default one UAV starting at the ROI's first vertex.
+    pub uavs: Vec<UavSpec>,
+    /// Altitude frame of the mission; default relative.
+    pub altitude_frame: AltitudeFrame,
+    /// Distance kept from no-fly-zone corners by transits, m, in [0, 100]; default 2.
+    pub nfz_clearance_m: f64,
+    /// Margin of the inclusion geofence around the flown area, m, in [0, 1000]; default 30.
+    pub fence_margin_m: f64,
+}
+
+impl Default for SurveyParams {
+    fn default() -> Self {
+        SurveyParams {
+            altitude_m: None,
+            gsd_cm_px: None,
+            camera: None,
+            camera_preset: None,
+            side_overlap: 0.7,
+            front_overlap: 0.8,
+            line_spacing_m: None,
+            slice_angle_deg: SliceAngle::Auto,
+            speed_m_s: 10.0,
+            turn_penalty_s: 2.0,
+            uavs: Vec::new(),
+            altitude_frame: AltitudeFrame::Relative,
+            nfz_clearance_m: 2.0,
+            fence_margin_m: 30.0,
+        }
+    }
+}
+
+pub const DEFAULT_ALTITUDE_M: f64 = 60.0;
+
+fn check_range(issues: &mut Vec<Issue>, pointer: &str, v: f64, lo: f64, hi: f64, lo_open: bool) {
+    let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
+    if !ok {
+        let range = if lo_open { format!("({lo}, {hi}]") } else { format!("[{lo}, {hi}]") };
+        issues.push(Issue::new(pointer, &format!("{v} is outside the allowed range {range}")));
+    }
+}
+
+impl SurveyParams {
+    /// Parse a params JSON value; unknown fields and wrong types are
+    /// reported with the pointer of the member at fault.
+    pub fn from_json(value: &Value, pointer: &str) -> Result<Self, Vec<Issue>> {
+        let params: SurveyParams = serde_path_to_error::deserialize(value).map_err(|e| {
+            let path = e.path().to_string();
+            let ptr = if path == "." {
+                pointer.to_string()
+            } else {
+                format!("{pointer}/{}", path.replace('.', "/").replace('[', "/").replace(']', ""))
+            };
+            vec![Issue::new(&ptr, &e.into_inner().to_string())]
+        })?;
+        params.validate(pointer)?;
+        Ok(params)
+    }
+
+    /// Range checks; every out-of-range value is reported, none is clamped.
+    pub fn validate(&self, pointer: &str) -> Result<(), Vec<Issue>> {
+        let mut issues = Vec::new();
+        let p = |f: &str| format!("{pointer}/{f}");
+        if let Some(a) = self.altitude_m {
+            check_range(&mut issues, &p("altitude_m"), a, 1.0, 1000.0, false);
+        }
+        if let Some(g) = self.gsd_cm_px {
+            check_range(&mut issues, &p("gsd_cm_px"), g, 0.05, 100.0, false);
+            if self.altitude_m.is_some() {
+                issues.push(Issue::new(&p("gsd_cm_px"), "give altitude_m or gsd_cm_px, not both"));
+            }
+        }
+        check_range(&mut issues, &p("side_overlap"), self.side_overlap, 0.0, 0.95, false);
+        check_range(&mut issues, &p("front_overlap"), self.front_overlap, 0.0, 0.95, false);
+        if let Some(s) = self.line_spacing_m {
+            check_range(&mut issues, &p("line_spacing_m"), s, 0.5, 2000.0, false);
+        }
+        if let SliceAngle::Degrees(d) = self.slice_angle_deg {
+            if !(d.is_finite() && (0.0..180.0).contains(&d)) {
+                issues.push(Issue::new(
+                    &p("slice_angle_deg"),
+                    &format!("{d} is outside the allowed range [0, 180) (or use \"auto\")"),
+                ));
+            }
+        }
+        check_range(&mut issues, &p("speed_m_s"), self.speed_m_s, 0.0, 50.0, true);
+        check_range(&mut issues, &p("turn_penalty_s"), self.turn_penalty_s, 0.0, 120.0, false);
+        check_range(&mut issues, &p("nfz_clearance_m"), self.nfz_clearance_m, 0.0, 100.0, false);
+        check_range(&mut issues, &p("fence_margin_m"), self.fence_margin_m, 0.0, 1000.0, false);
+        match (&self.camera, &self.camera_preset) {
+            (Some(_), Some(_)) => issues.push(Issue::new(&p("camera_preset"), "give camera or camera_preset, not both")),
+            (Some(c), None) => {
+                if let Err(errs) = c.validate() {
+                    issues.extend(errs.into_iter().map(|(f, m)| Issue::new(&p(&format!("camera/{f}")), &m)));
+                }
+            }
+            (None, Some(name)) if Camera::preset(name).is_none() => issues.push(Issue::new(
+                &p("camera_preset"),
+                &format!("unknown camera preset {name:?}; known presets: {}", coverage::PRESETS.join(", ")),
+            )),
+            _ => {}
+        }
+        if self.uavs.len() > 1 {
+            issues.push(Issue::new(
+                &p("uavs"),
+                &format!(
+                    "{} UAVs given, but planning for several UAVs (flock assignment) is not \
+                     available yet: give exactly one UAV",
+                    self.uavs.len()
+                ),
+            ));
+        }
+        for (i, u) in self.uavs.iter().enumerate() {
+            if u.id.trim().is_empty() || u.id.len() > 64 {
+                issues.push(Issue::new(&p(&format!("uavs/{i}/id")), "a UAV id must have 1 to 64 characters"));
+            } else if !u.id.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+                issues.push(Issue::new(
+                    &p(&format!("uavs/{i}/id")),
+                    "a UAV id may only contain letters, digits, '-' and '_' (it names files)",
+                ));
+            }
+            let [lon, lat] = u.start;
+            if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
+                issues.push(Issue::new(&p(&format!("uavs/{i}/start/0")), &format!("longitude {lon} is outside [-180, 180]")));
+            }
+            if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
+                issues.push(Issue::new(&p(&format!("uavs/{i}/start/1")), &format!("latitude {lat} is outside [-90, 90]")));
+            }
+        }
+        if self.altitude_frame == AltitudeFrame::Amsl {
+            issues.push(Issue::new(
+                &p("altitude_frame"),
+                "altitude_frame \"amsl\" needs terrain heights from a DEM, which this request has \
+                 not got: use \"relative\" or \"terrain\"",
+            ));
+        }
+        if issues.is_empty() { Ok(()) } else { Err(issues) }
+    }
+
+    pub fn camera(&self) -> Camera {
+        match (&self.camera, &self.camera_preset) {
+            (Some(c), _) => c.clone(),
+            (None, Some(name)) => Camera::preset(name).unwrap_or_default(),
+            (None, None) => Camera::default(),
+        }
+    }
+
+    pub fn altitude(&self, camera: &Camera) -> f64 {
+        match (self.altitude_m, self.gsd_cm_px) {
+            (Some(a), _) => a,
+            (None, Some(g)) => coverage::altitude_for_gsd(camera, g),
+            (None, None) => DEFAULT_ALTITUDE_M,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// The request is invalid; each issue names the member at fault.
+    #[error("{}", crate::geo::join_issues(.0))]
+    Invalid(Vec<Issue>),
+    /// A stage failed on valid input (a bug, or geometry beyond its reach).
+    #[error("planning failed: {0}")]
+    Internal(String),
+}
+
+impl From<GeoError> for PlanError {
+    fn from(e: GeoError) -> Self {
+        match e {
+            GeoError::Invalid(issues) => PlanError::Invalid(issues),
+            GeoError::OutsideUtm { .. } => PlanError::Invalid(vec![Issue::new("/roi", &e.to_string())]),
+            GeoError::Projection(m) => PlanError::Internal(m),
+        }
+    }
+}
+
+/// A survey request: area, no-fly zones and parameters.
+#[derive(Clone, Debug)]
+pub struct SurveyRequest {
+    pub roi: Vec<ParsedPolygon>,
+    pub no_fly: Vec<ParsedPolygon>,
+    pub params: SurveyParams,
+}
+
+impl SurveyRequest {
+    /// Read a request from JSON values: the ROI (any GeoJSON area), the NFZs
+    /// (each any GeoJSON area) and the params object. All faults are collected.
+    pub fn from_json(roi: &Value, no_fly: &[(Value, String)], params: &Value) -> Result<Self, PlanError> {
+        let mut issues = Vec::new();
+        let roi = parse_polygons(roi, "/roi").unwrap_or_else(|e| {
+            issues.extend(e);
+            Vec::new()
+        });
+        let mut nfz = Vec::new();
+        for (v, ptr) in no_fly {
+            match parse_polygons(v, ptr) {
+                Ok(p) => nfz.extend(p),
+                Err(e) => issues.extend(e),
+            }
+        }
+        let params = SurveyParams::from_json(params, "/params").unwrap_or_else(|e| {
+            issues.extend(e);
+            SurveyParams::default()
+        });
+        if issues.is_empty() {
+            Ok(SurveyRequest { roi, no_fly: nfz, params })
+        } else {
+            Err(PlanError::Invalid(issues))
+        }
+    }
+}
+
+/// Statistics of the whole survey.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurveyStats {
+    pub area_m2: f64,
+    pub free_area_m2: f64,
+    pub altitude_m: f64,
+    pub gsd_cm_px: f64,
+    pub footprint_side_m: f64,
+    pub footprint_front_m: f64,
+    pub line_spacing_m: f64,
+    pub trigger_distance_m: f64,
+    pub slice_angle_deg: f64,
+    pub cell_count: usize,
+    pub lane_count: usize,
+    pub photos: usize,
+    pub length_m: f64,
+    pub length_3d_m: f64,
+    pub turns: usize,
+    pub flight_time_s: f64,
+    pub coverage_ratio: f64,
+}
+
+/// Statistics of one UAV's mission.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UavStats {
+    pub length_m: f64,
+    pub length_3d_m: f64,
+    pub survey_length_m: f64,
+    pub transit_length_m: f64,
+    pub turns: usize,
+    pub flight_time_s: f64,
+    pub photos: usize,
+    pub cells: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CellOut {
+    pub id: usize,
+    pub area_m2: f64,
+    pub lane_bearing_deg: f64,
+    pub lanes: usize,
+    /// GeoJSON Polygon, WGS84.
+    pub polygon: Value,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UavPlan {
+    pub id: String,
+    pub start: [f64; 2],
+    /// Cell ids in the order flown.
+    pub cells: Vec<usize>,
+    pub stats: UavStats,
+    pub mission: Mission,
+}
+
+/// A planned survey: what `plan.json` holds and the files are made from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurveyPlan {
+    pub utm_epsg: u32,
+    pub altitude_frame: AltitudeFrame,
+    pub stats: SurveyStats,
+    pub cells: Vec<CellOut>,
+    pub uavs: Vec<UavPlan>,
+    /// Fence polygons (lon/lat): the inclusion area, then every no-fly zone.
+    pub fences: Vec<FencePolygon>,
+    pub warnings: Vec<String>,
+}
+
+/// A file produced from a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanFile {
+    pub name: String,
+    pub content_type: &'static str,
+    pub content: String,
+}
+
+/// Plan a survey end to end.
+pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, PlanError> {
+    let params = &req.params;
+    params.validate("/params").map_err(PlanError::Invalid)?;
+    let area = prepare_area(&req.roi, &req.no_fly, "/roi", "/no_fly", limits)?;
+    let proj = &area.projection;
+
+    let free = free_space(&area);
+    let free_area = free.unsigned_area();
+    if free_area < MIN_FREE_AREA_M2 {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/no_fly",
+            "the no-fly zones cover the whole region of interest: nothing is left to survey",
+        )]));
+    }
+
+    let camera = params.camera();
+    let altitude = params.altitude(&camera);
+    if !(1.0..=1000.0).contains(&altitude) {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/params/gsd_cm_px",
+            &format!("this GSD needs an altitude of {altitude:.1} m, outside [1, 1000] m"),
+        )]));
+    }
+    let geometry =
+        coverage::survey_geometry(&camera, altitude, params.side_overlap, params.front_overlap, params.line_spacing_m);
+
+    let (slice_angle, cells, plans) = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
+
+    // One UAV (flock assignment comes with its own stage).
+    let uav = params.uavs.first().cloned().unwrap_or_else(|| {
+        let c = req.roi[0].polygon.exterior().0[0];
+        UavSpec { id: "uav1".to_string(), start: [c.x, c.y] }
+    });
+    let start_utm = proj.to_utm(Coord { x: uav.start[0], y: uav.start[1] })?;
+    let nfz_union = nfz_union(&area.no_fly);
+    let obstacles = ObstacleMap::new(&nfz_union, params.nfz_clearance_m);
+    if obstacles.contains_point(start_utm) {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/params/uavs/0/start",
+            "the UAV's start position is inside a no-fly zone",
+        )]));
+    }
+    let tour = plan_tour(start_utm, &plans, &cells, &free, &obstacles).map_err(|e| PlanError::Internal(e.to_string()))?;
+
+    let mut warnings = Vec::new();
+    let home = GeoPoint { lon: uav.start[0], lat: uav.start[1], alt: 0.0 };
+    let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
+    let path = tour.path();
+    let path_len: f64 = path.windows(2).map(|w| dist(w[0], w[1])).sum();
+    let survey_len: f64 = tour.visits.iter().flat_map(|v| &v.lanes).map(|l| dist(l.start, l.end)).sum();
+    let turns = count_turns(&path);
+    let photos: usize = tour
+        .visits
+        .iter()
+        .flat_map(|v| &v.lanes)
+        .map(|l| coverage::photo_count(dist(l.start, l.end), geometry.trigger_distance_m))
+        .sum();
+    // Flat survey: 3D adds the climb after take-off and the descent home.
+    let length_3d = path_len + 2.0 * altitude;
+    let flight_time = length_3d / params.speed_m_s + turns as f64 * params.turn_penalty_s;
+    let uav_stats = UavStats {
+        length_m: path_len,
+        length_3d_m: length_3d,
+        survey_length_m: survey_len,
+        transit_length_m: tour.transit_length_m(),
+        turns,
+        flight_time_s: flight_time,
+        photos,
+        cells: tour.visits.len(),
+    };
+
+    let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
+    let coverage_ratio = coverage::coverage_ratio(&lanes, geometry.footprint_side_m, &free);
+    if coverage_ratio < 0.995 {
+        warnings.push(format!(
+            "footprints cover {:.2} % of the free area (narrow corners between no-fly zones)",
+            coverage_ratio * 100.0
+        ));
+    }
+
+    let cells_out = cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let plan = plans.iter().find(|p| p.cell_index == i);
+            Ok(CellOut {
+                id: i,
+                area_m2: c.unsigned_area(),
+                lane_bearing_deg: plan.map_or(slice_angle, |p| p.direction_deg),
+                lanes: plan.map_or(0, |p| p.lanes.len()),
+                polygon: gj::polygon_geometry(&proj.polygon_to_wgs84(c)?),
+            })
+        })
+        .collect::<Result<Vec<_>, GeoError>>()?;
+
+    let fences = fences(&area, &path, params.fence_margin_m)?;
+    let stats = SurveyStats {
+        area_m2: area.roi.unsigned_area(),
+        free_area_m2: free_area,
+        altitude_m: altitude,
+        gsd_cm_px: geometry.gsd_cm_px,
+        footprint_side_m: geometry.footprint_side_m,
+        footprint_front_m: geometry.footprint_front_m,
+        line_spacing_m: geometry.line_spacing_m,
+        trigger_distance_m: geometry.trigger_distance_m,
+        slice_angle_deg: slice_angle,
+        cell_count: cells.len(),
+        lane_count: lanes.len(),
+        photos,
+        length_m: path_len,
+        length_3d_m: length_3d,
+        turns,
+        flight_time_s: flight_time,
+        coverage_ratio,
+    };
+    Ok(SurveyPlan {
+        utm_epsg: proj.epsg(),
+        altitude_frame: params.altitude_frame,
+        stats,
+        cells: cells_out,
+        uavs: vec![UavPlan {
+            id: uav.id.clone(),
+            start: uav.start,
+            cells: tour.visits.iter().map(|v| v.cell_index).collect(),
+            stats: uav_stats,
+            mission,
+        }],
+        fences,
+        warnings,
+    })
+}
+
+/// ROI minus the no-fly zones, over every part of the ROI.
+fn free_space(area: &SurveyArea) -> MultiPolygon<f64> {
+    let mut parts = Vec::new();
+    for roi in &area.roi.0 {
+        parts.extend(decompose::free_space(roi, &area.no_fly).0);
+    }
+    if area.roi.0.len() > 1 {
+        // Overlapping ROI parts must not be surveyed twice.
+        let mut acc = MultiPolygon::<f64>(Vec::new());
+        for p in parts {
+            acc = acc.union(&MultiPolygon(vec![p]));
+        }
+        acc
+    } else {
+        MultiPolygon(parts)
+    }
+}
+
+fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
+    let mut acc = MultiPolygon::<f64>(Vec::new());
+    for p in no_fly {
+        acc = acc.union(&MultiPolygon(vec![p.clone()]));
+    }
+    acc
+}
+
+/// Decompose at the requested angle, or at every candidate angle for
+/// `auto`, and plan the lanes of every cell. `auto` keeps the angle with
+/// the fewest turns in total, then the shortest lanes-and-links length.
+fn decompose_and_cover(
+    free: &MultiPolygon<f64>,
+    angle: SliceAngle,
+    spacing: f64,
+) -> Result<(f64, Vec<Polygon<f64>>, Vec<CellPlan>), PlanError> {
+    let candidates = match angle {
+        SliceAngle::Degrees(d) => vec![d],
+        SliceAngle::Auto => auto_candidates(free),
+    };
+    let mut best: Option<(usize, f64, f64, Vec<Polygon<f64>>, Vec<CellPlan>)> = None;
+    for a in candidates {
+        let cells = decompose::decompose(free, a).map_err(|e| PlanError::Internal(e.to_string()))?;
+        let plans: Vec<CellPlan> = cells
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| coverage::plan_cell(i, c, free, spacing, a))
+            .collect();
+        let turns: usize = plans.iter().map(CellPlan::turns).sum();
+        let len: f64 = plans.iter().map(CellPlan::length_m).sum();
+        let better = match &best {
+            None => true,
+            Some((t, l, ..)) => turns < *t || (turns == *t && len < *l - 1e-6),
+        };
+        if better {
+            best = Some((turns, len, a, cells, plans));
+        }
+    }
+    let (_, _, a, cells, plans) = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
+    if plans.is_empty() {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/roi",
+            "the free area is too small or too thin for a single survey lane",
+        )]));
+    }
+    Ok((a, cells, plans))
+}
+
+/// Candidate slice angles for `auto`: every 15°, and the bearings of the
+/// longest boundary edges (a lane or slice along a long edge saves turns).
+fn auto_candidates(free: &MultiPolygon<f64>) -> Vec<f64> {
+    let mut edges: Vec<(f64, f64)> = free
+        .0
+        .iter()
+        .flat_map(|p| std::iter::once(p.exterior()).chain(p.interiors()))
+        .flat_map(|r| r.lines())
+        .map(|l| (Euclidean.length(&l), bearing_mod_180(l.start, l.end)))
+        .collect();
+    edges.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut out: Vec<f64> = (0..(180.0 / AUTO_STEP_DEG) as usize).map(|i| i as f64 * AUTO_STEP_DEG).collect();
+    for (_, b) in edges.into_iter().take(AUTO_EDGE_CANDIDATES) {
+        for c in [b, (b + 90.0) % 180.0] {
+            if out.iter().all(|o| angle_gap(*o, c) > 0.5) {
+                out.push(c);
+            }
+        }
+    }
+    out
+}
+
+fn bearing_mod_180(a: Coord<f64>, b: Coord<f64>) -> f64 {
+    let deg = (b.x - a.x).atan2(b.y - a.y).to_degrees();
+    let m = deg.rem_euclid(180.0);
+    if m >= 180.0 - 1e-9 { 0.0 } else { m }
+}
+
+fn angle_gap(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(180.0);
+    d.min(180.0 - d)
+}
+
+fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
+    (b.x - a.x).hypot(b.y - a.y)
+}
+
+/// Heading changes above [`TURN_THRESHOLD_DEG`] along a polyline.
+fn count_turns(path: &[Coord<f64>]) -> usize {
+    let mut headings = path
+        .windows(2)
+        .filter(|w| dist(w[0], w[1]) > 1e-6)
+        .map(|w| (w[1].y - w[0].y).atan2(w[1].x - w[0].x));
+    let Some(mut prev) = headings.next() else { return 0 };
+    let mut turns = 0;
+    for h in headings {
+        let mut d = (h - prev).abs();
+        if d > std::f64::consts::PI {
+            d = 2.0 * std::f64::consts::PI - d;
+        }
+        if d.to_degrees() > TURN_THRESHOLD_DEG {
+            turns += 1;
+        }
+        prev = h;
+    }
+    turns
+}
+
+/// The mission: take-off, speed, then every transit and lane in order, with
+/// the camera triggering by distance along each lane, back above home, RTL.
+fn build_mission(
+    tour: &crate::flock::Tour,
+    home: GeoPoint,
+    altitude: f64,
+    geometry: &SurveyGeometry,
+    params: &SurveyParams,
+    proj: &crate::geo::UtmProjection,
+) -> Result<Mission, GeoError> {
+    let wp = |c: Coord<f64>| -> Result<MissionItem, GeoError> {
+        let ll = proj.to_wgs84(c)?;
+        Ok(MissionItem::Waypoint(GeoPoint { lon: ll.x, lat: ll.y, alt: altitude }))
+    };
+    let mut items = vec![
+        MissionItem::Takeoff { alt: altitude },
+        MissionItem::ChangeSpeed { speed_m_s: params.speed_m_s },
+    ];
+    let transit = |items: &mut Vec<MissionItem>, t: &[Coord<f64>], keep_last: bool| -> Result<(), GeoError> {
+        // The first point is where we already are; the last is the next lane
+        // start, written by the lane itself, except on the way home.
+        let end = if keep_last { t.len() } else { t.len().saturating_sub(1) };
+        for &c in t.iter().take(end).skip(1) {
+            items.push(wp(c)?);
+        }
+        Ok(())
+    };
+    for (i, visit) in tour.visits.iter().enumerate() {
+        transit(&mut items, &tour.transits[i], false)?;
+        for (k, lane) in visit.lanes.iter().enumerate() {
+            items.push(wp(lane.start)?);
+            items.push(MissionItem::CameraTriggerDistance { distance_m: geometry.trigger_distance_m });
+            items.push(wp(lane.end)?);
+            items.push(MissionItem::CameraTriggerDistance { distance_m: 0.0 });
+            if let Some(link) = visit.links.get(k) {
+                for &c in link {
+                    items.push(wp(c)?);
+                }
+            }
+        }
+    }
+    if let Some(last) = tour.transits.last() {
+        transit(&mut items, last, true)?;
+    }
+    items.push(MissionItem::ReturnToLaunch);
+    Ok(Mission { home, frame: params.altitude_frame, cruise_speed_m_s: params.speed_m_s, items })
+}
+
+/// The inclusion fence (convex hull of the ROI and the flown path, grown by
+/// `margin`) followed by every no-fly zone as an exclusion fence.
+fn fences(area: &SurveyArea, path: &[Coord<f64>], margin: f64) -> Result<Vec<FencePolygon>, GeoError> {
+    let proj = &area.projection;
+    let mut pts: Vec<Point<f64>> = area.roi.0.iter().flat_map(|p| p.exterior().0.iter().map(|&c| Point(c))).collect();
+    pts.extend(path.iter().map(|&c| Point(c)));
+    // Grow the hull by `margin`: a 16-gon around every hull vertex, hulled
+    // again, stays within 2 % of a true buffer.
+    let hull = MultiPoint(pts).convex_hull();
+    let mut grown = Vec::new();
+    for c in &hull.exterior().0 {
+        for k in 0..16 {
+            let t = f64::from(k) * std::f64::consts::TAU / 16.0;
+            grown.push(Point::new(c.x + margin * t.cos(), c.y + margin * t.sin()));
+        }
+    }
+    let hull = MultiPoint(grown).convex_hull();
+    let mut out = vec![FencePolygon { inclusion: true, vertices: ring_lonlat(&proj.polygon_to_wgs84(&hull)?) }];
+    for nfz in &area.no_fly_wgs84 {
+        out.push(FencePolygon { inclusion: false, vertices: ring_lonlat(nfz) });
+    }
+    Ok(out)
+}
+
+fn ring_lonlat(p: &Polygon<f64>) -> Vec<[f64; 2]> {
+    let ring = &p.exterior().0;
+    let n = if ring.len() > 1 && ring.first() == ring.last() { ring.len() - 1 } else { ring.len() };
+    ring[..n].iter().map(|c| [c.x, c.y]).collect()
+}
+
+impl SurveyPlan {
+    /// The files of the plan: per UAV `.waypoints`, `.plan`, route GeoJSON
+    /// and fence `.waypoints`; the cells as GeoJSON.
+    pub fn files(&self) -> Vec<PlanFile> {
+        let mut out = Vec::new();
+        for u in &self.uavs {
+            out.push(PlanFile {
+                name: format!("{}.waypoints", u.id),
+                content_type: "text/plain; charset=utf-8",
+                content: export::write_waypoints(&u.mission),
+            });
+            out.push(PlanFile {
+                name: format!("{}.plan", u.id),
+                content_type: "application/json",
+                content: pretty(&export::write_plan(&u.mission, &self.fences)),
+            });
+            let mut props = Map::new();
+            props.insert("uav".into(), json!(u.id));
+            props.insert("altitude_frame".into(), json!(self.altitude_frame));
+            props.insert("length_m".into(), json!(u.stats.length_m));
+            props.insert("flight_time_s".into(), json!(u.stats.flight_time_s));
+            out.push(PlanFile {
+                name: format!("{}.route.geojson", u.id),
+                content_type: "application/geo+json",
+                content: pretty(&json!({"type": "FeatureCollection", "features": [gj::route_feature(&u.mission, props)]})),
+            });
+            out.push(PlanFile {
+                name: format!("{}.fence.waypoints", u.id),
+                content_type: "text/plain; charset=utf-8",
+                content: export::write_fence(&self.fences),
+            });
+        }
+        let cells = gj::feature_collection(self.cells.iter().map(|c| {
+            let mut props = Map::new();
+            props.insert("id".into(), json!(c.id));
+            props.insert("area_m2".into(), json!(c.area_m2));
+            props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
+            props.insert("lanes".into(), json!(c.lanes));
+            (c.polygon.clone(), props)
+        }));
+        out.push(PlanFile { name: "cells.geojson".into(), content_type: "application/geo+json", content: pretty(&cells) });
+        out
+    }
+}
+
+fn pretty(v: &Value) -> String {
+    let mut s = serde_json::to_string_pretty(v).unwrap_or_default();
+    s.push('\n');
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_defaults_and_ranges() {
+        let p = SurveyParams::from_json(&json!({}), "/params").unwrap();
+        assert_eq!(p.side_overlap, 0.7);
+        assert_eq!(p.front_overlap, 0.8);
+        assert_eq!(p.speed_m_s, 10.0);
+        assert_eq!(p.slice_angle_deg, SliceAngle::Auto);
+        assert_eq!(p.altitude(&p.camera()), DEFAULT_ALTITUDE_M);
+
+        let e = SurveyParams::from_json(&json!({"side_overlap": 1.0, "altitude_m": -5}), "/params").unwrap_err();
+        let ptrs: Vec<&str> = e.iter().map(|i| i.pointer.as_str()).collect();
+        assert!(ptrs.contains(&"/params/side_overlap") && ptrs.contains(&"/params/altitude_m"), "{e:?}");
+
+        let e = SurveyParams::from_json(&json!({"slice_angle_deg": "sideways"}), "/params").unwrap_err();
+        assert_eq!(e[0].pointer, "/params/slice_angle_deg");
+        let e = SurveyParams::from_json(&json!({"altitude": 50}), "/params").unwrap_err();
+        assert!(e[0].message.contains("unknown field"), "{e:?}");
+        let e = SurveyParams::from_json(&json!({"camera": {"sensor_width_mm": "x"}}), "/params").unwrap_err();
+        assert!(e[0].pointer.starts_with("/params/camera"), "{e:?}");
+        let p = SurveyParams::from_json(&json!({"slice_angle_deg": 30}), "/params").unwrap();
+        assert_eq!(p.slice_angle_deg, SliceAngle::Degrees(30.0));
+    }
+
+    #[test]
+    fn turns_are_heading_changes() {
+        let c = |x: f64, y: f64| Coord { x, y };
+        // A lawnmower with two lane changes: four 90° turns.
+        let path = [c(0., 0.), c(10., 0.), c(10., 1.), c(0., 1.), c(0., 2.), c(10., 2.)];
+        assert_eq!(count_turns(&path), 4);
+        assert_eq!(count_turns(&[c(0., 0.), c(1., 0.), c(2., 0.01)]), 0);
+    }
+
+    #[test]
+    fn auto_candidates_include_edge_bearings() {
+        let p = geo_types::polygon![(x: 0.0, y: 0.0), (x: 100.0, y: 100.0), (x: 90.0, y: 110.0), (x: -10.0, y: 10.0)];
+        let c = auto_candidates(&MultiPolygon(vec![p]));
+        assert!(c.iter().any(|a| angle_gap(*a, 45.0) < 1e-9));
+        assert!(c.iter().any(|a| angle_gap(*a, 135.0) < 1e-9));
+    }
+}

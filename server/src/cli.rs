@@ -1,0 +1,172 @@
+//! Command-line interface: `terraplan survey` runs the same planner as the
+//! service on files. Exit status: 0 success, 2 invalid input (the message
+//! names the fault), 1 any other failure.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use planner_core::geo::{Issue, Limits};
+use planner_core::survey::{PlanError, SurveyRequest, plan_survey};
+use serde_json::{Value, json};
+
+#[derive(Parser)]
+#[command(name = "terraplan", version, about = "Mission planning for UAV survey flocks and ground robots")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Plan a photo survey of an area and write the mission files.
+    Survey(SurveyArgs),
+}
+
+#[derive(clap::Args)]
+struct SurveyArgs {
+    /// Region of interest: a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection (WGS84).
+    #[arg(long, value_name = "FILE")]
+    roi: PathBuf,
+    /// No-fly zones (GeoJSON); may be given several times.
+    #[arg(long = "no-fly", value_name = "FILE")]
+    no_fly: Vec<PathBuf>,
+    /// Survey parameters as JSON (same fields as the API request).
+    #[arg(long, value_name = "FILE.json")]
+    params: Option<PathBuf>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Largest ROI accepted, km².
+    #[arg(long, default_value_t = Limits::default().max_roi_area_km2)]
+    max_roi_area_km2: f64,
+}
+
+/// A failure with its exit status.
+struct Failure {
+    status: u8,
+    message: String,
+}
+
+impl Failure {
+    fn input(message: impl Into<String>) -> Self {
+        Failure { status: 2, message: message.into() }
+    }
+    fn other(message: impl Into<String>) -> Self {
+        Failure { status: 1, message: message.into() }
+    }
+}
+
+pub fn run() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            // clap exits 2 on usage errors and 0 for --help/--version.
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    let result = match cli.command {
+        Command::Survey(args) => survey(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            eprintln!("error: {}", f.message);
+            ExitCode::from(f.status)
+        }
+    }
+}
+
+fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Failure::input(format!("cannot read {what} file {}: {e}", path.display())))?;
+    serde_json::from_str(&text).map_err(|e| {
+        Failure::input(format!("{what} file {} is not valid JSON: {e}", path.display()))
+    })
+}
+
+fn survey(args: &SurveyArgs) -> Result<(), Failure> {
+    let roi = read_json(&args.roi, "ROI")?;
+    let mut no_fly = Vec::new();
+    for (i, p) in args.no_fly.iter().enumerate() {
+        no_fly.push((read_json(p, "no-fly")?, format!("/no_fly/{i}")));
+    }
+    let params = match &args.params {
+        Some(p) => read_json(p, "params")?,
+        None => json!({}),
+    };
+    let limits = Limits { max_roi_area_km2: args.max_roi_area_km2, ..Limits::default() };
+    let describe = |issues: &[Issue]| describe_issues(issues, args);
+    let req = SurveyRequest::from_json(&roi, &no_fly, &params).map_err(|e| plan_failure(e, &describe))?;
+    let plan = plan_survey(&req, &limits).map_err(|e| plan_failure(e, &describe))?;
+
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
+    let files = plan.files();
+    let mut doc = serde_json::to_value(&plan).map_err(|e| Failure::other(e.to_string()))?;
+    doc["files"] = json!(files.iter().map(|f| json!({"name": f.name, "content_type": f.content_type})).collect::<Vec<_>>());
+    let write = |name: &str, content: &str| {
+        let path = args.out.join(name);
+        std::fs::write(&path, content).map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+    };
+    for f in &files {
+        write(&f.name, &f.content)?;
+    }
+    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
+    text.push('\n');
+    write("plan.json", &text)?;
+    let s = &plan.stats;
+    println!(
+        "planned {} cells, {} lanes, {:.0} m, {} photos, {:.0} s flight, coverage {:.2} % -> {}",
+        s.cell_count,
+        s.lane_count,
+        s.length_m,
+        s.photos,
+        s.flight_time_s,
+        s.coverage_ratio * 100.0,
+        args.out.display()
+    );
+    for w in &plan.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure {
+    match e {
+        PlanError::Invalid(issues) => Failure::input(describe(&issues)),
+        PlanError::Internal(m) => Failure::other(format!("planning failed: {m}")),
+    }
+}
+
+/// Issues with their pointers translated to the file they came from, e.g.
+/// `field.geojson#/coordinates/0: ring self-intersects …`.
+fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
+    let locate = |ptr: &str| -> String {
+        if let Some(rest) = ptr.strip_prefix("/roi") {
+            return format!("{}#{rest}", args.roi.display());
+        }
+        if let Some(rest) = ptr.strip_prefix("/params") {
+            let file = args.params.as_ref().map_or("params".to_string(), |p| p.display().to_string());
+            return format!("{file}#{rest}");
+        }
+        if let Some(rest) = ptr.strip_prefix("/no_fly/") {
+            let (idx, tail) = rest.split_once('/').map_or((rest, ""), |(a, b)| (a, b));
+            if let Some(p) = idx.parse::<usize>().ok().and_then(|i| args.no_fly.get(i)) {
+                let tail = if tail.is_empty() { String::new() } else { format!("/{tail}") };
+                return format!("{}#{tail}", p.display());
+            }
+        }
+        if ptr == "/no_fly" {
+            return "no-fly zones".to_string();
+        }
+        ptr.to_string()
+    };
+    let lines: Vec<String> = issues.iter().map(|i| format!("{}: {}", locate(&i.pointer), i.message)).collect();
+    if lines.len() == 1 {
+        format!("invalid input: {}", lines[0])
+    } else {
+        format!("invalid input:\n  {}", lines.join("\n  "))
+    }
+}

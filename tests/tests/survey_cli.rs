@@ -1,0 +1,145 @@
+//! `terraplan survey` end to end on real field boundaries, checked by
+//! pymavlink, shapely and pyproj (tests/validators/check_survey.py).
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{Value, json};
+use terraplan_e2e::{shared_data, terraplan, text, validator, workspace};
+
+fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
+    p
+}
+
+fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
+    json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
+}
+
+/// Plan, then run the independent validator; returns (plan.json, validator summary).
+fn plan_and_validate(roi: &Path, nfz: &[&Path], params: &Value, dir: &Path) -> (Value, Value) {
+    let params_path = write(dir, "params.json", params);
+    let out = dir.join("out");
+    let mut args = vec!["survey", "--roi", roi.to_str().unwrap()];
+    for n in nfz {
+        args.extend(["--no-fly", n.to_str().unwrap()]);
+    }
+    args.extend(["--params", params_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = terraplan(&args);
+    assert!(o.status.success(), "terraplan failed: {}", text(&o.stderr));
+    let plan: Value = serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    let mut vargs: Vec<&Path> = vec![&out, roi];
+    vargs.extend(nfz.iter().copied());
+    let v = validator("check_survey.py", &vargs);
+    assert!(v.status.success(), "validator: {}{}", text(&v.stdout), text(&v.stderr));
+    let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
+    (plan, summary)
+}
+
+#[test]
+fn example_field_with_nfz_inside_and_across_border() {
+    let dir = tempfile::tempdir().unwrap();
+    let ex = workspace().join("examples");
+    for angle in [json!(0), json!(90), json!(37.5), json!("auto")] {
+        let params = json!({"altitude_m": 60, "slice_angle_deg": angle, "uavs": [{"id": "uav1", "start": [6.0620, 51.5110]}]});
+        let (plan, summary) = plan_and_validate(&ex.join("field.geojson"), &[&ex.join("field-nfz.geojson")], &params, dir.path());
+        let ratio = summary["coverage_ratio"].as_f64().unwrap();
+        assert!(ratio >= 0.995, "angle {angle}: coverage {ratio}");
+        let stats = &plan["stats"];
+        assert!(stats["cell_count"].as_u64().unwrap() >= 2, "an NFZ inside the field splits it");
+        // Cells' union equals the free area within 1e-6 relative.
+        let cell_area: f64 = plan["cells"].as_array().unwrap().iter().map(|c| c["area_m2"].as_f64().unwrap()).sum();
+        let free = stats["free_area_m2"].as_f64().unwrap();
+        assert!((cell_area - free).abs() <= 1e-6 * free, "cells {cell_area} vs free {free}");
+        // Every cell is flown once.
+        let mut flown: Vec<u64> = plan["uavs"][0]["cells"].as_array().unwrap().iter().map(|c| c.as_u64().unwrap()).collect();
+        flown.sort();
+        let with_lanes: Vec<u64> = plan["cells"].as_array().unwrap().iter().filter(|c| c["lanes"].as_u64().unwrap() > 0).map(|c| c["id"].as_u64().unwrap()).collect();
+        assert_eq!(flown, with_lanes);
+        for f in ["uav1.waypoints", "uav1.plan", "uav1.route.geojson", "uav1.fence.waypoints", "cells.geojson"] {
+            assert!(dir.path().join("out").join(f).exists(), "{f} missing");
+        }
+    }
+}
+
+#[test]
+fn fields2cover_fields_with_generated_nfzs() {
+    let dir = tempfile::tempdir().unwrap();
+    // Two Illinois fields as one ROI; NFZs inside, across a border, overlapping
+    // each other and one entirely outside.
+    let roi = shared_data("polygons/fields2cover__test_2_cell.json");
+    let nfz = write(
+        dir.path(),
+        "nfz.geojson",
+        &json!({"type": "FeatureCollection", "features": [
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1375, 41.4710, -90.1365, 41.4717)},
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1368, 41.4714, -90.1360, 41.4720)},
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1315, 41.4650, -90.1280, 41.4660)},
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1500, 41.4800, -90.1490, 41.4810)}
+        ]}),
+    );
+    for angle in [json!(0), json!(90), json!("auto")] {
+        let params = json!({"altitude_m": 80, "side_overlap": 0.6, "slice_angle_deg": angle});
+        let (plan, summary) = plan_and_validate(&roi, &[&nfz], &params, dir.path());
+        let ratio = summary["coverage_ratio"].as_f64().unwrap();
+        assert!(ratio >= 0.995, "angle {angle}: coverage {ratio}");
+        assert!(plan["uavs"][0]["stats"]["photos"].as_u64().unwrap() > 0);
+    }
+}
+
+#[test]
+fn netherlands_field_default_params() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test.json");
+    let (plan, summary) = plan_and_validate(&roi, &[], &json!({}), dir.path());
+    assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
+    // Default camera at 60 m: GSD = 60·13.2·100/(5472·8.8) ≈ 1.645 cm/px.
+    let gsd = plan["stats"]["gsd_cm_px"].as_f64().unwrap();
+    assert!((gsd - 1.6447).abs() < 1e-3, "{gsd}");
+    // Starts at the ROI's first vertex by default.
+    let start = &plan["uavs"][0]["start"];
+    assert!((start[0].as_f64().unwrap() - 6.062131843297665).abs() < 1e-12);
+}
+
+/// Each bad input exits with status 2 and a message naming the fault.
+#[test]
+fn bad_input_names_its_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cases: Vec<(&str, Value, Option<Value>, Value, &str)> = vec![
+        ("self-intersecting ROI", json!({"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 52.003], [5.005, 52.0], [5.0, 52.003], [5.0, 52.0]]]}), None, json!({}), "self-intersects"),
+        ("NFZ covering the ROI", rect(5.0, 52.0, 5.005, 52.003), Some(rect(4.99, 51.99, 5.01, 52.01)), json!({}), "cover the whole region"),
+        ("empty ring", json!({"type": "Polygon", "coordinates": [[]]}), None, json!({}), "ring is empty"),
+        ("unclosable ring", json!({"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 52.003]]]}), None, json!({}), "too short"),
+        ("latitude 95", json!({"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 95.0], [5.0, 52.003], [5.0, 52.0]]]}), None, json!({}), "latitude 95"),
+        ("NaN", json!({"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, "NaN"], [5.0, 52.003], [5.0, 52.0]]]}), None, json!({}), "finite number"),
+        ("overlap 1", rect(5.0, 52.0, 5.005, 52.003), None, json!({"side_overlap": 1.0}), "side_overlap: 1 is outside"),
+        ("negative altitude", rect(5.0, 52.0, 5.005, 52.003), None, json!({"altitude_m": -10}), "altitude_m: -10 is outside"),
+        ("unknown geometry type", json!({"type": "Circle", "coordinates": [5.0, 52.0]}), None, json!({}), "unknown GeoJSON type"),
+        ("too large", rect(5.0, 52.0, 5.3, 52.3), None, json!({}), "too large"),
+        ("two UAVs", rect(5.0, 52.0, 5.005, 52.003), None, json!({"uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "b", "start": [5.0, 52.0]}]}), "not available yet"),
+        ("start in NFZ", rect(5.0, 52.0, 5.005, 52.003), Some(rect(5.001, 52.001, 5.002, 52.002)), json!({"uavs": [{"id": "a", "start": [5.0015, 52.0015]}]}), "inside a no-fly zone"),
+    ];
+    for (name, roi, nfz, params, expect) in cases {
+        let roi_p = write(d, "case-roi.json", &roi);
+        let params_p = write(d, "case-params.json", &params);
+        let mut args = vec!["survey".to_string(), "--roi".into(), roi_p.display().to_string()];
+        if let Some(n) = nfz {
+            args.extend(["--no-fly".into(), write(d, "case-nfz.json", &n).display().to_string()]);
+        }
+        args.extend(["--params".into(), params_p.display().to_string(), "--out".into(), d.join("o").display().to_string()]);
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = terraplan(&argv);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert!(err.contains(expect), "{name}: expected {expect:?} in {err:?}");
+    }
+    // Unreadable and malformed files are input errors too.
+    let o = terraplan(&["survey", "--roi", "/nonexistent.geojson", "--out", d.join("o").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o.stderr).contains("cannot read ROI file"));
+    std::fs::write(d.join("broken.json"), "{\"type\": ").unwrap();
+    let o = terraplan(&["survey", "--roi", d.join("broken.json").to_str().unwrap(), "--out", d.join("o").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o.stderr).contains("not valid JSON"));
+}

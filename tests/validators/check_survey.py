@@ -1,0 +1,126 @@
+"""Independent check of a terraplan survey output directory.
+
+Written against pymavlink, shapely and pyproj only (none of terraplan's
+code): loads every UAV's .waypoints with pymavlink's MAVWPLoader, compares
+item counts and positions with plan.json, and checks in UTM metres that no
+flown point or segment enters a no-fly zone, that survey lanes stay in the
+ROI, and that the lanes' footprints cover the free area.
+
+usage: check_survey.py OUT_DIR ROI.geojson [NFZ.geojson ...]
+Prints a JSON summary; exits 1 with a message on the first failed check.
+"""
+import json
+import sys
+from pathlib import Path
+
+from pymavlink import mavutil, mavwp
+from pyproj import Transformer
+from shapely.geometry import LineString, Point, shape
+from shapely.ops import transform, unary_union
+
+CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
+CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
+# Tolerances: positions are written with 8 decimals (≈1 mm); geometry
+# checks allow 5 cm for the lon/lat round trip of points on NFZ borders.
+POS_TOL_DEG = 1e-6
+GEOM_TOL_M = 0.05
+
+
+def fail(msg):
+    print(f"check_survey: FAIL: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
+def areas(path):
+    doc = json.loads(Path(path).read_text())
+    feats = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
+    geoms = []
+    for f in feats:
+        g = f["geometry"] if f.get("type") == "Feature" else f
+        geoms.append(shape(g).buffer(0) if not shape(g).is_valid else shape(g))
+    return unary_union(geoms)
+
+
+def main():
+    out = Path(sys.argv[1])
+    roi_ll = areas(sys.argv[2])
+    nfz_ll = unary_union([areas(p) for p in sys.argv[3:]]) if len(sys.argv) > 3 else None
+    plan = json.loads((out / "plan.json").read_text())
+    epsg = plan["utm_epsg"]
+    fwd = Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform
+    roi = transform(fwd, roi_ll)
+    nfz = transform(fwd, nfz_ll) if nfz_ll is not None else None
+    free = roi.difference(nfz) if nfz is not None else roi
+    nfz_core = nfz.buffer(-GEOM_TOL_M) if nfz is not None else None
+    roi_grown = roi.buffer(GEOM_TOL_M)
+
+    summary = {"uavs": {}}
+    lanes = []
+    for uav in plan["uavs"]:
+        uid = uav["id"]
+        wp_path = out / f"{uid}.waypoints"
+        loader = mavwp.MAVWPLoader()
+        n = loader.load(str(wp_path))
+        expected = 1 + len(uav["mission"]["items"])
+        if n != expected:
+            fail(f"{wp_path}: pymavlink loaded {n} items, plan.json has {expected}")
+        items = [loader.wp(i) for i in range(n)]
+        home = items[0]
+        if home.frame != 0 or home.command != CMD_WAYPOINT:
+            fail(f"{wp_path}: item 0 is not a home waypoint in frame 0")
+        if abs(home.x - uav["start"][1]) > POS_TOL_DEG or abs(home.y - uav["start"][0]) > POS_TOL_DEG:
+            fail(f"{wp_path}: home position differs from the UAV start")
+        expected_wps = [it for it in uav["mission"]["items"] if it["kind"] == "waypoint"]
+        got_wps = [it for it in items[1:] if it.command == CMD_WAYPOINT]
+        if len(got_wps) != len(expected_wps):
+            fail(f"{wp_path}: {len(got_wps)} waypoints, plan.json has {len(expected_wps)}")
+        for a, b in zip(got_wps, expected_wps):
+            if abs(a.x - b["lat"]) > POS_TOL_DEG or abs(a.y - b["lon"]) > POS_TOL_DEG:
+                fail(f"{wp_path}: waypoint {a.seq} at ({a.y}, {a.x}) differs from plan.json")
+        if items[-1].command != mavutil.mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            fail(f"{wp_path}: the last item is not RTL")
+
+        # The flown polyline: home, waypoints, home.
+        pts = [fwd(home.y, home.x)] + [fwd(w.y, w.x) for w in got_wps] + [fwd(home.y, home.x)]
+        if nfz_core is not None:
+            for p in pts:
+                if nfz_core.contains(Point(p)):
+                    fail(f"{wp_path}: flown point {p} is inside a no-fly zone")
+            for a, b in zip(pts, pts[1:]):
+                seg = LineString([a, b]) if a != b else None
+                if seg is not None and seg.intersection(nfz_core).length > 0:
+                    fail(f"{wp_path}: segment {a} -> {b} crosses a no-fly zone")
+        # Lanes: the waypoint before a trigger-on to the waypoint after it.
+        last_wp = None
+        trig = None
+        for it in items[1:]:
+            if it.command == CMD_TRIGG:
+                if it.param1 > 0:
+                    trig = last_wp
+                elif trig is not None:
+                    lane = LineString([fwd(trig.y, trig.x), fwd(last_wp.y, last_wp.x)])
+                    if not roi_grown.contains(lane):
+                        fail(f"{wp_path}: survey lane {lane.wkt} leaves the ROI")
+                    lanes.append(lane)
+                    trig = None
+            elif it.command == CMD_WAYPOINT:
+                last_wp = it
+        summary["uavs"][uid] = {"items": n, "waypoints": len(got_wps)}
+
+    if len(lanes) != plan["stats"]["lane_count"]:
+        fail(f"found {len(lanes)} lanes in the missions, plan.json says {plan['stats']['lane_count']}")
+    half = plan["stats"]["footprint_side_m"] / 2.0
+    swaths = unary_union([l.buffer(half, cap_style="flat") for l in lanes if l.length > 0])
+    ratio = swaths.intersection(free).area / free.area
+    summary["coverage_ratio"] = ratio
+    summary["free_area_m2"] = free.area
+    summary["lanes"] = len(lanes)
+    if abs(free.area - plan["stats"]["free_area_m2"]) > 1e-3 * free.area:
+        fail(f"free area {free.area:.1f} m² differs from plan.json {plan['stats']['free_area_m2']:.1f}")
+    if abs(ratio - plan["stats"]["coverage_ratio"]) > 0.002:
+        fail(f"coverage {ratio:.5f} differs from plan.json {plan['stats']['coverage_ratio']:.5f}")
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
