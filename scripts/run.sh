@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Sets up a fresh machine and runs terraplan. With no arguments it plans a
-# survey of a real field (Fields2Cover's test parcel) with a no-fly zone and
-# writes the mission files to ./out; otherwise the arguments go to terraplan.
+# Sets up a fresh machine and runs terraplan. With no arguments: the service
+# on its embedded default (http://127.0.0.1:8080, SQLite in ./terraplan-data).
+# With arguments: any terraplan command, e.g.
+#   bash scripts/run.sh survey --roi examples/field.geojson --out out
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 if [ "$#" -eq 0 ]; then
-  set -- survey --roi examples/field.geojson --no-fly examples/field-nfz.geojson \
-    --params examples/params.json --out out
+  set -- serve
 fi
 exec cargo run --release --quiet -p terraplan -- "$@"

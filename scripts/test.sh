@@ -1,11 +1,27 @@
 #!/usr/bin/env bash
 # Sets up a fresh machine and runs every test: formatting, unit and property
-# tests, end-to-end tests against the real binary, and the external
-# validators (pymavlink, shapely) inside them.
+# tests, end-to-end tests of the real binary (CLI and HTTP service, with the
+# external validators pymavlink, shapely and pyproj inside them) on SQLite,
+# the service suite again on a throwaway PostgreSQL, and schemathesis
+# against the live OpenAPI document.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --with-validators
 cargo fmt --all -- --check
 # The end-to-end tests run the real binary, so build it first.
 cargo build --workspace --bins
-TERRAPLAN_VENV="$PWD/.venv" cargo nextest run --workspace --no-fail-fast
+export TERRAPLAN_VENV="$PWD/.venv"
+
+echo "== all tests (SQLite)"
+cargo nextest run --workspace --no-fail-fast
+
+echo "== service tests on PostgreSQL"
+pgdir=$(mktemp -d)
+trap 'bash scripts/pg-cluster.sh stop "$pgdir"; rm -rf "$pgdir"' EXIT
+TERRAPLAN_TEST_DATABASE_URL=$(bash scripts/pg-cluster.sh start "$pgdir")
+export TERRAPLAN_TEST_DATABASE_URL
+cargo nextest run -p terraplan-e2e --no-fail-fast -E 'binary(service) | binary(load)'
+unset TERRAPLAN_TEST_DATABASE_URL
+
+echo "== contract tests (schemathesis)"
+bash scripts/schemathesis.sh

@@ -11,4 +11,4 @@ pub mod decompose;
 pub mod export;
 pub mod flock;
 pub mod geo;
-
+pub mod survey;

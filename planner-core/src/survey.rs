@@ -32,6 +32,32 @@ pub enum SliceAngle {
     Degrees(f64),
 }
 
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for SliceAngle {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Type};
+        OneOfBuilder::new()
+            .item(
+                ObjectBuilder::new()
+                    .schema_type(Type::Number)
+                    .minimum(Some(0.0))
+                    .exclusive_maximum(Some(180.0))
+                    .description(Some("bearing of the slice lines, degrees clockwise from grid north")),
+            )
+            .item(
+                ObjectBuilder::new()
+                    .schema_type(Type::String)
+                    .enum_values(Some(["auto"]))
+                    .description(Some("the angle with the fewest turns in total")),
+            )
+            .default(Some(serde_json::json!("auto")))
+            .into()
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for SliceAngle {}
+
 impl Serialize for SliceAngle {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         match self {
@@ -62,6 +88,7 @@ impl<'de> Deserialize<'de> for SliceAngle {
 }
 
 /// One UAV of the flock.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct UavSpec {
@@ -72,37 +99,48 @@ pub struct UavSpec {
 
 /// Survey request parameters: the fields of the params file and of the API
 /// request body. Ranges are checked by [`SurveyParams::validate`].
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema), schema(default))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SurveyParams {
     /// Flight height above ground, m, in [1, 1000]; default 60 unless
     /// `gsd_cm_px` is given.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 1000, example = 60))]
     pub altitude_m: Option<f64>,
     /// Target ground sample distance, cm/px, in [0.05, 100]; sets the altitude.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.05, maximum = 100))]
     pub gsd_cm_px: Option<f64>,
     /// Camera; default [`Camera::default`].
     pub camera: Option<Camera>,
     /// Name of a camera preset (see [`coverage::PRESETS`]); exclusive with `camera`.
     pub camera_preset: Option<String>,
     /// Side overlap of neighbouring lanes' footprints, [0, 0.95]; default 0.7.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 0.95))]
     pub side_overlap: f64,
     /// Front overlap of consecutive photos, [0, 0.95]; default 0.8.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 0.95))]
     pub front_overlap: f64,
     /// Direct line spacing, m, in [0.5, 2000]; overrides the side overlap.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.5, maximum = 2000))]
     pub line_spacing_m: Option<f64>,
     /// Bearing of the slice lines, degrees in [0, 180), or "auto"; default auto.
     pub slice_angle_deg: SliceAngle,
     /// Ground speed, m/s, in (0, 50]; default 10.
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 50))]
     pub speed_m_s: f64,
     /// Time charged per turn in the flight-time estimate, s, in [0, 120]; default 2.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 120))]
     pub turn_penalty_s: f64,
     /// UAVs; default one UAV starting at the ROI's first vertex.
+    #[cfg_attr(feature = "openapi", schema(max_items = 1))]
     pub uavs: Vec<UavSpec>,
     /// Altitude frame of the mission; default relative.
     pub altitude_frame: AltitudeFrame,
     /// Distance kept from no-fly-zone corners by transits, m, in [0, 100]; default 2.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 100))]
     pub nfz_clearance_m: f64,
     /// Margin of the inclusion geofence around the flown area, m, in [0, 1000]; default 30.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1000))]
     pub fence_margin_m: f64,
 }
 
@@ -265,11 +303,16 @@ impl From<GeoError> for PlanError {
     fn from(e: GeoError) -> Self {
         match e {
             GeoError::Invalid(issues) => PlanError::Invalid(issues),
-            GeoError::OutsideUtm { .. } => PlanError::Invalid(vec![Issue::new("/roi", &e.to_string())]),
+            GeoError::OutsideUtm { .. } => PlanError::Invalid(vec![Issue::new(ROI_POINTER, &e.to_string())]),
             GeoError::Projection(m) => PlanError::Internal(m),
         }
     }
 }
+
+/// JSON pointer of the ROI in a request document.
+pub const ROI_POINTER: &str = "/roi";
+/// JSON pointer of the no-fly zones array in a request document.
+pub const NO_FLY_POINTER: &str = "/no_fly_zones";
 
 /// A survey request: area, no-fly zones and parameters.
 #[derive(Clone, Debug)]
@@ -280,27 +323,47 @@ pub struct SurveyRequest {
 }
 
 impl SurveyRequest {
-    /// Read a request from JSON values: the ROI (any GeoJSON area), the NFZs
-    /// (each any GeoJSON area) and the params object. All faults are collected.
-    pub fn from_json(roi: &Value, no_fly: &[(Value, String)], params: &Value) -> Result<Self, PlanError> {
+    /// Read a request document: `{"roi": GeoJSON, "no_fly_zones": [GeoJSON,
+    /// …], …SurveyParams fields}` — the body of `POST /api/v1/surveys`, and
+    /// what the CLI assembles from its files. Every fault is collected, each
+    /// with the JSON pointer of the member at fault.
+    pub fn from_document(doc: &Value) -> Result<Self, PlanError> {
+        let Some(obj) = doc.as_object() else {
+            return Err(PlanError::Invalid(vec![Issue::new("", "the request must be a JSON object")]));
+        };
         let mut issues = Vec::new();
-        let roi = parse_polygons(roi, "/roi").unwrap_or_else(|e| {
-            issues.extend(e);
-            Vec::new()
-        });
-        let mut nfz = Vec::new();
-        for (v, ptr) in no_fly {
-            match parse_polygons(v, ptr) {
-                Ok(p) => nfz.extend(p),
-                Err(e) => issues.extend(e),
+        let roi = match obj.get("roi") {
+            Some(v) => parse_polygons(v, ROI_POINTER).unwrap_or_else(|e| {
+                issues.extend(e);
+                Vec::new()
+            }),
+            None => {
+                issues.push(Issue::new(ROI_POINTER, "missing: the region of interest (GeoJSON) is required"));
+                Vec::new()
             }
+        };
+        let mut no_fly = Vec::new();
+        match obj.get("no_fly_zones") {
+            None | Some(Value::Null) => {}
+            Some(Value::Array(zones)) => {
+                for (i, v) in zones.iter().enumerate() {
+                    match parse_polygons(v, &format!("{NO_FLY_POINTER}/{i}")) {
+                        Ok(p) => no_fly.extend(p),
+                        Err(e) => issues.extend(e),
+                    }
+                }
+            }
+            Some(_) => issues.push(Issue::new(NO_FLY_POINTER, "must be an array of GeoJSON areas")),
         }
-        let params = SurveyParams::from_json(params, "/params").unwrap_or_else(|e| {
+        let mut rest = obj.clone();
+        rest.remove("roi");
+        rest.remove("no_fly_zones");
+        let params = SurveyParams::from_json(&Value::Object(rest), "").unwrap_or_else(|e| {
             issues.extend(e);
             SurveyParams::default()
         });
         if issues.is_empty() {
-            Ok(SurveyRequest { roi, no_fly: nfz, params })
+            Ok(SurveyRequest { roi, no_fly, params })
         } else {
             Err(PlanError::Invalid(issues))
         }
@@ -308,6 +371,7 @@ impl SurveyRequest {
 }
 
 /// Statistics of the whole survey.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurveyStats {
     pub area_m2: f64,
@@ -330,6 +394,7 @@ pub struct SurveyStats {
 }
 
 /// Statistics of one UAV's mission.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UavStats {
     pub length_m: f64,
@@ -386,15 +451,15 @@ pub struct PlanFile {
 /// Plan a survey end to end.
 pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, PlanError> {
     let params = &req.params;
-    params.validate("/params").map_err(PlanError::Invalid)?;
-    let area = prepare_area(&req.roi, &req.no_fly, "/roi", "/no_fly", limits)?;
+    params.validate("").map_err(PlanError::Invalid)?;
+    let area = prepare_area(&req.roi, &req.no_fly, ROI_POINTER, NO_FLY_POINTER, limits)?;
     let proj = &area.projection;
 
     let free = free_space(&area);
     let free_area = free.unsigned_area();
     if free_area < MIN_FREE_AREA_M2 {
         return Err(PlanError::Invalid(vec![Issue::new(
-            "/no_fly",
+            NO_FLY_POINTER,
             "the no-fly zones cover the whole region of interest: nothing is left to survey",
         )]));
     }
@@ -403,13 +468,25 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
     let altitude = params.altitude(&camera);
     if !(1.0..=1000.0).contains(&altitude) {
         return Err(PlanError::Invalid(vec![Issue::new(
-            "/params/gsd_cm_px",
+            "/gsd_cm_px",
             &format!("this GSD needs an altitude of {altitude:.1} m, outside [1, 1000] m"),
         )]));
     }
     let geometry =
         coverage::survey_geometry(&camera, altitude, params.side_overlap, params.front_overlap, params.line_spacing_m);
 
+    let lane_km = free_area / geometry.line_spacing_m / 1000.0;
+    if lane_km > limits.max_lane_km {
+        let ptr = if params.line_spacing_m.is_some() { "/line_spacing_m" } else { "/altitude_m" };
+        return Err(PlanError::Invalid(vec![Issue::new(
+            ptr,
+            &format!(
+                "this survey would need about {lane_km:.0} km of lanes at {:.2} m spacing, over the \
+                 limit of {} km: fly higher, lower the side overlap or survey a smaller area",
+                geometry.line_spacing_m, limits.max_lane_km
+            ),
+        )]));
+    }
     let (slice_angle, cells, plans) = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
 
     // One UAV (flock assignment comes with its own stage).
@@ -422,7 +499,7 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
     let obstacles = ObstacleMap::new(&nfz_union, params.nfz_clearance_m);
     if obstacles.contains_point(start_utm) {
         return Err(PlanError::Invalid(vec![Issue::new(
-            "/params/uavs/0/start",
+            "/uavs/0/start",
             "the UAV's start position is inside a no-fly zone",
         )]));
     }
@@ -575,7 +652,7 @@ fn decompose_and_cover(
     let (_, _, a, cells, plans) = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
     if plans.is_empty() {
         return Err(PlanError::Invalid(vec![Issue::new(
-            "/roi",
+            ROI_POINTER,
             "the free area is too small or too thin for a single survey lane",
         )]));
     }
@@ -775,24 +852,24 @@ mod tests {
 
     #[test]
     fn params_defaults_and_ranges() {
-        let p = SurveyParams::from_json(&json!({}), "/params").unwrap();
+        let p = SurveyParams::from_json(&json!({}), "").unwrap();
         assert_eq!(p.side_overlap, 0.7);
         assert_eq!(p.front_overlap, 0.8);
         assert_eq!(p.speed_m_s, 10.0);
         assert_eq!(p.slice_angle_deg, SliceAngle::Auto);
         assert_eq!(p.altitude(&p.camera()), DEFAULT_ALTITUDE_M);
 
-        let e = SurveyParams::from_json(&json!({"side_overlap": 1.0, "altitude_m": -5}), "/params").unwrap_err();
+        let e = SurveyParams::from_json(&json!({"side_overlap": 1.0, "altitude_m": -5}), "").unwrap_err();
         let ptrs: Vec<&str> = e.iter().map(|i| i.pointer.as_str()).collect();
-        assert!(ptrs.contains(&"/params/side_overlap") && ptrs.contains(&"/params/altitude_m"), "{e:?}");
+        assert!(ptrs.contains(&"/side_overlap") && ptrs.contains(&"/altitude_m"), "{e:?}");
 
-        let e = SurveyParams::from_json(&json!({"slice_angle_deg": "sideways"}), "/params").unwrap_err();
-        assert_eq!(e[0].pointer, "/params/slice_angle_deg");
-        let e = SurveyParams::from_json(&json!({"altitude": 50}), "/params").unwrap_err();
+        let e = SurveyParams::from_json(&json!({"slice_angle_deg": "sideways"}), "").unwrap_err();
+        assert_eq!(e[0].pointer, "/slice_angle_deg");
+        let e = SurveyParams::from_json(&json!({"altitude": 50}), "").unwrap_err();
         assert!(e[0].message.contains("unknown field"), "{e:?}");
-        let e = SurveyParams::from_json(&json!({"camera": {"sensor_width_mm": "x"}}), "/params").unwrap_err();
-        assert!(e[0].pointer.starts_with("/params/camera"), "{e:?}");
-        let p = SurveyParams::from_json(&json!({"slice_angle_deg": 30}), "/params").unwrap();
+        let e = SurveyParams::from_json(&json!({"camera": {"sensor_width_mm": "x"}}), "").unwrap_err();
+        assert!(e[0].pointer.starts_with("/camera"), "{e:?}");
+        let p = SurveyParams::from_json(&json!({"slice_angle_deg": 30}), "").unwrap();
         assert_eq!(p.slice_angle_deg, SliceAngle::Degrees(30.0));
     }
 

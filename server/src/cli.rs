@@ -7,8 +7,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use planner_core::geo::{Issue, Limits};
-use planner_core::survey::{PlanError, SurveyRequest, plan_survey};
+use planner_core::survey::{NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey};
 use serde_json::{Value, json};
+
+use crate::config::ServeConfig;
 
 #[derive(Parser)]
 #[command(name = "terraplan", version, about = "Mission planning for UAV survey flocks and ground robots")]
@@ -19,6 +21,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the HTTP service (REST API, OpenAPI document, API docs page).
+    Serve(ServeConfig),
     /// Plan a photo survey of an area and write the mission files.
     Survey(SurveyArgs),
 }
@@ -67,6 +71,7 @@ pub fn run() -> ExitCode {
         }
     };
     let result = match cli.command {
+        Command::Serve(config) => serve(config),
         Command::Survey(args) => survey(&args),
     };
     match result {
@@ -78,6 +83,14 @@ pub fn run() -> ExitCode {
     }
 }
 
+fn serve(config: ServeConfig) -> Result<(), Failure> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::other(format!("cannot start the async runtime: {e}")))?;
+    runtime.block_on(crate::serve::serve(config)).map_err(Failure::other)
+}
+
 fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| Failure::input(format!("cannot read {what} file {}: {e}", path.display())))?;
@@ -87,18 +100,29 @@ fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
 }
 
 fn survey(args: &SurveyArgs) -> Result<(), Failure> {
-    let roi = read_json(&args.roi, "ROI")?;
-    let mut no_fly = Vec::new();
-    for (i, p) in args.no_fly.iter().enumerate() {
-        no_fly.push((read_json(p, "no-fly")?, format!("/no_fly/{i}")));
-    }
-    let params = match &args.params {
+    // Assemble the same request document the API takes, so both share one
+    // parser and one set of JSON pointers.
+    let mut doc = match &args.params {
         Some(p) => read_json(p, "params")?,
         None => json!({}),
     };
+    let Some(obj) = doc.as_object_mut() else {
+        return Err(Failure::input("the params file must hold a JSON object"));
+    };
+    for key in ["roi", "no_fly_zones"] {
+        if obj.contains_key(key) {
+            return Err(Failure::input(format!(
+                "the params file may not contain {key:?}: give areas with --roi and --no-fly"
+            )));
+        }
+    }
+    obj.insert("roi".into(), read_json(&args.roi, "ROI")?);
+    let zones = args.no_fly.iter().map(|p| read_json(p, "no-fly")).collect::<Result<Vec<_>, _>>()?;
+    obj.insert("no_fly_zones".into(), Value::Array(zones));
+
     let limits = Limits { max_roi_area_km2: args.max_roi_area_km2, ..Limits::default() };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
-    let req = SurveyRequest::from_json(&roi, &no_fly, &params).map_err(|e| plan_failure(e, &describe))?;
+    let req = SurveyRequest::from_document(&doc).map_err(|e| plan_failure(e, &describe))?;
     let plan = plan_survey(&req, &limits).map_err(|e| plan_failure(e, &describe))?;
 
     std::fs::create_dir_all(&args.out)
@@ -144,24 +168,20 @@ fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure 
 /// `field.geojson#/coordinates/0: ring self-intersects …`.
 fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
     let locate = |ptr: &str| -> String {
-        if let Some(rest) = ptr.strip_prefix("/roi") {
+        if let Some(rest) = ptr.strip_prefix(ROI_POINTER) {
             return format!("{}#{rest}", args.roi.display());
         }
-        if let Some(rest) = ptr.strip_prefix("/params") {
-            let file = args.params.as_ref().map_or("params".to_string(), |p| p.display().to_string());
-            return format!("{file}#{rest}");
-        }
-        if let Some(rest) = ptr.strip_prefix("/no_fly/") {
-            let (idx, tail) = rest.split_once('/').map_or((rest, ""), |(a, b)| (a, b));
+        if let Some(rest) = ptr.strip_prefix(NO_FLY_POINTER) {
+            let rest = rest.trim_start_matches('/');
+            let (idx, tail) = rest.split_once('/').unwrap_or((rest, ""));
             if let Some(p) = idx.parse::<usize>().ok().and_then(|i| args.no_fly.get(i)) {
                 let tail = if tail.is_empty() { String::new() } else { format!("/{tail}") };
                 return format!("{}#{tail}", p.display());
             }
-        }
-        if ptr == "/no_fly" {
             return "no-fly zones".to_string();
         }
-        ptr.to_string()
+        let file = args.params.as_ref().map_or("params".to_string(), |p| p.display().to_string());
+        format!("{file}#{ptr}")
     };
     let lines: Vec<String> = issues.iter().map(|i| format!("{}: {}", locate(&i.pointer), i.message)).collect();
     if lines.len() == 1 {

@@ -1,6 +1,13 @@
-//! The `terraplan` binary: the CLI subcommands over planner-core.
+//! The `terraplan` binary: `serve` (the HTTP service) and the CLI
+//! subcommands that run the same planner on files.
 
+mod api;
+mod app;
 mod cli;
+mod config;
+mod db;
+mod error;
+mod serve;
 
 fn main() -> std::process::ExitCode {
     cli::run()

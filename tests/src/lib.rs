@@ -64,3 +64,122 @@ pub fn validator(script: &str, args: &[&Path]) -> Output {
 pub fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
+
+/// A real `terraplan serve` process on a free loopback port, stopped with
+/// SIGTERM (graceful shutdown) when dropped.
+pub struct Server {
+    child: Option<std::process::Child>,
+    pub base: String,
+    pub data_dir: PathBuf,
+}
+
+impl Server {
+    /// Start on `data_dir`. With `TERRAPLAN_TEST_DATABASE_URL` set (the
+    /// test command sets it for the PostgreSQL run) the server uses that
+    /// database instead of the embedded SQLite.
+    pub fn start(data_dir: &Path, extra_args: &[&str]) -> Server {
+        use std::io::{BufRead, BufReader};
+        let mut cmd = Command::new(terraplan_bin());
+        cmd.args(["serve", "--host", "127.0.0.1", "--port", "0", "--data-dir"])
+            .arg(data_dir)
+            .args(extra_args)
+            .env_remove("DATABASE_URL")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::inherit());
+        if let Ok(url) = std::env::var("TERRAPLAN_TEST_DATABASE_URL") {
+            cmd.env("DATABASE_URL", url);
+        }
+        let mut child = cmd.spawn().expect("start terraplan serve");
+        let stdout = child.stdout.take().expect("stdout");
+        let mut line = String::new();
+        BufReader::new(stdout).read_line(&mut line).expect("read address");
+        let base = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("unexpected first line from terraplan serve: {line:?}"))
+            .to_string();
+        Server { child: Some(child), base, data_dir: data_dir.to_path_buf() }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    /// Send SIGTERM and wait for a clean exit; returns the exit status.
+    pub fn stop(mut self) -> std::process::ExitStatus {
+        self.terminate().expect("server was running")
+    }
+
+    fn terminate(&mut self) -> Option<std::process::ExitStatus> {
+        let mut child = self.child.take()?;
+        let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        loop {
+            if let Ok(Some(status)) = child.try_wait() {
+                return Some(status);
+            }
+            if std::time::Instant::now() > deadline {
+                let _ = child.kill();
+                return child.wait().ok();
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        self.terminate();
+    }
+}
+
+/// An HTTP response read whole.
+pub struct Reply {
+    pub status: u16,
+    pub headers: Vec<(String, String)>,
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str())
+    }
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body).unwrap_or_else(|e| panic!("body is not JSON ({e}): {}", text(&self.body)))
+    }
+    pub fn text(&self) -> String {
+        text(&self.body)
+    }
+}
+
+fn agent() -> ureq::Agent {
+    ureq::Agent::config_builder().http_status_as_error(false).build().into()
+}
+
+fn reply(res: Result<ureq::http::Response<ureq::Body>, ureq::Error>) -> Reply {
+    let mut res = res.expect("HTTP request");
+    let status = res.status().as_u16();
+    let headers = res
+        .headers()
+        .iter()
+        .map(|(k, v)| (k.as_str().to_string(), v.to_str().unwrap_or("").to_string()))
+        .collect();
+    let body = res.body_mut().with_config().limit(256 * 1024 * 1024).read_to_vec().expect("read body");
+    Reply { status, headers, body }
+}
+
+pub fn get(url: &str) -> Reply {
+    reply(agent().get(url).call())
+}
+
+pub fn delete(url: &str) -> Reply {
+    reply(agent().delete(url).call())
+}
+
+pub fn post(url: &str, content_type: &str, body: &[u8]) -> Reply {
+    reply(agent().post(url).header("Content-Type", content_type).send(body))
+}
+
+pub fn post_json(url: &str, body: &serde_json::Value) -> Reply {
+    post(url, "application/json", body.to_string().as_bytes())
+}

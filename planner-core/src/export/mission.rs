@@ -22,6 +22,7 @@ pub mod frame {
 }
 
 /// How mission altitudes are expressed (SPEC §2).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum AltitudeFrame {
@@ -92,6 +93,7 @@ impl Mission {
 /// A fence polygon: an inclusion area the vehicle must stay in, or an
 /// exclusion area (a no-fly zone) it must stay out of. Rings are lon/lat,
 /// not closed (the first vertex is not repeated).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FencePolygon {
     pub inclusion: bool,

@@ -63,6 +63,9 @@ pub struct Limits {
     pub max_vertices: usize,
     /// Most no-fly zones accepted.
     pub max_no_fly_zones: usize,
+    /// Most survey-lane kilometres (free area / line spacing) one plan may
+    /// need: bounds the planner's time and memory for tiny spacings.
+    pub max_lane_km: f64,
 }
 
 impl Default for Limits {
@@ -71,6 +74,7 @@ impl Default for Limits {
             max_roi_area_km2: 100.0,
             max_vertices: 50_000,
             max_no_fly_zones: 5_000,
+            max_lane_km: 10_000.0,
         }
     }
 }

@@ -1,0 +1,833 @@
+//! Back-and-forth (boustrophedon) lanes in one cell (SPEC §3.3, thesis §5.4).
+//!
+//! Candidate lane directions are parallel and perpendicular to every cell
+//! edge, plus the slice direction (along which the decomposition guarantees
+//! the cell is monotone, so at least one candidate is always valid). For each
+//! direction the cell is looked at in a frame where lanes run along `u` and
+//! are stacked along `v`; the direction with the fewest turns, then the
+//! shortest flown length, wins.
+
+use geo::Area;
+use geo_types::{Coord, MultiPolygon, Polygon};
+
+use super::links::LinkRouter;
+use super::region::{EPS, Region, dot, is_positive};
+use super::{CellPlan, Lane};
+
+/// More lanes than this in one cell means the spacing is absurdly small for
+/// the cell; such a direction is not planned (memory would explode).
+const MAX_ROWS: usize = 100_000;
+
+/// Plans the lanes of `cell` (index `cell_index` in the decomposition) with
+/// lanes at most `line_spacing_m` apart. `free` is the free space (ROI minus
+/// NFZs) that contains the cell: lanes are extended through it to cover
+/// slanted boundaries but never leave it, and links avoid its exterior.
+///
+/// Returns `None` for a degenerate cell (fewer than three distinct vertices,
+/// no area, non-finite coordinates) or a spacing that is not a positive
+/// number (or so small that the cell would need more than 100 000 lanes).
+pub fn plan_cell(
+    cell_index: usize,
+    cell: &Polygon<f64>,
+    free: &MultiPolygon<f64>,
+    line_spacing_m: f64,
+    slice_angle_deg: f64,
+) -> Option<CellPlan> {
+    if !is_positive(line_spacing_m) {
+        return None;
+    }
+    let ring = clean_ring(cell);
+    if ring.len() < 3
+        || ring.iter().any(|c| !c.x.is_finite() || !c.y.is_finite())
+        || cell.unsigned_area() <= EPS * EPS
+    {
+        return None;
+    }
+    let cell_region = Region::from_polygon(cell);
+    // Rank cheaply before building lanes: the lane count of a direction only
+    // needs the cell's extent across it. Directions are tried by increasing
+    // lane count (turns are 2 per lane change) and the first count with a
+    // monotone direction wins; only those finalists get their free-space
+    // clipping and links computed. Cells with a curved outline have hundreds
+    // of candidate directions, so this matters.
+    let mut candidates: Vec<(Frame, Vec<RowOffset>)> = candidate_bearings(&ring, slice_angle_deg)
+        .into_iter()
+        .filter_map(|b| {
+            let frame = Frame::new(b, &ring);
+            let offsets = row_offsets(frame.v, line_spacing_m)?;
+            Some((frame, offsets))
+        })
+        .collect();
+    candidates.sort_by_key(|(_, offsets)| offsets.len());
+    let mut finalists: Vec<Layout> = Vec::new();
+    let mut rejected: Vec<Layout> = Vec::new();
+    for group in candidates.chunk_by(|a, b| a.1.len() == b.1.len()) {
+        for (frame, offsets) in group {
+            let layout = Layout::new(*frame, offsets, &cell_region);
+            if layout.is_monotone() {
+                finalists.push(layout);
+            } else {
+                rejected.push(layout);
+            }
+        }
+        if !finalists.is_empty() {
+            break;
+        }
+    }
+    if finalists.is_empty() {
+        // The cell is not monotone along any candidate (not a cell from the
+        // decomposition): fly every piece of every line, fewest pieces first.
+        let fewest = rejected.iter().map(Layout::lane_count).min()?;
+        finalists = rejected
+            .into_iter()
+            .filter(|l| l.lane_count() == fewest)
+            .collect();
+    }
+    let free_region = Region::from_multi_polygon(free);
+    let router = LinkRouter::new(cell, free);
+    let mut best: Option<CellPlan> = None;
+    for layout in &finalists {
+        let lanes = layout.lanes(&ring, &free_region);
+        if lanes.is_empty() {
+            continue;
+        }
+        let plan = CellPlan {
+            cell_index,
+            direction_deg: layout.frame.bearing,
+            links: router.links(&lanes),
+            lanes,
+        };
+        let better = match &best {
+            None => true,
+            Some(b) => (plan.turns(), plan.length_m()) < (b.turns(), b.length_m() * (1.0 - 1e-12)),
+        };
+        if better {
+            best = Some(plan);
+        }
+    }
+    best
+}
+
+/// Exterior ring without repeated points or the closing point.
+fn clean_ring(cell: &Polygon<f64>) -> Vec<Coord<f64>> {
+    let mut ring: Vec<Coord<f64>> = cell.exterior().0.clone();
+    ring.dedup();
+    while ring.len() > 1 && ring.first() == ring.last() {
+        ring.pop();
+    }
+    ring
+}
+
+/// Lane bearings in [0, 180): the slice direction first, then parallel and
+/// perpendicular to each edge, without duplicates.
+fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::with_capacity(2 * ring.len() + 1);
+    let mut push = |b: f64| {
+        if !b.is_finite() {
+            return;
+        }
+        let mut b = b.rem_euclid(180.0);
+        if b >= 180.0 - 1e-9 {
+            b = 0.0;
+        }
+        let same = |a: f64| {
+            let d = (a - b).abs();
+            d.min(180.0 - d) < 1e-9
+        };
+        if !out.iter().any(|a| same(*a)) {
+            out.push(b);
+        }
+    };
+    push(slice_angle_deg);
+    for k in 0..ring.len() {
+        let e = ring[(k + 1) % ring.len()] - ring[k];
+        if e.x == 0.0 && e.y == 0.0 {
+            continue;
+        }
+        let bearing = e.x.atan2(e.y).to_degrees();
+        push(bearing);
+        push(bearing + 90.0);
+    }
+    out
+}
+
+/// The frame of one candidate direction: lanes run along `u` and are
+/// stacked along `v`.
+#[derive(Clone, Copy, Debug)]
+struct Frame {
+    bearing: f64,
+    /// Origin of the local frame.
+    origin: Coord<f64>,
+    /// Unit vector along the lanes (bearing `bearing`).
+    d: Coord<f64>,
+    /// Unit normal: lanes are stacked along it.
+    n: Coord<f64>,
+    /// Extent of the cell along `d`.
+    u: (f64, f64),
+    /// Extent of the cell along `n`.
+    v: (f64, f64),
+}
+
+impl Frame {
+    fn new(bearing: f64, ring: &[Coord<f64>]) -> Frame {
+        let rad = bearing.to_radians();
+        let d = Coord {
+            x: rad.sin(),
+            y: rad.cos(),
+        };
+        // Stack the lanes eastwards (northwards for east–west lanes), as the
+        // decomposition sweeps its slices.
+        let n = if bearing < 90.0 {
+            Coord { x: d.y, y: -d.x }
+        } else {
+            Coord { x: -d.y, y: d.x }
+        };
+        let origin = ring[0];
+        let (mut u, mut v) = (
+            (f64::INFINITY, f64::NEG_INFINITY),
+            (f64::INFINITY, f64::NEG_INFINITY),
+        );
+        for &c in ring {
+            let (cu, cv) = (dot(c - origin, d), dot(c - origin, n));
+            u = (u.0.min(cu), u.1.max(cu));
+            v = (v.0.min(cv), v.1.max(cv));
+        }
+        Frame {
+            bearing,
+            origin,
+            d,
+            n,
+            u,
+            v,
+        }
+    }
+
+    fn point(&self, u: f64, v: f64) -> Coord<f64> {
+        self.origin + self.d * u + self.n * v
+    }
+}
+
+/// A lane line's offset `v` and the band of `v` its strip must cover.
+type RowOffset = (f64, (f64, f64));
+
+/// Lane offsets across an extent `(vmin, vmax)`: one lane in the middle of a
+/// narrow cell; otherwise the first and last half a spacing inside and the
+/// others evenly spread in between (so never more than `spacing` apart).
+/// `None` for an empty extent or more than [`MAX_ROWS`] lanes.
+fn row_offsets((vmin, vmax): (f64, f64), spacing: f64) -> Option<Vec<RowOffset>> {
+    let h = vmax - vmin;
+    if h.is_nan() || h <= EPS {
+        return None;
+    }
+    if h <= spacing + EPS {
+        return Some(vec![((vmin + vmax) / 2.0, (vmin, vmax))]);
+    }
+    // The tolerance keeps an exact multiple from gaining a lane by rounding.
+    let gaps = ((h - spacing) / spacing - 1e-9).ceil().max(1.0);
+    if gaps.is_nan() || gaps >= MAX_ROWS as f64 {
+        return None;
+    }
+    let gaps = gaps as usize;
+    let actual = (h - spacing) / gaps as f64;
+    Some(
+        (0..=gaps)
+            .map(|i| {
+                let v = vmin + spacing / 2.0 + i as f64 * actual;
+                // The outer lanes also answer for the half spacing between
+                // them and the cell's extent.
+                let lo = if i == 0 { vmin } else { v - actual / 2.0 };
+                let hi = if i == gaps { vmax } else { v + actual / 2.0 };
+                (v, (lo, hi))
+            })
+            .collect(),
+    )
+}
+
+/// Lane rows of one candidate direction.
+struct Layout {
+    frame: Frame,
+    rows: Vec<Row>,
+}
+
+struct Row {
+    /// Offset of the lane line along `n`.
+    v: f64,
+    /// The strip of the cell this lane must cover, along `n`.
+    band: (f64, f64),
+    /// Parts of the lane line inside the cell, as `u` ranges, ascending.
+    segments: Vec<(f64, f64)>,
+}
+
+impl Layout {
+    fn new(frame: Frame, offsets: &[RowOffset], cell: &Region) -> Layout {
+        let (umin, umax) = frame.u;
+        let rows = offsets
+            .iter()
+            .filter_map(|&(v, band)| {
+                let start = frame.point(umin - 1.0, v);
+                let segments: Vec<(f64, f64)> = cell
+                    .intervals(start, frame.d, 0.0, umax - umin + 2.0)
+                    .into_iter()
+                    .map(|(s, e)| (s + umin - 1.0, e + umin - 1.0))
+                    .collect();
+                // Only a grazing line (rounding at a vertex) finds nothing.
+                (!segments.is_empty()).then_some(Row { v, band, segments })
+            })
+            .collect();
+        Layout { frame, rows }
+    }
+
+    /// Every lane line meets the cell in one segment.
+    fn is_monotone(&self) -> bool {
+        !self.rows.is_empty() && self.rows.iter().all(|r| r.segments.len() == 1)
+    }
+
+    fn lane_count(&self) -> usize {
+        self.rows.iter().map(|r| r.segments.len()).sum()
+    }
+
+    fn point(&self, u: f64, v: f64) -> Coord<f64> {
+        self.frame.point(u, v)
+    }
+
+    /// The lanes in flight order, alternating direction row by row.
+    fn lanes(&self, ring: &[Coord<f64>], free: &Region) -> Vec<Lane> {
+        let mut lanes = Vec::with_capacity(self.rows.len());
+        for (k, row) in self.rows.iter().enumerate() {
+            let forward = k % 2 == 0;
+            let (bu0, bu1) = self.band_extent(ring, row.band);
+            let count = row.segments.len();
+            let mut row_lanes: Vec<Lane> = row
+                .segments
+                .iter()
+                .enumerate()
+                .map(|(i, &(a, b))| {
+                    // Extend the row's outer ends so the strip reaches the
+                    // farthest cell point in its band (slanted boundaries).
+                    let lo = if i == 0 { bu0.min(a) } else { a };
+                    let hi = if i + 1 == count { bu1.max(b) } else { b };
+                    let (u0, u1) = self.clip_to_free(free, row.v, (lo, hi), (a, b));
+                    let (p, q) = (self.point(u0, row.v), self.point(u1, row.v));
+                    if forward {
+                        Lane { start: p, end: q }
+                    } else {
+                        Lane { start: q, end: p }
+                    }
+                })
+                .collect();
+            if !forward {
+                row_lanes.reverse();
+            }
+            lanes.extend(row_lanes);
+        }
+        lanes
+    }
+
+    /// `u` range of the part of the cell within `band` (along `n`).
+    fn band_extent(&self, ring: &[Coord<f64>], (lo, hi): (f64, f64)) -> (f64, f64) {
+        let (mut umin, mut umax) = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut take = |u: f64| {
+            umin = umin.min(u);
+            umax = umax.max(u);
+        };
+        let m = ring.len();
+        for k in 0..m {
+            let (p, q) = (
+                ring[k] - self.frame.origin,
+                ring[(k + 1) % m] - self.frame.origin,
+            );
+            let (u1, v1, u2, v2) = (
+                dot(p, self.frame.d),
+                dot(p, self.frame.n),
+                dot(q, self.frame.d),
+                dot(q, self.frame.n),
+            );
+            if (v2 - v1).abs() <= f64::EPSILON * (v1.abs() + v2.abs()) {
+                if v1 >= lo - EPS && v1 <= hi + EPS {
+                    take(u1);
+                    take(u2);
+                }
+                continue;
+            }
+            // Part of the edge whose v lies in the band.
+            let ta = ((lo - v1) / (v2 - v1)).clamp(0.0, 1.0);
+            let tb = ((hi - v1) / (v2 - v1)).clamp(0.0, 1.0);
+            let (t0, t1) = (ta.min(tb), ta.max(tb));
+            let v_at = |t: f64| v1 + (v2 - v1) * t;
+            if v_at(t0) < lo - EPS || v_at(t0) > hi + EPS {
+                continue; // the edge misses the band
+            }
+            take(u1 + (u2 - u1) * t0);
+            take(u1 + (u2 - u1) * t1);
+        }
+        (umin, umax)
+    }
+
+    /// Clips the wanted lane `(lo, hi)` to the stretch of its line that lies
+    /// in free space and contains the lane's part in the cell `(a, b)`.
+    fn clip_to_free(
+        &self,
+        free: &Region,
+        v: f64,
+        (lo, hi): (f64, f64),
+        (a, b): (f64, f64),
+    ) -> (f64, f64) {
+        let start = self.point(lo, v);
+        let mid = (a + b) / 2.0 - lo;
+        free.intervals(start, self.frame.d, 0.0, hi - lo)
+            .into_iter()
+            .find(|&(s, e)| s <= mid + EPS && e >= mid - EPS)
+            .map(|(s, e)| (lo + s, lo + e))
+            // The cell is not in free space (inconsistent input): fly only
+            // the part in the cell.
+            .unwrap_or((a, b))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::coverage_ratio;
+    use super::*;
+    use approx::assert_abs_diff_eq;
+    use geo::{BooleanOps, Buffer, Covers, Intersects};
+    use geo_types::{Line, LineString, coord};
+
+    const X0: f64 = 480_000.0;
+    const Y0: f64 = 5_200_000.0;
+
+    /// A polygon from coordinates relative to a UTM-like origin.
+    fn poly(pts: &[(f64, f64)]) -> Polygon<f64> {
+        Polygon::new(
+            LineString(
+                pts.iter()
+                    .map(|&(x, y)| coord! { x: X0 + x, y: Y0 + y })
+                    .collect(),
+            ),
+            vec![],
+        )
+    }
+
+    fn local(c: Coord<f64>) -> (f64, f64) {
+        (c.x - X0, c.y - Y0)
+    }
+
+    /// Every flown segment (lanes and links) stays in `free`, checked with
+    /// geo's exact predicates against free space grown by a micrometre.
+    fn assert_flown_in_free(plan: &CellPlan, free: &MultiPolygon<f64>) {
+        let grown = free.buffer(1e-6);
+        for w in plan.path().windows(2) {
+            assert!(
+                grown.covers(&Line::new(w[0], w[1])),
+                "{:?} leaves free space",
+                w
+            );
+        }
+        for lane in &plan.lanes {
+            assert!(grown.covers(&Line::new(lane.start, lane.end)), "{lane:?}");
+        }
+    }
+
+    fn assert_boustrophedon(plan: &CellPlan) {
+        let rad = plan.direction_deg.to_radians();
+        let d = coord! { x: rad.sin(), y: rad.cos() };
+        for (i, lane) in plan.lanes.iter().enumerate() {
+            let along = dot(lane.end - lane.start, d);
+            assert!(along.abs() > 0.0);
+            if i > 0 {
+                let prev = dot(plan.lanes[i - 1].end - plan.lanes[i - 1].start, d);
+                assert!(
+                    along * prev < 0.0,
+                    "lanes {} and {i} fly the same way",
+                    i - 1
+                );
+            }
+            // Lanes are straight along the chosen direction.
+            let across = super::super::region::cross(d, lane.end - lane.start);
+            assert!(across.abs() < 1e-6);
+        }
+        assert_eq!(plan.links.len(), plan.lanes.len() - 1);
+    }
+
+    #[test]
+    fn rectangle_lanes_along_long_side() {
+        let cell = poly(&[(0., 0.), (200., 0.), (200., 100.), (0., 100.)]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        // North–south slices; lanes still go east–west along the long side.
+        let plan = plan_cell(7, &cell, &free, 20.0, 0.0).unwrap();
+        assert_eq!(plan.cell_index, 7);
+        assert_abs_diff_eq!(plan.direction_deg, 90.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 5);
+        assert_eq!(plan.turns(), 8);
+        for (i, lane) in plan.lanes.iter().enumerate() {
+            let (sx, sy) = local(lane.start);
+            let (ex, ey) = local(lane.end);
+            let y = 10.0 + 20.0 * i as f64;
+            assert_abs_diff_eq!(sy, y, epsilon = 1e-6);
+            assert_abs_diff_eq!(ey, y, epsilon = 1e-6);
+            let (from, to) = if i % 2 == 0 {
+                (0.0, 200.0)
+            } else {
+                (200.0, 0.0)
+            };
+            assert_abs_diff_eq!(sx, from, epsilon = 1e-6);
+            assert_abs_diff_eq!(ex, to, epsilon = 1e-6);
+        }
+        assert!(plan.links.iter().all(Vec::is_empty));
+        assert_abs_diff_eq!(plan.length_m(), 5.0 * 200.0 + 4.0 * 20.0, epsilon = 1e-6);
+        assert_boustrophedon(&plan);
+    }
+
+    #[test]
+    fn spacing_is_never_exceeded() {
+        // Height 110 with spacing 20: ceil(90/20) + 1 = 6 lanes, 18 m apart,
+        // the outer ones 10 m inside.
+        let cell = poly(&[(0., 0.), (300., 0.), (300., 110.), (0., 110.)]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 90.0).unwrap();
+        let ys: Vec<f64> = plan.lanes.iter().map(|l| local(l.start).1).collect();
+        assert_eq!(ys.len(), 6);
+        for (i, y) in ys.iter().enumerate() {
+            assert_abs_diff_eq!(*y, 10.0 + 18.0 * i as f64, epsilon = 1e-6);
+        }
+        // A cell narrower than the spacing gets one lane in the middle.
+        let thin = poly(&[(0., 0.), (300., 0.), (300., 12.), (0., 12.)]);
+        let plan = plan_cell(0, &thin, &MultiPolygon(vec![thin.clone()]), 20.0, 0.0).unwrap();
+        assert_eq!(plan.lanes.len(), 1);
+        assert_abs_diff_eq!(local(plan.lanes[0].start).1, 6.0, epsilon = 1e-6);
+        assert_eq!(plan.turns(), 0);
+        assert!(plan.links.is_empty());
+    }
+
+    #[test]
+    fn rotated_rectangle_follows_its_edges() {
+        // 300 × 90 rectangle turned 30° from the axes.
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let pts: Vec<(f64, f64)> = [(0., 0.), (300., 0.), (300., 90.), (0., 90.)]
+            .iter()
+            .map(|&(x, y)| (x * c - y * s, x * s + y * c))
+            .collect();
+        let cell = poly(&pts);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
+        // The long side has bearing 90° − 30° = 60°.
+        assert_abs_diff_eq!(plan.direction_deg, 60.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 5); // ceil(70/20) + 1
+        for lane in &plan.lanes {
+            assert_abs_diff_eq!(
+                (lane.end.x - lane.start.x).hypot(lane.end.y - lane.start.y),
+                300.0,
+                epsilon = 1e-6
+            );
+        }
+        assert_boustrophedon(&plan);
+        assert_flown_in_free(&plan, &free);
+    }
+
+    #[test]
+    fn slanted_boundaries_are_fully_covered() {
+        // Cells inside a larger free area: lanes may reach past the slanted
+        // edges so that their strips cover the corners.
+        let roi = poly(&[(-200., -200.), (800., -200.), (800., 600.), (-200., 600.)]);
+        let free = MultiPolygon(vec![roi]);
+        let cells = [
+            poly(&[(0., 0.), (400., 0.), (500., 300.), (100., 300.)]), // parallelogram
+            poly(&[(0., 0.), (500., 40.), (180., 350.)]),              // triangle
+            poly(&[(0., 0.), (450., 0.), (350., 200.), (60., 220.)]),  // trapezoid
+        ];
+        for (i, cell) in cells.iter().enumerate() {
+            for slice in [0.0, 90.0] {
+                let plan = plan_cell(i, cell, &free, 25.0, slice).unwrap();
+                let ratio = coverage_ratio(&plan.lanes, 25.0, &MultiPolygon(vec![cell.clone()]));
+                assert!(ratio >= 0.995, "cell {i}: coverage {ratio}");
+                assert_boustrophedon(&plan);
+                assert_flown_in_free(&plan, &free);
+            }
+        }
+        // Without free space around them the lanes stop at the slanted
+        // edges and the corners of each strip are missed.
+        for cell in &cells[1..] {
+            let own = MultiPolygon(vec![cell.clone()]);
+            let plan = plan_cell(0, cell, &own, 25.0, 0.0).unwrap();
+            let ratio = coverage_ratio(&plan.lanes, 25.0, &own);
+            assert!(ratio < 0.99, "{ratio}");
+            assert_flown_in_free(&plan, &own);
+        }
+    }
+
+    #[test]
+    fn lanes_stop_at_free_space_boundary() {
+        // Triangle cell whose west leg borders an NFZ and whose south leg is
+        // the ROI border: lanes parallel to the hypotenuse may reach past
+        // neither, so the corners there stay uncovered, but nothing leaves
+        // free space.
+        let roi = poly(&[(0., 100.), (400., 100.), (400., 400.), (0., 400.)]);
+        let nfz = poly(&[(0., 100.), (100., 100.), (100., 300.), (0., 300.)]);
+        let free = MultiPolygon(vec![roi]).difference(&MultiPolygon(vec![nfz.clone()]));
+        let cell = poly(&[(100., 100.), (300., 100.), (100., 300.)]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
+        assert_abs_diff_eq!(plan.direction_deg, 135.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 8); // ceil((141.42 − 20)/20) + 1
+        assert_flown_in_free(&plan, &free);
+        let shrunk = nfz.buffer(-1e-6);
+        for lane in &plan.lanes {
+            assert!(
+                !shrunk.intersects(&Line::new(lane.start, lane.end)),
+                "{lane:?}"
+            );
+        }
+        // Lanes end on the legs, so each lane end misses a small triangle.
+        let ratio = coverage_ratio(&plan.lanes, 20.0, &MultiPolygon(vec![cell.clone()]));
+        assert!(ratio < 0.99 && ratio > 0.9, "{ratio}");
+    }
+
+    #[test]
+    fn lanes_extend_into_neighbouring_free_space() {
+        // Same triangle, but west of it is free: west ends reach past the
+        // leg (x < 100), south ends still stop at the ROI border (y = 100).
+        let roi = poly(&[(0., 100.), (400., 100.), (400., 400.), (0., 400.)]);
+        let free = MultiPolygon(vec![roi]);
+        let cell = poly(&[(100., 100.), (300., 100.), (100., 300.)]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
+        assert_flown_in_free(&plan, &free);
+        let min_x = plan
+            .lanes
+            .iter()
+            .flat_map(|l| [l.start, l.end])
+            .map(|c| local(c).0);
+        assert!(min_x.fold(f64::INFINITY, f64::min) < 100.0 - 1.0);
+        for c in plan.lanes.iter().flat_map(|l| [l.start, l.end]) {
+            assert!(local(c).1 >= 100.0 - 1e-6);
+        }
+    }
+
+    #[test]
+    fn concave_monotone_cell_gets_safe_links() {
+        // A thin wedge cut into the east side between the first two lanes:
+        // every east–west line meets the cell once, but the straight link
+        // between their east ends would cross the wedge.
+        let cell = poly(&[
+            (0., 0.),
+            (100., 0.),
+            (100., 15.),
+            (30., 20.),
+            (100., 25.),
+            (100., 100.),
+            (0., 100.),
+        ]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 90.0).unwrap();
+        assert_abs_diff_eq!(plan.direction_deg, 90.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 5);
+        assert_eq!(plan.links[0].len(), 1);
+        let (x, y) = local(plan.links[0][0]);
+        assert_abs_diff_eq!(x, 30.0, epsilon = 1e-6);
+        assert_abs_diff_eq!(y, 20.0, epsilon = 1e-6);
+        assert!(plan.links[1..].iter().all(Vec::is_empty));
+        assert_flown_in_free(&plan, &free);
+        // The straight link would indeed have left the cell.
+        let straight = Line::new(plan.lanes[0].end, plan.lanes[1].start);
+        assert!(!free.buffer(1e-6).covers(&straight));
+    }
+
+    #[test]
+    fn reoriented_variants_keep_lanes_and_stay_safe() {
+        let cell = poly(&[
+            (0., 0.),
+            (100., 0.),
+            (100., 15.),
+            (30., 20.),
+            (100., 25.),
+            (100., 100.),
+            (0., 100.),
+        ]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 90.0).unwrap();
+        assert_eq!(plan.reoriented(false, false, &cell, &free), plan);
+        let key = |l: &Lane| {
+            let (a, b) = (local(l.start), local(l.end));
+            let (a, b) = if a < b { (a, b) } else { (b, a) };
+            [a.0, a.1, b.0, b.1].map(|v| (v * 1e6).round() as i64)
+        };
+        let mut original: Vec<_> = plan.lanes.iter().map(key).collect();
+        original.sort();
+        let mut entries = Vec::new();
+        for (rev, flip) in [(false, false), (false, true), (true, false), (true, true)] {
+            let r = plan.reoriented(rev, flip, &cell, &free);
+            let mut lanes: Vec<_> = r.lanes.iter().map(key).collect();
+            lanes.sort();
+            assert_eq!(lanes, original);
+            assert_eq!(r.direction_deg, plan.direction_deg);
+            assert_boustrophedon(&r);
+            assert_flown_in_free(&r, &free);
+            let flown = |p: &CellPlan| -> f64 {
+                p.lanes
+                    .iter()
+                    .map(|l| (l.end.x - l.start.x).hypot(l.end.y - l.start.y))
+                    .sum()
+            };
+            assert_abs_diff_eq!(flown(&r), flown(&plan), epsilon = 1e-6);
+            entries.push(r.entry().unwrap());
+        }
+        // Four different entry points: both ends of the first and last lane.
+        for i in 0..4 {
+            for j in i + 1..4 {
+                assert!((entries[i].x - entries[j].x).hypot(entries[i].y - entries[j].y) > 1.0);
+            }
+        }
+        // Reversed and flipped is the original path backwards.
+        let back = plan.reoriented(true, true, &cell, &free);
+        let mut path = back.path();
+        path.reverse();
+        let orig = plan.path();
+        assert_eq!(path.len(), orig.len());
+        for (p, q) in path.iter().zip(&orig) {
+            assert_abs_diff_eq!(p.x, q.x, epsilon = 1e-6);
+            assert_abs_diff_eq!(p.y, q.y, epsilon = 1e-6);
+        }
+    }
+
+    #[test]
+    fn non_monotone_direction_is_rejected() {
+        // A notch cut from the north: north–south lines (the slices) meet the
+        // cell once, east–west lines through the notch meet it twice.
+        let cell = poly(&[
+            (0., 0.),
+            (300., 0.),
+            (300., 100.),
+            (200., 100.),
+            (200., 40.),
+            (100., 40.),
+            (100., 100.),
+            (0., 100.),
+        ]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
+        // East–west would need only 5 lanes, but 15 north–south ones are
+        // the fewest among the monotone directions.
+        assert_abs_diff_eq!(plan.direction_deg, 0.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 15);
+        assert_boustrophedon(&plan);
+        assert_flown_in_free(&plan, &free);
+        // Lanes under the notch stop at its floor.
+        for lane in &plan.lanes[5..10] {
+            assert_abs_diff_eq!(
+                local(lane.start).1.max(local(lane.end).1),
+                40.0,
+                epsilon = 1e-6
+            );
+        }
+        // From x = 90 (flown north) to x = 110 the link goes round the
+        // notch's corner instead of cutting through it.
+        assert_eq!(plan.links[4].len(), 1);
+        let (x, y) = local(plan.links[4][0]);
+        assert_abs_diff_eq!(x, 100.0, epsilon = 1e-6);
+        assert_abs_diff_eq!(y, 40.0, epsilon = 1e-6);
+        let ratio = coverage_ratio(&plan.lanes, 20.0, &free);
+        assert!(ratio > 0.999, "{ratio}");
+    }
+
+    #[test]
+    fn non_monotone_cell_still_gets_a_safe_plan() {
+        // Notches from the north and from the east: no candidate direction
+        // is monotone, so every piece of every line becomes a lane.
+        let cell = poly(&[
+            (0., 0.),
+            (300., 0.),
+            (300., 40.),
+            (250., 40.),
+            (250., 60.),
+            (300., 60.),
+            (300., 100.),
+            (200., 100.),
+            (200., 40.),
+            (100., 40.),
+            (100., 100.),
+            (0., 100.),
+        ]);
+        let free = MultiPolygon(vec![cell.clone()]);
+        let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
+        // East–west rows at y = 10 … 90: one piece each at 10 and 30, two
+        // at 50, 70, 90 → 8 lanes, against 15 + 2 north–south (the east
+        // notch cuts x = 270 and 290).
+        assert_abs_diff_eq!(plan.direction_deg, 90.0, epsilon = 1e-9);
+        assert_eq!(plan.lanes.len(), 8);
+        assert_eq!(plan.links.len(), 7);
+        assert_flown_in_free(&plan, &free);
+        let ratio = coverage_ratio(&plan.lanes, 20.0, &free);
+        assert!(ratio > 0.999, "{ratio}");
+    }
+
+    #[test]
+    fn curved_cell_with_many_edges() {
+        // A 256-gon (128 distinct candidate directions) of radius 500 m
+        // inside a free area whose own outline has 1024 vertices.
+        let ngon = |r: f64, k: usize| -> Vec<(f64, f64)> {
+            (0..k)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * i as f64 / k as f64;
+                    (r * a.cos(), r * a.sin())
+                })
+                .collect()
+        };
+        let cell = poly(&ngon(500.0, 256));
+        let free = MultiPolygon(vec![poly(&ngon(700.0, 1024))]);
+        let t = std::time::Instant::now();
+        let plan = plan_cell(0, &cell, &free, 30.0, 0.0).unwrap();
+        assert!(t.elapsed().as_secs_f64() < 10.0, "{:?}", t.elapsed());
+        assert_eq!(plan.lanes.len(), 34); // ceil((1000 − 30)/30) + 1
+        assert_boustrophedon(&plan);
+        assert_flown_in_free(&plan, &free);
+        let ratio = coverage_ratio(&plan.lanes, 30.0, &MultiPolygon(vec![cell.clone()]));
+        assert!(ratio >= 0.995, "{ratio}");
+    }
+
+    #[test]
+    fn degenerate_input_gives_none() {
+        let free = MultiPolygon(vec![poly(&[(0., 0.), (10., 0.), (10., 10.), (0., 10.)])]);
+        let line = poly(&[(0., 0.), (10., 0.), (5., 0.)]);
+        assert!(plan_cell(0, &line, &free, 5.0, 0.0).is_none());
+        let two = poly(&[(0., 0.), (10., 0.), (10., 0.)]);
+        assert!(plan_cell(0, &two, &free, 5.0, 0.0).is_none());
+        let empty = Polygon::new(LineString(vec![]), vec![]);
+        assert!(plan_cell(0, &empty, &free, 5.0, 0.0).is_none());
+        let nan = poly(&[(0., 0.), (f64::NAN, 0.), (10., 10.)]);
+        assert!(plan_cell(0, &nan, &free, 5.0, 0.0).is_none());
+        let cell = poly(&[(0., 0.), (10., 0.), (10., 10.)]);
+        assert!(plan_cell(0, &cell, &free, 0.0, 0.0).is_none());
+        assert!(plan_cell(0, &cell, &free, f64::NAN, 0.0).is_none());
+        assert!(plan_cell(0, &cell, &free, 1e-9, 0.0).is_none());
+        // A non-finite slice angle only drops that candidate.
+        assert!(plan_cell(0, &cell, &free, 5.0, f64::NAN).is_some());
+        // An implicitly closed ring works like a closed one.
+        let open = Polygon::new(
+            LineString(vec![
+                coord! { x: 0., y: 0. },
+                coord! { x: 10., y: 0. },
+                coord! { x: 10., y: 10. },
+            ]),
+            vec![],
+        );
+        assert!(plan_cell(0, &open, &free, 5.0, 0.0).is_some());
+    }
+
+    #[test]
+    fn candidates_are_deduplicated() {
+        let ring = [
+            coord! { x: 0., y: 0. },
+            coord! { x: 10., y: 0. },
+            coord! { x: 10., y: 10. },
+            coord! { x: 0., y: 10. },
+        ];
+        assert_eq!(candidate_bearings(&ring, 0.0), vec![0.0, 90.0]);
+        assert_eq!(candidate_bearings(&ring, 180.0), vec![0.0, 90.0]);
+        let tri = [
+            coord! { x: 0., y: 0. },
+            coord! { x: 10., y: 10. },
+            coord! { x: 0., y: 10. },
+        ];
+        let b = candidate_bearings(&tri, -30.0);
+        assert_eq!(b.len(), 5);
+        assert_abs_diff_eq!(b[0], 150.0, epsilon = 1e-9);
+        assert!(b.iter().all(|x| (0.0..180.0).contains(x)));
+    }
+}

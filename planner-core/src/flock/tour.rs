@@ -1,0 +1,1145 @@
+//! One UAV's tour over all cells: cell order and the end each cell is entered
+//! at (SPEC §3.4, §3.5).
+//!
+//! A lawnmower cell can be flown four ways (start at the first or last lane,
+//! at either end), so the tour is a small generalised TSP: visit every cell
+//! once in one of its ways, starting and ending at home, minimising the
+//! transit length. The four ways of a cell come in reverse pairs (`w` and
+//! `w ^ 1` fly the same path backwards), which is what makes 2-opt segment
+//! reversal valid here.
+//!
+//! 1. Construction: nearest neighbour over all (cell, way) entry points.
+//! 2. Euclidean local search: exact orientation DP for the current order,
+//!    2-opt and or-opt (segments of 1–3 cells, either direction, any way for
+//!    a single cell) on K-nearest-neighbour candidate lists.
+//! 3. The same local search on real NFZ-avoiding transit lengths. Euclidean
+//!    distance is a lower bound of the real one, so a move is only costed
+//!    with [`ObstacleMap::shortest_path`] when its optimistic gain is
+//!    positive; the number of such queries is capped.
+//!
+//! All effort is bounded by pass and query budgets (no wall clock), so the
+//! result is deterministic.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use geo_types::{Coord, MultiPolygon, Polygon};
+use rstar::RTree;
+use rstar::primitives::GeomWithData;
+
+use super::transit::{ObstacleMap, TransitError, polyline_length};
+use crate::coverage::CellPlan;
+
+/// The flight of one UAV: its cells in order and the transits around them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tour {
+    /// Cells in flight order, each oriented as flown.
+    pub visits: Vec<CellPlan>,
+    /// `visits.len() + 1` transits: start → `visits[0]` entry, each exit →
+    /// next entry, last exit → start. Every polyline includes its endpoints.
+    pub transits: Vec<Vec<Coord<f64>>>,
+}
+
+impl Tour {
+    /// The whole flown polyline (transits and cells) without consecutive
+    /// duplicate points.
+    pub fn path(&self) -> Vec<Coord<f64>> {
+        let mut out: Vec<Coord<f64>> = Vec::new();
+        let mut extend = |points: &[Coord<f64>]| {
+            for &p in points {
+                if out.last() != Some(&p) {
+                    out.push(p);
+                }
+            }
+        };
+        for (i, transit) in self.transits.iter().enumerate() {
+            extend(transit);
+            if let Some(visit) = self.visits.get(i) {
+                extend(&visit.path());
+            }
+        }
+        out
+    }
+
+    /// Total length of the transits, metres.
+    pub fn transit_length_m(&self) -> f64 {
+        self.transits.iter().map(|t| polyline_length(t)).sum()
+    }
+
+    /// Transits plus the flown cell paths, metres.
+    pub fn length_m(&self) -> f64 {
+        self.transit_length_m() + self.visits.iter().map(CellPlan::length_m).sum::<f64>()
+    }
+}
+
+/// Neighbours per cell in the candidate lists of the local search.
+const NEIGHBOURS: usize = 10;
+/// Rounds of (orientation DP, 2-opt, or-opt) per phase.
+const MAX_ROUNDS: usize = 25;
+/// Real-length queries allowed in the second phase: `BASE + PER_CELL · n`.
+const QUERY_BUDGET_BASE: usize = 500;
+const QUERY_BUDGET_PER_CELL: usize = 4;
+/// Moves must gain at least this much (metres) to count, against rounding.
+const MIN_GAIN: f64 = 1e-6;
+/// Cost of a leg that has no NFZ-free path: huge but finite, so gains stay
+/// comparable.
+const NO_PATH_PENALTY: f64 = 1e9;
+/// Tolerance when matching a re-oriented plan to the requested ends.
+const END_MATCH_TOL: f64 = 1e-6;
+
+/// Plans the tour of one UAV from `start` over every plan with lanes, and
+/// back. `plans[i].cell_index` indexes `cells`; `free` is the free space the
+/// cells' inner links must stay in (used to re-orient cells). Plans without
+/// lanes are skipped. Fails if a transit cannot avoid the obstacles
+/// (start inside an NFZ, or a cell unreachable).
+pub fn plan_tour(
+    start: Coord<f64>,
+    plans: &[CellPlan],
+    cells: &[Polygon<f64>],
+    free: &MultiPolygon<f64>,
+    obstacles: &ObstacleMap,
+) -> Result<Tour, TransitError> {
+    let jobs: Vec<Job> = plans
+        .iter()
+        .enumerate()
+        .filter_map(|(i, plan)| Job::new(i, plan, cells.get(plan.cell_index).is_some()))
+        .collect();
+    let mut legs = Legs::new(obstacles);
+
+    let t = std::time::Instant::now();
+    let mut search = Search::new(start, &jobs);
+    search.nearest_neighbour();
+    eprintln!("DBG nn {:?} cost {}", t.elapsed(), search.legs_of(&search.seq).iter().map(|&(p,q)| dist(p,q)).sum::<f64>());
+    search.improve(&mut legs);
+    eprintln!("DBG p1 {:?} cost {}", t.elapsed(), search.legs_of(&search.seq).iter().map(|&(p,q)| dist(p,q)).sum::<f64>());
+    legs.exact = true;
+    legs.budget = QUERY_BUDGET_BASE + QUERY_BUDGET_PER_CELL * jobs.len();
+    search.improve(&mut legs);
+    eprintln!("DBG p2 {:?} cost {} budget left {}", t.elapsed(), search.legs_of(&search.seq).iter().map(|&(p,q)| legs.lower(p,q)).sum::<f64>(), legs.budget);
+
+    let visits: Vec<CellPlan> = search
+        .seq
+        .iter()
+        .map(|&(j, way)| jobs[j].materialise(way, plans, cells, free))
+        .collect();
+    let mut transits = Vec::with_capacity(visits.len() + 1);
+    let mut at = start;
+    for visit in &visits {
+        let (entry, exit) = (visit.entry().unwrap_or(at), visit.exit().unwrap_or(at));
+        transits.push(legs.path(at, entry)?);
+        at = exit;
+    }
+    transits.push(legs.path(at, start)?);
+    Ok(Tour { visits, transits })
+}
+
+/// Entry and exit of one way of flying a cell.
+#[derive(Clone, Copy, Debug)]
+struct Way {
+    entry: Coord<f64>,
+    exit: Coord<f64>,
+}
+
+/// A cell to visit. Ways: 0 = as planned, 1 = its exact reverse, 2 = start
+/// at the other end of the first lane, 3 = the reverse of 2.
+#[derive(Clone, Debug)]
+struct Job {
+    plan: usize,
+    ways: [Way; 4],
+    centre: Coord<f64>,
+}
+
+impl Job {
+    fn new(plan: usize, cell_plan: &CellPlan, has_cell: bool) -> Option<Job> {
+        let first = cell_plan.lanes.first()?;
+        let last = cell_plan.lanes.last()?;
+        let forward = Way {
+            entry: first.start,
+            exit: last.end,
+        };
+        // Ways 2 and 3 need new links through the cell; without the cell
+        // polygon they fall back to ways 0 and 1.
+        let across = if has_cell {
+            Way {
+                entry: first.end,
+                exit: last.start,
+            }
+        } else {
+            forward
+        };
+        let rev = |w: Way| Way {
+            entry: w.exit,
+            exit: w.entry,
+        };
+        let c = [first.start, first.end, last.start, last.end];
+        Some(Job {
+            plan,
+            ways: [forward, rev(forward), across, rev(across)],
+            centre: Coord {
+                x: c.iter().map(|p| p.x).sum::<f64>() / 4.0,
+                y: c.iter().map(|p| p.y).sum::<f64>() / 4.0,
+            },
+        })
+    }
+
+    /// The cell plan flown in `way`. Which `reoriented` flags give which
+    /// ends is checked rather than assumed; the best match is kept.
+    fn materialise(
+        &self,
+        way: u8,
+        plans: &[CellPlan],
+        cells: &[Polygon<f64>],
+        free: &MultiPolygon<f64>,
+    ) -> CellPlan {
+        let plan = &plans[self.plan];
+        let want = self.ways[way as usize];
+        let Some(cell) = cells.get(plan.cell_index) else {
+            return if way % 2 == 0 {
+                plan.clone()
+            } else {
+                reversed(plan)
+            };
+        };
+        if way == 0 {
+            return plan.clone();
+        }
+        let candidates: [(bool, bool); 3] = match way {
+            1 => [(true, true), (true, false), (false, true)],
+            2 => [(false, true), (true, false), (true, true)],
+            _ => [(true, false), (true, true), (false, true)],
+        };
+        let mismatch = |p: &CellPlan| match (p.entry(), p.exit()) {
+            (Some(a), Some(b)) => dist(a, want.entry) + dist(b, want.exit),
+            _ => f64::INFINITY,
+        };
+        let mut best: Option<(f64, CellPlan)> = None;
+        for (reverse_order, flip_lanes) in candidates {
+            let p = plan.reoriented(reverse_order, flip_lanes, cell, free);
+            let m = mismatch(&p);
+            if m <= END_MATCH_TOL {
+                return p;
+            }
+            if best.as_ref().is_none_or(|(bm, _)| m < *bm) {
+                best = Some((m, p));
+            }
+        }
+        best.map_or_else(|| plan.clone(), |(_, p)| p)
+    }
+}
+
+/// Flies `plan` exactly backwards.
+fn reversed(plan: &CellPlan) -> CellPlan {
+    let mut out = plan.clone();
+    out.lanes.reverse();
+    for lane in &mut out.lanes {
+        std::mem::swap(&mut lane.start, &mut lane.end);
+    }
+    out.links.reverse();
+    for link in &mut out.links {
+        link.reverse();
+    }
+    out
+}
+
+/// A leg's end points as bits, the smaller point first: a leg and its
+/// reverse share one entry.
+type LegKey = [u64; 4];
+
+fn leg_key(p: Coord<f64>, q: Coord<f64>) -> (LegKey, bool) {
+    let (a, b) = (
+        [p.x.to_bits(), p.y.to_bits()],
+        [q.x.to_bits(), q.y.to_bits()],
+    );
+    if a <= b {
+        ([a[0], a[1], b[0], b[1]], false)
+    } else {
+        ([b[0], b[1], a[0], a[1]], true)
+    }
+}
+
+/// Multiply-rotate hasher for [`LegKey`]s: the default SipHash dominated
+/// the second search phase, which looks legs up millions of times.
+#[derive(Default)]
+struct LegHasher(u64);
+
+impl Hasher for LegHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+/// A priced leg: its length (with [`NO_PATH_PENALTY`] when impossible)
+/// and its polyline from the key's first point.
+struct Leg {
+    length: f64,
+    path: Result<Vec<Coord<f64>>, TransitError>,
+}
+
+/// Leg costs: Euclidean, or (when `exact`) the NFZ-avoiding length, with
+/// memoised shortest paths and a query budget.
+struct Legs<'a> {
+    map: &'a ObstacleMap,
+    exact: bool,
+    budget: usize,
+    priced: HashMap<LegKey, Leg, BuildHasherDefault<LegHasher>>,
+}
+
+impl<'a> Legs<'a> {
+    fn new(map: &'a ObstacleMap) -> Self {
+        Legs {
+            map,
+            exact: false,
+            budget: 0,
+            priced: HashMap::default(),
+        }
+    }
+
+    /// A lower bound of the leg cost that never queries.
+    fn lower(&self, p: Coord<f64>, q: Coord<f64>) -> f64 {
+        if !self.exact {
+            return dist(p, q);
+        }
+        self.priced
+            .get(&leg_key(p, q).0)
+            .map_or_else(|| dist(p, q), |leg| leg.length)
+    }
+
+    /// Queries and stores the leg `p → q`.
+    fn price(&mut self, p: Coord<f64>, q: Coord<f64>) -> &Leg {
+        let (key, reversed) = leg_key(p, q);
+        let map = self.map;
+        self.priced.entry(key).or_insert_with(|| {
+            let (a, b) = if reversed { (q, p) } else { (p, q) };
+            let path = map.shortest_path(a, b);
+            let length = path
+                .as_ref()
+                .map_or(dist(a, b) + NO_PATH_PENALTY, |path| polyline_length(path));
+            Leg { length, path }
+        })
+    }
+
+    /// The leg cost; `None` when it would need a query beyond the budget.
+    fn cost(&mut self, p: Coord<f64>, q: Coord<f64>) -> Option<f64> {
+        if !self.exact {
+            return Some(dist(p, q));
+        }
+        if let Some(leg) = self.priced.get(&leg_key(p, q).0) {
+            return Some(leg.length);
+        }
+        if self.budget == 0 {
+            return None;
+        }
+        self.budget -= 1;
+        Some(self.price(p, q).length)
+    }
+
+    /// The leg's polyline from `p` to `q` (queried without budget: final
+    /// legs must exist).
+    fn path(&mut self, p: Coord<f64>, q: Coord<f64>) -> Result<Vec<Coord<f64>>, TransitError> {
+        let reversed = leg_key(p, q).1;
+        match &self.price(p, q).path {
+            Ok(path) if reversed => Ok(path.iter().rev().copied().collect()),
+            Ok(path) => Ok(path.clone()),
+            // Errors name the requested direction's endpoints.
+            Err(_) if reversed => self.map.shortest_path(p, q),
+            Err(e) => Err(e.clone()),
+        }
+    }
+}
+
+/// The local search state: the sequence of (job, way) and each job's
+/// position in it.
+struct Search<'a> {
+    start: Coord<f64>,
+    jobs: &'a [Job],
+    seq: Vec<(usize, u8)>,
+    pos: Vec<usize>,
+    neighbours: Vec<Vec<usize>>,
+    home_neighbours: Vec<usize>,
+}
+
+impl<'a> Search<'a> {
+    fn new(start: Coord<f64>, jobs: &'a [Job]) -> Self {
+        let tree: RTree<GeomWithData<[f64; 2], usize>> = RTree::bulk_load(
+            jobs.iter()
+                .enumerate()
+                .map(|(i, j)| GeomWithData::new([j.centre.x, j.centre.y], i))
+                .collect(),
+        );
+        let nearest = |c: Coord<f64>, skip: Option<usize>| -> Vec<usize> {
+            tree.nearest_neighbor_iter(&[c.x, c.y])
+                .map(|g| g.data)
+                .filter(|&i| Some(i) != skip)
+                .take(NEIGHBOURS)
+                .collect()
+        };
+        Search {
+            start,
+            jobs,
+            seq: Vec::new(),
+            pos: vec![0; jobs.len()],
+            neighbours: jobs
+                .iter()
+                .enumerate()
+                .map(|(i, j)| nearest(j.centre, Some(i)))
+                .collect(),
+            home_neighbours: nearest(start, None),
+        }
+    }
+
+    /// Greedy construction: always fly to the nearest unvisited entry.
+    fn nearest_neighbour(&mut self) {
+        let mut tree: RTree<GeomWithData<[f64; 2], (usize, u8)>> = RTree::bulk_load(
+            self.jobs
+                .iter()
+                .enumerate()
+                .flat_map(|(i, j)| {
+                    (0..4u8).map(move |w| {
+                        let e = j.ways[w as usize].entry;
+                        GeomWithData::new([e.x, e.y], (i, w))
+                    })
+                })
+                .collect(),
+        );
+        let mut at = self.start;
+        while let Some(&next) = tree.nearest_neighbor(&[at.x, at.y]) {
+            let (job, way) = next.data;
+            for w in 0..4u8 {
+                let e = self.jobs[job].ways[w as usize].entry;
+                tree.remove(&GeomWithData::new([e.x, e.y], (job, w)));
+            }
+            self.seq.push((job, way));
+            at = self.jobs[job].ways[way as usize].exit;
+        }
+        self.reindex(0, self.seq.len());
+    }
+
+    fn reindex(&mut self, from: usize, to: usize) {
+        for k in from..to.min(self.seq.len()) {
+            self.pos[self.seq[k].0] = k;
+        }
+    }
+
+    fn way(&self, k: usize) -> Way {
+        let (job, way) = self.seq[k];
+        self.jobs[job].ways[way as usize]
+    }
+
+    /// Exit of position `k`, home for `k = -1`.
+    fn exit_of(&self, k: isize) -> Coord<f64> {
+        if k < 0 {
+            self.start
+        } else {
+            self.way(k as usize).exit
+        }
+    }
+
+    /// Entry of position `k`, home past the end.
+    fn entry_of(&self, k: usize) -> Coord<f64> {
+        if k >= self.seq.len() {
+            self.start
+        } else {
+            self.way(k).entry
+        }
+    }
+
+    fn improve(&mut self, legs: &mut Legs) {
+        if self.seq.is_empty() {
+            return;
+        }
+        if legs.exact {
+            // Price the current tour exactly (without budget: it is needed
+            // for the final transits anyway).
+            for k in 0..=self.seq.len() {
+                let (p, q) = (self.exit_of(k as isize - 1), self.entry_of(k));
+                let _ = legs.path(p, q);
+            }
+        }
+        for _r in 0..MAX_ROUNDS {
+            let mut improved = self.orient(legs);
+            let a = self.two_opt(legs);
+            let b = self.or_opt(legs);
+            eprintln!("DBG round {_r} {improved} {a} {b}");
+            improved |= a | b;
+            if !improved || (legs.exact && legs.budget == 0) {
+                break;
+            }
+        }
+    }
+
+    /// Gain test for a move replacing legs `old` by legs `new`: cheap bound
+    /// first, then exact costs. Returns the exact gain if worth taking.
+    fn gain(
+        legs: &mut Legs,
+        old: &[(Coord<f64>, Coord<f64>)],
+        new: &[(Coord<f64>, Coord<f64>)],
+    ) -> Option<f64> {
+        let old_cost: f64 = old.iter().map(|&(p, q)| legs.lower(p, q)).sum();
+        let optimistic: f64 = new.iter().map(|&(p, q)| legs.lower(p, q)).sum();
+        if old_cost - optimistic <= MIN_GAIN {
+            return None;
+        }
+        let mut new_cost = 0.0;
+        for &(p, q) in new {
+            new_cost += legs.cost(p, q)?;
+        }
+        let gain = old_cost - new_cost;
+        (gain > MIN_GAIN).then_some(gain)
+    }
+
+    /// Best ways for the current order: a shortest path through 4 states per
+    /// position (exact for Euclidean costs; with real costs, legs not yet
+    /// priced count at their lower bound and the result is verified).
+    fn orient(&mut self, legs: &mut Legs) -> bool {
+        let n = self.seq.len();
+        let mut cost = [0.0f64; 4];
+        let mut back: Vec<[u8; 4]> = Vec::with_capacity(n);
+        for k in 0..n {
+            let ways = &self.jobs[self.seq[k].0].ways;
+            let mut next = [f64::INFINITY; 4];
+            let mut from = [0u8; 4];
+            for w in 0..4 {
+                if k == 0 {
+                    next[w] = legs.lower(self.start, ways[w].entry);
+                    continue;
+                }
+                let prev = &self.jobs[self.seq[k - 1].0].ways;
+                for v in 0..4 {
+                    let c = cost[v] + legs.lower(prev[v].exit, ways[w].entry);
+                    if c < next[w] {
+                        next[w] = c;
+                        from[w] = v as u8;
+                    }
+                }
+            }
+            back.push(from);
+            cost = next;
+        }
+        let last = &self.jobs[self.seq[n - 1].0].ways;
+        let mut best = 0u8;
+        let mut best_cost = f64::INFINITY;
+        for w in 0..4 {
+            let c = cost[w] + legs.lower(last[w].exit, self.start);
+            if c < best_cost {
+                best_cost = c;
+                best = w as u8;
+            }
+        }
+        let mut chosen = vec![0u8; n];
+        chosen[n - 1] = best;
+        for k in (1..n).rev() {
+            chosen[k - 1] = back[k][chosen[k] as usize];
+        }
+        if chosen.iter().zip(&self.seq).all(|(&w, &(_, v))| w == v) {
+            return false;
+        }
+        let trial: Vec<(usize, u8)> = self
+            .seq
+            .iter()
+            .zip(&chosen)
+            .map(|(&(j, _), &w)| (j, w))
+            .collect();
+        // Only the legs that change enter the comparison (less rounding).
+        let (mut old_legs, mut new_legs) = (Vec::new(), Vec::new());
+        for (o, n) in self
+            .legs_of(&self.seq)
+            .into_iter()
+            .zip(self.legs_of(&trial))
+        {
+            if o != n {
+                old_legs.push(o);
+                new_legs.push(n);
+            }
+        }
+        if Self::gain(legs, &old_legs, &new_legs).is_some() {
+            self.seq = trial;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// All legs of the tour flying `seq`, home to home.
+    fn legs_of(&self, seq: &[(usize, u8)]) -> Vec<(Coord<f64>, Coord<f64>)> {
+        let mut out = Vec::with_capacity(seq.len() + 1);
+        let mut at = self.start;
+        for &(j, w) in seq {
+            let way = self.jobs[j].ways[w as usize];
+            out.push((at, way.entry));
+            at = way.exit;
+        }
+        out.push((at, self.start));
+        out
+    }
+
+    /// 2-opt: reverse positions `i..=j`, flying each cell backwards.
+    fn two_opt(&mut self, legs: &mut Legs) -> bool {
+        let n = self.seq.len();
+        let mut improved = false;
+        for i in 0..n {
+            // New leg exit(i-1) → exit(j): j near the cell before i.
+            let near: Vec<usize> = if i == 0 {
+                self.home_neighbours.clone()
+            } else {
+                self.neighbours[self.seq[i - 1].0].clone()
+            };
+            for c in near {
+                let j = self.pos[c];
+                if j >= i && self.try_reverse(legs, i, j) {
+                    improved = true;
+                }
+            }
+            // New leg entry(i) → entry(j+1): j + 1 near the cell at i.
+            let near = self.neighbours[self.seq[i].0].clone();
+            for c in near {
+                let k = self.pos[c];
+                if k > i && self.try_reverse(legs, i, k - 1) {
+                    improved = true;
+                }
+            }
+            if self.try_reverse(legs, i, n - 1) {
+                improved = true;
+            }
+        }
+        improved
+    }
+
+    fn try_reverse(&mut self, legs: &mut Legs, i: usize, j: usize) -> bool {
+        let before = self.exit_of(i as isize - 1);
+        let after = self.entry_of(j + 1);
+        let (first, last) = (self.way(i), self.way(j));
+        let old = [(before, first.entry), (last.exit, after)];
+        let new = [(before, last.exit), (first.entry, after)];
+        if Self::gain(legs, &old, &new).is_none() {
+            return false;
+        }
+        self.seq[i..=j].reverse();
+        for step in &mut self.seq[i..=j] {
+            step.1 ^= 1;
+        }
+        self.reindex(i, j + 1);
+        true
+    }
+
+    /// Or-opt: move 1–3 consecutive cells elsewhere, either direction (a
+    /// single cell in any of its ways).
+    fn or_opt(&mut self, legs: &mut Legs) -> bool {
+        let mut improved = false;
+        for len in 1..=3usize {
+            let mut i = 0;
+            while i + len <= self.seq.len() {
+                let mut near: Vec<usize> = self.neighbours[self.seq[i].0].clone();
+                near.extend_from_slice(&self.neighbours[self.seq[i + len - 1].0]);
+                let n = self.seq.len() as isize;
+                let mut targets: Vec<isize> = vec![-1, n - 1];
+                for c in near {
+                    let q = self.pos[c] as isize;
+                    targets.push(q);
+                    targets.push(q - 1);
+                }
+                targets.sort_unstable();
+                targets.dedup();
+                for q in targets {
+                    if self.try_move(legs, i, len, q) {
+                        improved = true;
+                        break;
+                    }
+                }
+                i += 1;
+            }
+        }
+        improved
+    }
+
+    /// Moves `seq[i..i+len]` between positions `q` and `q + 1` (in the
+    /// current indexing; `q = -1` is right after home).
+    fn try_move(&mut self, legs: &mut Legs, i: usize, len: usize, q: isize) -> bool {
+        let n = self.seq.len() as isize;
+        let (i_s, end) = (i as isize, (i + len) as isize);
+        if q < -1 || q >= n || (q >= i_s - 1 && q < end) {
+            return false;
+        }
+        let before = self.exit_of(i_s - 1);
+        let after = self.entry_of(i + len);
+        let (first, last) = (self.way(i), self.way(i + len - 1));
+        let (x, y) = (self.exit_of(q), self.entry_of((q + 1) as usize));
+
+        // Ways to insert the segment: as is, reversed, and for a single cell
+        // the two other ways.
+        let as_is: Vec<(usize, u8)> = self.seq[i..i + len].to_vec();
+        let backwards: Vec<(usize, u8)> = as_is.iter().rev().map(|&(j, w)| (j, w ^ 1)).collect();
+        let mut options = vec![as_is, backwards];
+        if len == 1 {
+            let (job, w) = self.seq[i];
+            options.extend([vec![(job, w ^ 2)], vec![(job, w ^ 3)]]);
+        }
+        let old = [(before, first.entry), (last.exit, after), (x, y)];
+        for segment in options {
+            let ((j0, w0), (j1, w1)) = (segment[0], segment[segment.len() - 1]);
+            let (entry, exit) = (
+                self.jobs[j0].ways[w0 as usize].entry,
+                self.jobs[j1].ways[w1 as usize].exit,
+            );
+            let new = [(before, after), (x, entry), (exit, y)];
+            if Self::gain(legs, &old, &new).is_none() {
+                continue;
+            }
+            self.seq.drain(i..i + len);
+            // Insertion index after the removal.
+            let at = if q < i_s {
+                (q + 1) as usize
+            } else {
+                (q + 1) as usize - len
+            };
+            self.seq.splice(at..at, segment);
+            let (lo, hi) = (i.min(at), (i + len).max(at + len));
+            self.reindex(lo, hi);
+            return true;
+        }
+        false
+    }
+}
+
+fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    (dx * dx + dy * dy).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::coverage::Lane;
+    use approx::assert_relative_eq;
+    use geo_types::{LineString, coord};
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
+        Polygon::new(
+            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
+            vec![],
+        )
+    }
+
+    /// A cell `[x0, x1] × [y0, y1]` with `n` north–south lanes, the first
+    /// flown northwards.
+    fn lawnmower(cell_index: usize, cell: &Polygon<f64>, n: usize) -> CellPlan {
+        let r = cell.exterior().0.clone();
+        let (x0, y0, x1, y1) = (r[0].x, r[0].y, r[2].x, r[2].y);
+        let spacing = (x1 - x0) / n as f64;
+        let lanes: Vec<Lane> = (0..n)
+            .map(|k| {
+                let x = x0 + (k as f64 + 0.5) * spacing;
+                let (s, e) = (coord! { x: x, y: y0 + 1.0 }, coord! { x: x, y: y1 - 1.0 });
+                if k % 2 == 0 {
+                    Lane { start: s, end: e }
+                } else {
+                    Lane { start: e, end: s }
+                }
+            })
+            .collect();
+        CellPlan {
+            cell_index,
+            direction_deg: 0.0,
+            links: vec![Vec::new(); n - 1],
+            lanes,
+        }
+    }
+
+    struct Case {
+        cells: Vec<Polygon<f64>>,
+        plans: Vec<CellPlan>,
+        free: MultiPolygon<f64>,
+    }
+
+    fn case(cells: Vec<Polygon<f64>>, lanes: usize, order: &[usize]) -> Case {
+        let plans = order
+            .iter()
+            .map(|&i| lawnmower(i, &cells[i], lanes))
+            .collect();
+        let free = MultiPolygon(cells.clone());
+        Case { cells, plans, free }
+    }
+
+    /// Structural checks every tour must pass.
+    fn check_tour(tour: &Tour, start: Coord<f64>, map: &ObstacleMap, case: &Case) {
+        assert_eq!(tour.transits.len(), tour.visits.len() + 1);
+        let mut seen: Vec<usize> = tour.visits.iter().map(|v| v.cell_index).collect();
+        seen.sort_unstable();
+        let mut expected: Vec<usize> = case
+            .plans
+            .iter()
+            .filter(|p| !p.lanes.is_empty())
+            .map(|p| p.cell_index)
+            .collect();
+        expected.sort_unstable();
+        assert_eq!(seen, expected, "every cell exactly once");
+        let mut at = start;
+        for (i, transit) in tour.transits.iter().enumerate() {
+            assert_eq!(transit.first(), Some(&at));
+            let to = tour.visits.get(i).map_or(start, |v| v.entry().unwrap());
+            assert_eq!(transit.last(), Some(&to));
+            for w in transit.windows(2) {
+                assert!(map.is_clear(w[0], w[1]), "transit {i} segment {w:?}");
+            }
+            if let Some(v) = tour.visits.get(i) {
+                at = v.exit().unwrap();
+            }
+        }
+        // Each visit flies the same lanes as its plan, in one of four ways.
+        for v in &tour.visits {
+            let plan = case
+                .plans
+                .iter()
+                .find(|p| p.cell_index == v.cell_index)
+                .unwrap();
+            let mut a: Vec<_> = plan.lanes.iter().map(|l| sorted_ends(l)).collect();
+            let mut b: Vec<_> = v.lanes.iter().map(|l| sorted_ends(l)).collect();
+            a.sort_by(|x, y| x.partial_cmp(y).unwrap());
+            b.sort_by(|x, y| x.partial_cmp(y).unwrap());
+            assert_eq!(a, b);
+        }
+        let path = tour.path();
+        assert_eq!(path.first(), Some(&start));
+        assert_eq!(path.last(), Some(&start));
+        assert!(path.windows(2).all(|w| w[0] != w[1]));
+        assert_relative_eq!(polyline_length(&path), tour.length_m(), max_relative = 1e-9);
+    }
+
+    fn sorted_ends(l: &Lane) -> [f64; 4] {
+        let (p, q) = if (l.start.x, l.start.y) <= (l.end.x, l.end.y) {
+            (l.start, l.end)
+        } else {
+            (l.end, l.start)
+        };
+        [p.x, p.y, q.x, q.y]
+    }
+
+    /// Transit length of flying `plans` as given, in input order.
+    fn input_order_length(start: Coord<f64>, plans: &[CellPlan], map: &ObstacleMap) -> f64 {
+        let mut at = start;
+        let mut total = 0.0;
+        for p in plans {
+            total += map.shortest_length(at, p.entry().unwrap()).unwrap();
+            at = p.exit().unwrap();
+        }
+        total + map.shortest_length(at, start).unwrap()
+    }
+
+    #[test]
+    fn row_of_cells_is_flown_in_row_order() {
+        // Six cells in a row east of home, handed over shuffled.
+        let cells: Vec<_> = (0..6)
+            .map(|k| rect(20.0 * k as f64, 0.0, 20.0 * k as f64 + 15.0, 40.0))
+            .collect();
+        let c = case(cells, 3, &[3, 0, 5, 1, 4, 2]);
+        let start = coord! { x: -10.0, y: 0.0 };
+        let map = ObstacleMap::new(&MultiPolygon(vec![]), 1.0);
+        let tour = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap();
+        check_tour(&tour, start, &map, &c);
+        let order: Vec<usize> = tour.visits.iter().map(|v| v.cell_index).collect();
+        assert_eq!(order, vec![0, 1, 2, 3, 4, 5]);
+        // Ends are chosen so each cell is entered where the previous one
+        // was left: every inner transit just crosses a 5 m gap.
+        for t in &tour.transits[1..6] {
+            assert_relative_eq!(polyline_length(t), 10.0, epsilon = 1e-9);
+        }
+        assert!(tour.transit_length_m() < input_order_length(start, &c.plans, &map) / 2.0);
+    }
+
+    #[test]
+    fn shuffled_grid_beats_input_order() {
+        let mut cells = Vec::new();
+        for i in 0..6 {
+            for j in 0..6 {
+                let (x, y) = (30.0 * i as f64, 50.0 * j as f64);
+                cells.push(rect(x, y, x + 25.0, y + 45.0));
+            }
+        }
+        // A fixed scramble of 0..36.
+        let order: Vec<usize> = (0..36).map(|k| (k * 17 + 5) % 36).collect();
+        let c = case(cells, 4, &order);
+        let start = coord! { x: -20.0, y: -20.0 };
+        let map = ObstacleMap::new(&MultiPolygon(vec![]), 1.0);
+        let tour = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap();
+        check_tour(&tour, start, &map, &c);
+        let given = input_order_length(start, &c.plans, &map);
+        let planned = tour.transit_length_m();
+        assert!(planned < given / 4.0, "{planned} vs {given}");
+        // At least as good as the hand-made answer: a row-by-row serpentine
+        // with the best ways for that order.
+        let jobs: Vec<Job> = c
+            .plans
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| Job::new(i, p, true))
+            .collect();
+        let mut search = Search::new(start, &jobs);
+        let job_of_cell = |cell: usize| c.plans.iter().position(|p| p.cell_index == cell).unwrap();
+        for j in 0..6 {
+            for i in 0..6 {
+                let i = if j % 2 == 0 { i } else { 5 - i };
+                search.seq.push((job_of_cell(i * 6 + j), 0));
+            }
+        }
+        search.reindex(0, 36);
+        let mut legs = Legs::new(&map);
+        search.orient(&mut legs);
+        let serpentine: f64 = search
+            .legs_of(&search.seq)
+            .iter()
+            .map(|&(p, q)| dist(p, q))
+            .sum();
+        assert!(
+            planned <= serpentine + 1e-6,
+            "{planned} vs serpentine {serpentine}"
+        );
+    }
+
+    /// Exhaustive optimum over all orders and ways (Euclidean, no NFZ).
+    fn brute_force(start: Coord<f64>, jobs: &[Job]) -> f64 {
+        fn rec(
+            at: Coord<f64>,
+            start: Coord<f64>,
+            jobs: &[Job],
+            used: &mut Vec<bool>,
+            acc: f64,
+            best: &mut f64,
+        ) {
+            if acc >= *best {
+                return;
+            }
+            if used.iter().all(|&u| u) {
+                *best = best.min(acc + dist(at, start));
+                return;
+            }
+            for j in 0..jobs.len() {
+                if used[j] {
+                    continue;
+                }
+                used[j] = true;
+                for w in &jobs[j].ways {
+                    rec(w.exit, start, jobs, used, acc + dist(at, w.entry), best);
+                }
+                used[j] = false;
+            }
+        }
+        let mut best = f64::INFINITY;
+        rec(
+            start,
+            start,
+            jobs,
+            &mut vec![false; jobs.len()],
+            0.0,
+            &mut best,
+        );
+        best
+    }
+
+    #[test]
+    fn small_random_instances_are_solved_optimally() {
+        let mut seed = 3u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let map = ObstacleMap::new(&MultiPolygon(vec![]), 1.0);
+        let mut worse = 0;
+        for _ in 0..40 {
+            let cells: Vec<_> = (0..6)
+                .map(|_| {
+                    let (x, y) = (rnd() * 300.0, rnd() * 300.0);
+                    rect(x, y, x + 10.0 + rnd() * 40.0, y + 10.0 + rnd() * 40.0)
+                })
+                .collect();
+            let lanes = 1 + (rnd() * 4.0) as usize;
+            let c = case(cells, lanes, &[0, 1, 2, 3, 4, 5]);
+            let start = coord! { x: rnd() * 300.0, y: rnd() * 300.0 };
+            let tour = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap();
+            check_tour(&tour, start, &map, &c);
+            let jobs: Vec<Job> = c
+                .plans
+                .iter()
+                .enumerate()
+                .filter_map(|(i, p)| Job::new(i, p, true))
+                .collect();
+            let optimum = brute_force(start, &jobs);
+            let got = tour.transit_length_m();
+            assert!(got >= optimum - 1e-6);
+            if got > optimum + 1e-6 {
+                worse += 1;
+                assert!(got < optimum * 1.1, "{got} vs optimum {optimum}");
+            }
+        }
+        assert!(worse <= 2, "{worse} of 40 instances not optimal");
+    }
+
+    #[test]
+    fn transits_avoid_nfzs_and_real_lengths_steer_the_order() {
+        // Two columns of cells separated by a long NFZ wall with a gap at
+        // the south end. Euclid sees the columns as neighbours; flying
+        // across means going round the wall.
+        let mut cells = Vec::new();
+        for j in 0..5 {
+            let y = 100.0 + 60.0 * j as f64;
+            cells.push(rect(0.0, y, 40.0, y + 50.0));
+            cells.push(rect(60.0, y, 100.0, y + 50.0));
+        }
+        let wall = rect(45.0, 50.0, 55.0, 420.0);
+        let nfz = MultiPolygon(vec![wall]);
+        let map = ObstacleMap::new(&nfz, 2.0);
+        let c = case(cells, 3, &(0..10).collect::<Vec<_>>());
+        let start = coord! { x: 50.0, y: 0.0 };
+        let tour = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap();
+        check_tour(&tour, start, &map, &c);
+        // The wall is crossed only round its ends: at most twice in all.
+        let side = |v: &CellPlan| v.lanes[0].start.x < 50.0;
+        let switches = tour
+            .visits
+            .windows(2)
+            .filter(|w| side(&w[0]) != side(&w[1]))
+            .count();
+        assert!(switches <= 1, "{switches} wall crossings");
+        assert!(
+            tour.transits.iter().any(|t| t.len() > 2),
+            "some transit bends round the wall"
+        );
+    }
+
+    #[test]
+    fn degenerate_inputs() {
+        let map = ObstacleMap::new(&MultiPolygon(vec![]), 1.0);
+        let start = coord! { x: 1.0, y: 2.0 };
+        let tour = plan_tour(start, &[], &[], &MultiPolygon(vec![]), &map).unwrap();
+        assert!(tour.visits.is_empty());
+        assert_eq!(tour.transits, vec![vec![start, start]]);
+        assert_eq!(tour.path(), vec![start]);
+        assert_eq!(tour.length_m(), 0.0);
+
+        // A plan without lanes is skipped; a plan whose cell is missing is
+        // only flown forwards or backwards.
+        let cells = vec![rect(0.0, 0.0, 20.0, 20.0)];
+        let mut empty = lawnmower(0, &cells[0], 2);
+        empty.lanes.clear();
+        empty.links.clear();
+        let orphan = CellPlan {
+            cell_index: 7,
+            ..lawnmower(0, &rect(50.0, 0.0, 70.0, 20.0), 2)
+        };
+        let plans = vec![empty, orphan.clone()];
+        let tour = plan_tour(start, &plans, &cells, &MultiPolygon(cells.clone()), &map).unwrap();
+        assert_eq!(tour.visits.len(), 1);
+        let v = &tour.visits[0];
+        assert!(*v == orphan || *v == reversed(&orphan));
+    }
+
+    #[test]
+    fn start_inside_an_nfz_is_an_error() {
+        let cells = vec![rect(0.0, 0.0, 20.0, 20.0)];
+        let c = case(cells, 2, &[0]);
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(30.0, 0.0, 40.0, 10.0)]), 1.0);
+        let start = coord! { x: 35.0, y: 5.0 };
+        let err = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap_err();
+        assert!(matches!(err, TransitError::InsideObstacle { .. }), "{err}");
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    //! `cargo test --release -p planner-core --lib flock::tour::timing -- --ignored --nocapture`
+    use super::*;
+    use crate::coverage::Lane;
+    use geo_types::{LineString, coord};
+    use std::time::Instant;
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
+        Polygon::new(
+            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
+            vec![],
+        )
+    }
+
+    #[test]
+    #[ignore = "timing run, not a check"]
+    fn two_thousand_cells() {
+        // A 50 × 50 grid of 40 × 60 m blocks; one block in five is an NFZ,
+        // the others are cells with four lanes, listed in a scrambled order.
+        let (nx, ny) = (50usize, 50usize);
+        let (x0, y0) = (500_000.0, 5_000_000.0);
+        let (mut cells, mut nfz) = (Vec::new(), Vec::new());
+        for k in 0..nx * ny {
+            let (i, j) = (k % nx, k / nx);
+            let (x, y) = (x0 + 45.0 * i as f64, y0 + 65.0 * j as f64);
+            if (k * 7919) % 5 == 0 {
+                nfz.push(rect(x, y, x + 40.0, y + 60.0));
+            } else {
+                cells.push(rect(x, y, x + 40.0, y + 60.0));
+            }
+        }
+        let holes: Vec<LineString<f64>> = nfz.iter().map(|p| p.exterior().clone()).collect();
+        let roi = rect(
+            x0 - 5.0,
+            y0 - 5.0,
+            x0 + 45.0 * nx as f64,
+            y0 + 65.0 * ny as f64,
+        );
+        let free = MultiPolygon(vec![Polygon::new(roi.exterior().clone(), holes)]);
+        let n = cells.len();
+        let plans: Vec<CellPlan> = (0..n)
+            .map(|k| {
+                let i = (k * 7 + 3) % n;
+                let c = cells[i].exterior().0.clone();
+                let lanes = (0..4)
+                    .map(|l| {
+                        let x = c[0].x + 5.0 + 10.0 * l as f64;
+                        let (s, e) = (
+                            coord! { x: x, y: c[0].y + 1.0 },
+                            coord! { x: x, y: c[2].y - 1.0 },
+                        );
+                        if l % 2 == 0 {
+                            Lane { start: s, end: e }
+                        } else {
+                            Lane { start: e, end: s }
+                        }
+                    })
+                    .collect();
+                CellPlan {
+                    cell_index: i,
+                    direction_deg: 0.0,
+                    lanes,
+                    links: vec![Vec::new(); 3],
+                }
+            })
+            .collect();
+        let t = Instant::now();
+        let map = ObstacleMap::new(&MultiPolygon(nfz), 2.0);
+        println!(
+            "{} cells, {} NFZs: obstacle map {:?}",
+            n,
+            map.obstacle_count(),
+            t.elapsed()
+        );
+        let start = coord! { x: x0 - 3.0, y: y0 - 3.0 };
+        let t = Instant::now();
+        let tour = plan_tour(start, &plans, &cells, &free, &map).unwrap();
+        println!(
+            "plan_tour {:?}: transit {:.0} m, total {:.0} m, {} bent transits",
+            t.elapsed(),
+            tour.transit_length_m(),
+            tour.length_m(),
+            tour.transits.iter().filter(|t| t.len() > 2).count()
+        );
+    }
+}

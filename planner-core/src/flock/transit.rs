@@ -1,0 +1,1200 @@
+//! Transit paths that avoid no-fly zones (SPEC §3.4).
+//!
+//! A transit (start → cell, cell → cell, cell → home) is the shortest polyline
+//! that never passes through the interior of a no-fly zone. Shortest paths
+//! among polygonal obstacles bend only at convex obstacle corners, so the
+//! search runs on a visibility graph whose nodes are those corners, each pushed
+//! a little outward along its bisector so the flown path keeps a clearance
+//! from the NFZ corners.
+//!
+//! The full visibility graph of ~8000 corners has tens of millions of
+//! candidate edges, so it is never built. Instead A* runs on an *edge queue*
+//! ("lazy" A*): an entry `(u → v)` is keyed by `g(u) + |uv| + h(v)`, a lower
+//! bound of any path through that edge, and the expensive visibility test is
+//! only made when the entry is popped. Successors of a closed node are
+//! generated in rings of growing *slack* `|uv| + h(v) − h(u)`, so far-away
+//! corners that cannot beat the current bound are never even queued. Both
+//! visibility tests and ring queries go through R-trees (obstacle edges,
+//! obstacle bounding boxes and graph nodes).
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::fmt;
+
+use geo::kernels::{Kernel, Orientation, RobustKernel};
+use geo_types::{Coord, LineString, MultiPolygon};
+use rstar::primitives::GeomWithData;
+use rstar::{AABB, RTree, RTreeObject, SelectionFunction};
+
+/// Geometric tolerance in metres. Lane ends computed on an NFZ border may be
+/// off it by rounding noise; a point closer than this to an obstacle boundary
+/// counts as *on* the boundary, never strictly inside.
+const EPS: f64 = 1e-6;
+
+/// Sideways probe distance used to tell an edge shared by two touching
+/// obstacles (interior on both sides) from an outer boundary.
+const SIDE_PROBE: f64 = 10.0 * EPS;
+
+/// First slack ring of the successor generation, as a fraction of the query
+/// distance; each further ring is `RING_GROWTH` times wider.
+const RING_BASE_FRACTION: f64 = 0.01;
+const RING_GROWTH: f64 = 4.0;
+
+/// Which end of a requested transit an error refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Endpoint {
+    Start,
+    End,
+}
+
+impl fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Endpoint::Start => "start",
+            Endpoint::End => "end",
+        })
+    }
+}
+
+/// Why no transit could be planned.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TransitError {
+    #[error("transit {endpoint} point ({}, {}) lies inside a no-fly zone", .point.x, .point.y)]
+    InsideObstacle {
+        endpoint: Endpoint,
+        point: Coord<f64>,
+    },
+    #[error("transit {endpoint} point has a non-finite coordinate")]
+    NonFinite { endpoint: Endpoint },
+    #[error(
+        "no path from ({}, {}) to ({}, {}) avoids the no-fly zones",
+        .from.x, .from.y, .to.x, .to.y
+    )]
+    NoPath { from: Coord<f64>, to: Coord<f64> },
+}
+
+/// One obstacle boundary edge, indexed in an R-tree.
+#[derive(Clone, Copy, Debug)]
+struct Edge {
+    p: Coord<f64>,
+    q: Coord<f64>,
+    obstacle: usize,
+}
+
+impl RTreeObject for Edge {
+    type Envelope = AABB<[f64; 2]>;
+
+    fn envelope(&self) -> Self::Envelope {
+        AABB::from_corners([self.p.x, self.p.y], [self.q.x, self.q.y])
+    }
+}
+
+/// Bounding box of one obstacle polygon, for point-in-obstacle queries.
+#[derive(Clone, Debug)]
+struct ObstacleBox {
+    envelope: AABB<[f64; 2]>,
+    index: usize,
+}
+
+impl RTreeObject for ObstacleBox {
+    type Envelope = AABB<[f64; 2]>;
+
+    fn envelope(&self) -> Self::Envelope {
+        self.envelope
+    }
+}
+
+/// An obstacle polygon as plain rings: exterior counter-clockwise, holes
+/// clockwise, no closing duplicate, so the obstacle interior is always on the
+/// left of every edge.
+#[derive(Clone, Debug)]
+struct Obstacle {
+    exterior: Vec<Coord<f64>>,
+    holes: Vec<Vec<Coord<f64>>>,
+}
+
+impl Obstacle {
+    /// Crossing-number test; the result on the boundary itself is arbitrary
+    /// (callers reject boundary points separately).
+    fn contains(&self, p: Coord<f64>) -> bool {
+        ring_contains(&self.exterior, p) && !self.holes.iter().any(|h| ring_contains(h, p))
+    }
+
+    fn rings(&self) -> impl Iterator<Item = &Vec<Coord<f64>>> {
+        std::iter::once(&self.exterior).chain(self.holes.iter())
+    }
+}
+
+type NodeRef = GeomWithData<[f64; 2], u32>;
+
+/// No-fly zones prepared for many transit queries.
+///
+/// Build it once per mission from the NFZ union (overlapping or touching
+/// inputs also work, but a segment running exactly along an edge shared by two
+/// touching polygons counts as clear) and share it: it is immutable, `Send`
+/// and `Sync`.
+#[derive(Clone, Debug)]
+pub struct ObstacleMap {
+    obstacles: Vec<Obstacle>,
+    obstacle_tree: RTree<ObstacleBox>,
+    edge_tree: RTree<Edge>,
+    /// Visibility-graph nodes: convex corners pushed out by the clearance.
+    nodes: Vec<Coord<f64>>,
+    node_tree: RTree<NodeRef>,
+    clearance_m: f64,
+}
+
+impl ObstacleMap {
+    /// Prepares `obstacles` (UTM metres). Graph nodes are the obstacles'
+    /// convex corners moved `clearance_m` outward along the corner bisector;
+    /// a node that lands inside another obstacle is dropped. A negative or
+    /// non-finite clearance is treated as 0 (request validation is the
+    /// caller's job). Rings with non-finite or repeated vertices are cleaned,
+    /// degenerate rings (fewer than 3 vertices or zero area) are ignored.
+    pub fn new(obstacles: &MultiPolygon<f64>, clearance_m: f64) -> Self {
+        let clearance_m = if clearance_m.is_finite() {
+            clearance_m.max(0.0)
+        } else {
+            0.0
+        };
+        let mut prepared = Vec::new();
+        for polygon in obstacles {
+            let Some(exterior) = clean_ring(polygon.exterior(), true) else {
+                continue;
+            };
+            let holes = polygon
+                .interiors()
+                .iter()
+                .filter_map(|ring| clean_ring(ring, false))
+                .collect();
+            prepared.push(Obstacle { exterior, holes });
+        }
+
+        let mut edges = Vec::new();
+        let mut boxes = Vec::with_capacity(prepared.len());
+        for (index, obstacle) in prepared.iter().enumerate() {
+            let corners: Vec<[f64; 2]> = obstacle.exterior.iter().map(|c| [c.x, c.y]).collect();
+            boxes.push(ObstacleBox {
+                envelope: AABB::from_points(corners.iter()),
+                index,
+            });
+            for ring in obstacle.rings() {
+                for (i, &p) in ring.iter().enumerate() {
+                    edges.push(Edge {
+                        p,
+                        q: ring[(i + 1) % ring.len()],
+                        obstacle: index,
+                    });
+                }
+            }
+        }
+
+        let mut map = ObstacleMap {
+            obstacles: prepared,
+            obstacle_tree: RTree::bulk_load(boxes),
+            edge_tree: RTree::bulk_load(edges),
+            nodes: Vec::new(),
+            node_tree: RTree::new(),
+            clearance_m,
+        };
+
+        let mut nodes = Vec::new();
+        for obstacle in &map.obstacles {
+            for ring in obstacle.rings() {
+                let n = ring.len();
+                for i in 0..n {
+                    let (p, c, q) = (ring[(i + n - 1) % n], ring[i], ring[(i + 1) % n]);
+                    // Interior on the left: a left turn is a convex corner of
+                    // the obstacle (a reflex corner of free space), the only
+                    // kind a shortest path can bend around.
+                    if RobustKernel::orient2d(p, c, q) != Orientation::CounterClockwise {
+                        continue;
+                    }
+                    let node = c + outward_bisector(p, c, q) * clearance_m;
+                    if !map.contains_point(node) {
+                        nodes.push(node);
+                    }
+                }
+            }
+        }
+        map.node_tree = RTree::bulk_load(
+            nodes
+                .iter()
+                .enumerate()
+                .map(|(i, c)| GeomWithData::new([c.x, c.y], i as u32))
+                .collect(),
+        );
+        map.nodes = nodes;
+        map
+    }
+
+    /// The clearance used for the graph nodes, in metres.
+    pub fn clearance_m(&self) -> f64 {
+        self.clearance_m
+    }
+
+    /// Number of obstacle polygons kept.
+    pub fn obstacle_count(&self) -> usize {
+        self.obstacles.len()
+    }
+
+    /// Number of visibility-graph nodes (pushed convex corners).
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// True iff `p` lies strictly inside an obstacle: inside it and farther
+    /// than a micrometre from its boundary. A point on an edge shared by two
+    /// touching obstacles is on a boundary, hence not inside. Non-finite
+    /// points are never inside.
+    pub fn contains_point(&self, p: Coord<f64>) -> bool {
+        is_finite(p)
+            && self.candidates(p).any(|index| {
+                self.obstacles[index].contains(p) && !self.near_boundary(p, Some(index))
+            })
+    }
+
+    /// True iff the segment `a`–`b` does not pass through any obstacle
+    /// interior. Touching a boundary, running along an edge, or starting on a
+    /// boundary and leaving outward are all clear.
+    pub fn is_clear(&self, a: Coord<f64>, b: Coord<f64>) -> bool {
+        is_finite(a) && is_finite(b) && self.segment_clear(a, b, false)
+    }
+
+    /// Shortest polyline from `a` to `b` (both included) that avoids every
+    /// obstacle interior; `[a, b]` when the direct segment is clear.
+    pub fn shortest_path(
+        &self,
+        a: Coord<f64>,
+        b: Coord<f64>,
+    ) -> Result<Vec<Coord<f64>>, TransitError> {
+        for (endpoint, p) in [(Endpoint::Start, a), (Endpoint::End, b)] {
+            if !is_finite(p) {
+                return Err(TransitError::NonFinite { endpoint });
+            }
+            if self.contains_point(p) {
+                return Err(TransitError::InsideObstacle { endpoint, point: p });
+            }
+        }
+        if self.segment_clear(a, b, true) {
+            return Ok(vec![a, b]);
+        }
+        self.search(a, b)
+            .ok_or(TransitError::NoPath { from: a, to: b })
+    }
+
+    /// Length of [`ObstacleMap::shortest_path`].
+    pub fn shortest_length(&self, a: Coord<f64>, b: Coord<f64>) -> Result<f64, TransitError> {
+        Ok(polyline_length(&self.shortest_path(a, b)?))
+    }
+
+    /// Obstacles whose bounding box holds `p`.
+    fn candidates(&self, p: Coord<f64>) -> impl Iterator<Item = usize> + '_ {
+        self.obstacle_tree
+            .locate_in_envelope_intersecting(&AABB::from_point([p.x, p.y]))
+            .map(|b| b.index)
+    }
+
+    /// Is `p` inside some obstacle by the plain crossing test (no boundary
+    /// tolerance)?
+    fn inside_any(&self, p: Coord<f64>) -> bool {
+        self.candidates(p)
+            .any(|index| self.obstacles[index].contains(p))
+    }
+
+    /// Is `p` within [`EPS`] of an edge (of obstacle `only`, if given)?
+    fn near_boundary(&self, p: Coord<f64>, only: Option<usize>) -> bool {
+        let envelope = AABB::from_corners([p.x - EPS, p.y - EPS], [p.x + EPS, p.y + EPS]);
+        self.edge_tree
+            .locate_in_envelope_intersecting(&envelope)
+            .any(|e| {
+                only.is_none_or(|o| o == e.obstacle) && point_segment_distance(p, e.p, e.q) <= EPS
+            })
+    }
+
+    /// Does a segment piece with midpoint `m` and unit normal `normal` lie in
+    /// the interior of the obstacles' union? Either `m` is strictly inside one
+    /// obstacle, or it lies on a boundary with obstacle interior on both
+    /// sides (an edge shared by touching obstacles).
+    fn piece_blocked(&self, m: Coord<f64>, normal: Coord<f64>) -> bool {
+        if self.contains_point(m) {
+            return true;
+        }
+        let probe = normal * SIDE_PROBE;
+        self.near_boundary(m, None) && self.inside_any(m + probe) && self.inside_any(m - probe)
+    }
+
+    /// Segment test. The segment is split at every contact with an obstacle
+    /// edge and each piece's midpoint is tested for strict interior; a clean
+    /// transversal crossing is an immediate "blocked". With `ends_outside`
+    /// the caller vouches that neither end is strictly inside, which lets a
+    /// segment touching no edge at all skip the point-in-polygon test.
+    fn segment_clear(&self, a: Coord<f64>, b: Coord<f64>, ends_outside: bool) -> bool {
+        self.segment_check(a, b, ends_outside).is_ok()
+    }
+
+    /// [`ObstacleMap::segment_clear`], reporting on failure the edge that
+    /// was crossed cleanly, if that is what blocked the segment.
+    fn segment_check(
+        &self,
+        a: Coord<f64>,
+        b: Coord<f64>,
+        ends_outside: bool,
+    ) -> Result<(), Option<Edge>> {
+        let d = b - a;
+        let len = (d.x * d.x + d.y * d.y).sqrt();
+        if len <= EPS {
+            return if self.contains_point(a) {
+                Err(None)
+            } else {
+                Ok(())
+            };
+        }
+        let mut cuts: Vec<f64> = Vec::new();
+        let select = SegmentSelect { a, b };
+        for edge in self.edge_tree.locate_with_selection_function(select) {
+            match contact(a, b, len, edge.p, edge.q) {
+                Contact::None => {}
+                Contact::Crossing => return Err(Some(*edge)),
+                Contact::Touch(ts) => cuts.extend(ts.into_iter().flatten()),
+            }
+        }
+        if cuts.is_empty() && ends_outside {
+            return Ok(());
+        }
+        cuts.push(0.0);
+        cuts.push(1.0);
+        cuts.sort_by(f64::total_cmp);
+        let normal = Coord {
+            x: -d.y / len,
+            y: d.x / len,
+        };
+        let clear = cuts.windows(2).all(|w| {
+            // Pieces shorter than the tolerance hug a contact point.
+            (w[1] - w[0]) * len <= EPS || !self.piece_blocked(a + d * (0.5 * (w[0] + w[1])), normal)
+        });
+        if clear { Ok(()) } else { Err(None) }
+    }
+
+    /// Lazy A* over the implicit visibility graph (see the module docs).
+    fn search(&self, a: Coord<f64>, b: Coord<f64>) -> Option<Vec<Coord<f64>>> {
+        let n = self.nodes.len();
+        let (start, goal) = (n, n + 1);
+        let pos = |i: usize| match i {
+            _ if i < n => self.nodes[i],
+            _ if i == start => a,
+            _ => b,
+        };
+        let h = |c: Coord<f64>| dist(c, b);
+
+        let mut g = vec![f64::INFINITY; n + 2];
+        let mut parent = vec![usize::MAX; n + 2];
+        // Closed nodes get a slot in `occluders`: the edges that blocked
+        // earlier candidate edges from that node. Obstacles next to a node
+        // hide most of the others from it, and testing a few remembered
+        // edges is far cheaper than an R-tree walk. A remembered edge is
+        // only trusted for a clean crossing, the same rule `segment_check`
+        // applies, so results are unchanged.
+        let mut slot = vec![OPEN; n + 2];
+        let mut occluders: Vec<Vec<Edge>> = vec![Vec::new()];
+        g[start] = 0.0;
+        slot[start] = 0;
+
+        // Successors of one closed node in one slack ring, sorted by slack;
+        // the heap holds a single cursor per list, keyed by its next edge,
+        // so it stays small however many candidates a ring has.
+        let mut lists: Vec<RingList> = Vec::new();
+        let ring_base = (RING_BASE_FRACTION * h(a)).max(1.0);
+        let all_nodes = self.node_tree.root().envelope();
+        let mut heap = BinaryHeap::new();
+        heap.push(QueueEntry {
+            key: h(a),
+            kind: EntryKind::Expand {
+                node: start,
+                level: 0,
+            },
+        });
+
+        while let Some(entry) = heap.pop() {
+            let (from, to) = match entry.kind {
+                EntryKind::Expand { node: u, level } => {
+                    let (pu, gu) = (pos(u), g[u]);
+                    let hu = h(pu);
+                    let hi = ring_base * RING_GROWTH.powi(level as i32);
+                    let lo = if level == 0 {
+                        f64::NEG_INFINITY
+                    } else {
+                        hi / RING_GROWTH
+                    };
+                    let mut cands: Vec<(f64, usize)> = Vec::new();
+                    if level == 0 {
+                        // The goal has zero slack: always in the first ring.
+                        cands.push((0.0, goal));
+                    }
+                    let ring = RingSelect {
+                        u: pu,
+                        b,
+                        hu,
+                        lo,
+                        hi,
+                    };
+                    for node in self.node_tree.locate_with_selection_function(ring) {
+                        let v = node.data as usize;
+                        if slot[v] == OPEN {
+                            cands.push((slack(pu, self.nodes[v], b, hu), v));
+                        }
+                    }
+                    cands.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+                    if let Some(&(first, _)) = cands.first() {
+                        heap.push(QueueEntry {
+                            key: gu + hu + first,
+                            kind: EntryKind::Cursor { list: lists.len() },
+                        });
+                        lists.push(RingList {
+                            from: u,
+                            cands,
+                            next: 0,
+                        });
+                    }
+                    let max_slack =
+                        max_dist_to_box(pu, &all_nodes) + max_dist_to_box(b, &all_nodes) - hu;
+                    if n > 0 && hi < max_slack {
+                        heap.push(QueueEntry {
+                            key: gu + hu + hi,
+                            kind: EntryKind::Expand {
+                                node: u,
+                                level: level + 1,
+                            },
+                        });
+                    }
+                    continue;
+                }
+                EntryKind::Cursor { list } => {
+                    let ring = &mut lists[list];
+                    let (_, to) = ring.cands[ring.next];
+                    ring.next += 1;
+                    let from = ring.from;
+                    if let Some(&(next, _)) = ring.cands.get(ring.next) {
+                        let pf = pos(from);
+                        heap.push(QueueEntry {
+                            key: g[from] + h(pf) + next,
+                            kind: EntryKind::Cursor { list },
+                        });
+                    }
+                    (from, to)
+                }
+            };
+            if slot[to] != OPEN {
+                continue;
+            }
+            let (pf, pt) = (pos(from), pos(to));
+            let known = &mut occluders[slot[from] as usize];
+            if let Some(k) = occluded(known, pf, pt) {
+                // Move to front: the nearest occluders hit most often.
+                known[..=k].rotate_right(1);
+                continue;
+            }
+            if let Err(blocker) = self.segment_check(pf, pt, true) {
+                if let Some(edge) = blocker {
+                    if known.len() == MAX_OCCLUDERS {
+                        known.pop();
+                    }
+                    known.insert(0, edge);
+                }
+                continue;
+            }
+            slot[to] = occluders.len() as u32;
+            occluders.push(Vec::new());
+            g[to] = g[from] + dist(pf, pt);
+            parent[to] = from;
+            if to == goal {
+                let mut path = vec![b];
+                let mut at = goal;
+                while at != start {
+                    at = parent[at];
+                    path.push(pos(at));
+                }
+                path.reverse();
+                return Some(path);
+            }
+            heap.push(QueueEntry {
+                key: g[to] + h(pt),
+                kind: EntryKind::Expand { node: to, level: 0 },
+            });
+        }
+        None
+    }
+}
+
+/// Candidate successors of one closed node within one slack ring.
+struct RingList {
+    from: usize,
+    /// `(slack, node)`, ascending.
+    cands: Vec<(f64, usize)>,
+    next: usize,
+}
+
+/// How much longer the way to `b` gets by going through `v` from `u`
+/// (`hu = |ub|`).
+fn slack(u: Coord<f64>, v: Coord<f64>, b: Coord<f64>, hu: f64) -> f64 {
+    dist(u, v) + dist(v, b) - hu
+}
+
+/// `slot` value of a node not closed yet.
+const OPEN: u32 = u32::MAX;
+
+/// Occluding edges remembered per closed node.
+const MAX_OCCLUDERS: usize = 12;
+
+/// Index of the first remembered edge that `a`–`b` crosses cleanly.
+fn occluded(edges: &[Edge], a: Coord<f64>, b: Coord<f64>) -> Option<usize> {
+    let len = dist(a, b);
+    edges
+        .iter()
+        .position(|e| matches!(contact(a, b, len, e.p, e.q), Contact::Crossing))
+}
+
+/// Total length of a polyline.
+pub fn polyline_length(path: &[Coord<f64>]) -> f64 {
+    path.windows(2).map(|w| dist(w[0], w[1])).sum()
+}
+
+#[derive(Clone, Copy, Debug)]
+enum EntryKind {
+    /// The next candidate edge of ring list `list`.
+    Cursor { list: usize },
+    /// Generate the successors of closed node `node` in slack ring `level`.
+    Expand { node: usize, level: u32 },
+}
+
+/// Min-heap entry ordered by `key`, a lower bound of the length of any path
+/// through the entry's next edge.
+#[derive(Clone, Copy, Debug)]
+struct QueueEntry {
+    key: f64,
+    kind: EntryKind,
+}
+
+impl PartialEq for QueueEntry {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl Eq for QueueEntry {}
+
+impl PartialOrd for QueueEntry {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for QueueEntry {
+    fn cmp(&self, other: &Self) -> Ordering {
+        other.key.total_cmp(&self.key)
+    }
+}
+
+/// R-tree selection of edges whose (tolerance-inflated) box meets a segment.
+struct SegmentSelect {
+    a: Coord<f64>,
+    b: Coord<f64>,
+}
+
+impl SelectionFunction<Edge> for SegmentSelect {
+    fn should_unpack_parent(&self, envelope: &AABB<[f64; 2]>) -> bool {
+        segment_meets_box(self.a, self.b, envelope)
+    }
+
+    fn should_unpack_leaf(&self, leaf: &Edge) -> bool {
+        segment_meets_box(self.a, self.b, &leaf.envelope())
+    }
+}
+
+/// R-tree selection of the nodes `v` whose slack `|uv| + |vb| − |ub|` lies in
+/// `(lo, hi]`: an elliptic ring with foci `u` and `b`.
+struct RingSelect {
+    u: Coord<f64>,
+    b: Coord<f64>,
+    hu: f64,
+    lo: f64,
+    hi: f64,
+}
+
+impl SelectionFunction<NodeRef> for RingSelect {
+    fn should_unpack_parent(&self, envelope: &AABB<[f64; 2]>) -> bool {
+        let min = min_dist_to_box(self.u, envelope) + min_dist_to_box(self.b, envelope) - self.hu;
+        let max = max_dist_to_box(self.u, envelope) + max_dist_to_box(self.b, envelope) - self.hu;
+        min <= self.hi && max > self.lo
+    }
+
+    fn should_unpack_leaf(&self, leaf: &NodeRef) -> bool {
+        let [x, y] = *leaf.geom();
+        let v = Coord { x, y };
+        let s = slack(self.u, v, self.b, self.hu);
+        s > self.lo && s <= self.hi
+    }
+}
+
+/// How a segment `a`–`b` meets one obstacle edge `p`–`q`.
+enum Contact {
+    None,
+    /// Clean transversal crossing away from all four endpoints: the segment
+    /// enters the obstacle interior next to the crossing.
+    Crossing,
+    /// Contact at up to three segment parameters (touching a vertex, running
+    /// along the edge, or a crossing within tolerance of an endpoint).
+    Touch([Option<f64>; 3]),
+}
+
+fn contact(a: Coord<f64>, b: Coord<f64>, len: f64, p: Coord<f64>, q: Coord<f64>) -> Contact {
+    let d = b - a;
+    let param = |c: Coord<f64>| ((c - a).x * d.x + (c - a).y * d.y) / (len * len);
+    let near_ab = |c: Coord<f64>| point_segment_distance(c, a, b) <= EPS;
+    let touch_p = near_ab(p).then(|| param(p).clamp(0.0, 1.0));
+    let touch_q = near_ab(q).then(|| param(q).clamp(0.0, 1.0));
+
+    let side_p = RobustKernel::orient2d(a, b, p);
+    let side_q = RobustKernel::orient2d(a, b, q);
+    let side_a = RobustKernel::orient2d(p, q, a);
+    let side_b = RobustKernel::orient2d(p, q, b);
+    let strictly_apart = |s: Orientation, t: Orientation| {
+        s != Orientation::Collinear && t != Orientation::Collinear && s != t
+    };
+    if strictly_apart(side_p, side_q) && strictly_apart(side_a, side_b) {
+        let e = q - p;
+        let denom = d.x * e.y - d.y * e.x;
+        let t = (((p - a).x * e.y - (p - a).y * e.x) / denom).clamp(0.0, 1.0);
+        let elen = (e.x * e.x + e.y * e.y).sqrt();
+        let a_on_edge_line = ((a - p).x * e.y - (a - p).y * e.x).abs() / elen <= EPS;
+        let b_on_edge_line = ((b - p).x * e.y - (b - p).y * e.x).abs() / elen <= EPS;
+        let degenerate = touch_p.is_some()
+            || touch_q.is_some()
+            || (a_on_edge_line && b_on_edge_line)
+            || t * len <= EPS
+            || (1.0 - t) * len <= EPS;
+        if !degenerate {
+            return Contact::Crossing;
+        }
+        return Contact::Touch([Some(t), touch_p, touch_q]);
+    }
+    if touch_p.is_some() || touch_q.is_some() {
+        Contact::Touch([None, touch_p, touch_q])
+    } else {
+        Contact::None
+    }
+}
+
+/// Liang–Barsky clip of segment `a`–`b` against a box inflated by [`EPS`].
+fn segment_meets_box(a: Coord<f64>, b: Coord<f64>, envelope: &AABB<[f64; 2]>) -> bool {
+    let (lower, upper) = (envelope.lower(), envelope.upper());
+    let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+    for (start, delta, min, max) in [
+        (a.x, b.x - a.x, lower[0] - EPS, upper[0] + EPS),
+        (a.y, b.y - a.y, lower[1] - EPS, upper[1] + EPS),
+    ] {
+        if delta == 0.0 {
+            if start < min || start > max {
+                return false;
+            }
+        } else {
+            let (mut ta, mut tb) = ((min - start) / delta, (max - start) / delta);
+            if ta > tb {
+                std::mem::swap(&mut ta, &mut tb);
+            }
+            t0 = t0.max(ta);
+            t1 = t1.min(tb);
+            if t0 > t1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+fn min_dist_to_box(p: Coord<f64>, envelope: &AABB<[f64; 2]>) -> f64 {
+    envelope.distance_2(&[p.x, p.y]).sqrt()
+}
+
+fn max_dist_to_box(p: Coord<f64>, envelope: &AABB<[f64; 2]>) -> f64 {
+    let (lower, upper) = (envelope.lower(), envelope.upper());
+    let dx = (p.x - lower[0]).abs().max((upper[0] - p.x).abs());
+    let dy = (p.y - lower[1]).abs().max((upper[1] - p.y).abs());
+    (dx * dx + dy * dy).sqrt()
+}
+
+fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    (dx * dx + dy * dy).sqrt()
+}
+
+fn is_finite(c: Coord<f64>) -> bool {
+    c.x.is_finite() && c.y.is_finite()
+}
+
+fn point_segment_distance(c: Coord<f64>, a: Coord<f64>, b: Coord<f64>) -> f64 {
+    let d = b - a;
+    let len2 = d.x * d.x + d.y * d.y;
+    let t = if len2 > 0.0 {
+        (((c - a).x * d.x + (c - a).y * d.y) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    dist(c, a + d * t)
+}
+
+/// Unit vector pointing out of the obstacle at convex corner `c` (interior
+/// on the left of `p → c → q`).
+fn outward_bisector(p: Coord<f64>, c: Coord<f64>, q: Coord<f64>) -> Coord<f64> {
+    let unit = |v: Coord<f64>| v / (v.x * v.x + v.y * v.y).sqrt();
+    let v = unit(c - p) - unit(q - c);
+    unit(v)
+}
+
+/// Even-odd crossing test against one closed ring (no closing duplicate).
+fn ring_contains(ring: &[Coord<f64>], p: Coord<f64>) -> bool {
+    let mut inside = false;
+    let mut j = ring.len() - 1;
+    for i in 0..ring.len() {
+        let (a, b) = (ring[i], ring[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < a.x + (p.y - a.y) * (b.x - a.x) / (b.y - a.y) {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+/// Drops non-finite and repeated vertices and the closing duplicate, and
+/// orients the ring (counter-clockwise when `ccw`). `None` for rings without
+/// area.
+fn clean_ring(ring: &LineString<f64>, ccw: bool) -> Option<Vec<Coord<f64>>> {
+    let mut out: Vec<Coord<f64>> = Vec::with_capacity(ring.0.len());
+    for &c in ring.0.iter().filter(|c| is_finite(**c)) {
+        if out.last() != Some(&c) {
+            out.push(c);
+        }
+    }
+    while out.len() > 1 && out.first() == out.last() {
+        out.pop();
+    }
+    if out.len() < 3 {
+        return None;
+    }
+    let twice_area: f64 = (0..out.len())
+        .map(|i| {
+            let (a, b) = (out[i], out[(i + 1) % out.len()]);
+            a.x * b.y - a.y * b.x
+        })
+        .sum();
+    if twice_area == 0.0 || !twice_area.is_finite() {
+        return None;
+    }
+    if (twice_area > 0.0) != ccw {
+        out.reverse();
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use geo_types::{Polygon, coord};
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
+        Polygon::new(
+            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
+            vec![],
+        )
+    }
+
+    fn assert_path_clear(map: &ObstacleMap, path: &[Coord<f64>]) {
+        for w in path.windows(2) {
+            assert!(map.is_clear(w[0], w[1]), "segment {w:?} is blocked");
+        }
+    }
+
+    #[test]
+    fn direct_segment_when_nothing_blocks() {
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), 1.0);
+        let path = map
+            .shortest_path(coord! { x: -5.0, y: 20.0 }, coord! { x: 15.0, y: 20.0 })
+            .unwrap();
+        assert_eq!(
+            path,
+            vec![coord! { x: -5.0, y: 20.0 }, coord! { x: 15.0, y: 20.0 }]
+        );
+    }
+
+    #[test]
+    fn square_between_gives_two_corner_detour() {
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), 0.0);
+        let a = coord! { x: -10.0, y: 5.0 };
+        let b = coord! { x: 20.0, y: 5.0 };
+        let path = map.shortest_path(a, b).unwrap();
+        assert_eq!(path.len(), 4, "{path:?}");
+        // Over either pair of corners: 2·√(10² + 5²) + 10.
+        let expected = 2.0 * 125f64.sqrt() + 10.0;
+        assert_relative_eq!(polyline_length(&path), expected, epsilon = 1e-9);
+        assert_path_clear(&map, &path);
+    }
+
+    #[test]
+    fn clearance_pushes_the_detour_off_the_corners() {
+        let r = 2.0;
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), r);
+        let path = map
+            .shortest_path(coord! { x: -10.0, y: 5.0 }, coord! { x: 20.0, y: 5.0 })
+            .unwrap();
+        assert_eq!(path.len(), 4);
+        let s = r / 2f64.sqrt();
+        let corners = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)]
+            .map(|(x, y)| coord! { x: x, y: y });
+        for corner in &path[1..3] {
+            // Each bend is a corner moved r along the diagonal.
+            let nearest = corners
+                .iter()
+                .map(|c| dist(*corner, *c))
+                .fold(f64::INFINITY, f64::min);
+            assert_relative_eq!(nearest, r, epsilon = 1e-9);
+            assert!(corner.x < 0.0 || corner.x > 10.0);
+            assert_relative_eq!((corner.y - 5.0).abs(), 5.0 + s, epsilon = 1e-9);
+        }
+        assert_path_clear(&map, &path);
+    }
+
+    #[test]
+    fn wall_of_touching_obstacles_is_walked_around() {
+        // Five unit squares stacked into a wall x ∈ [0, 10], y ∈ [0, 50].
+        let wall: Vec<_> = (0..5)
+            .map(|i| rect(0.0, 10.0 * i as f64, 10.0, 10.0 * (i + 1) as f64))
+            .collect();
+        let map = ObstacleMap::new(&MultiPolygon(wall), 0.0);
+        let a = coord! { x: -10.0, y: 15.0 };
+        let b = coord! { x: 20.0, y: 15.0 };
+        assert!(!map.is_clear(a, b));
+        let path = map.shortest_path(a, b).unwrap();
+        assert_path_clear(&map, &path);
+        // Around the bottom: corners (0, 0) and (10, 0).
+        let expected = 2.0 * (100.0f64 + 225.0).sqrt() + 10.0;
+        assert_relative_eq!(polyline_length(&path), expected, epsilon = 1e-9);
+        assert!(path.iter().all(|c| c.y <= 15.0));
+    }
+
+    #[test]
+    fn boundary_points_are_valid_endpoints() {
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), 1.0);
+        let on_edge = coord! { x: 10.0, y: 5.0 };
+        let corner = coord! { x: 0.0, y: 0.0 };
+        assert!(!map.contains_point(on_edge));
+        assert!(!map.contains_point(corner));
+        // Leaving outward is clear, cutting through is not.
+        assert!(map.is_clear(on_edge, coord! { x: 20.0, y: 5.0 }));
+        assert!(!map.is_clear(on_edge, coord! { x: -5.0, y: 5.0 }));
+        // Sliding along the edge is clear.
+        assert!(map.is_clear(coord! { x: 10.0, y: -5.0 }, coord! { x: 10.0, y: 15.0 }));
+        // Rounding noise: a lane end a nanometre inside still counts as on it.
+        let noisy = coord! { x: 10.0 - 1e-9, y: 5.0 };
+        assert!(map.is_clear(noisy, coord! { x: 20.0, y: 5.0 }));
+
+        let path = map
+            .shortest_path(on_edge, coord! { x: -5.0, y: 5.0 })
+            .unwrap();
+        assert_eq!(path.first(), Some(&on_edge));
+        assert_path_clear(&map, &path);
+        let path = map
+            .shortest_path(corner, coord! { x: 10.0, y: 10.0 })
+            .unwrap();
+        assert_path_clear(&map, &path);
+        assert!(polyline_length(&path) > 20.0);
+    }
+
+    #[test]
+    fn endpoint_inside_is_an_error() {
+        let map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), 1.0);
+        let inside = coord! { x: 5.0, y: 5.0 };
+        let outside = coord! { x: 20.0, y: 5.0 };
+        assert_eq!(
+            map.shortest_path(inside, outside),
+            Err(TransitError::InsideObstacle {
+                endpoint: Endpoint::Start,
+                point: inside
+            })
+        );
+        assert_eq!(
+            map.shortest_path(outside, inside),
+            Err(TransitError::InsideObstacle {
+                endpoint: Endpoint::End,
+                point: inside
+            })
+        );
+        let nan = coord! { x: f64::NAN, y: 0.0 };
+        assert_eq!(
+            map.shortest_path(outside, nan),
+            Err(TransitError::NonFinite {
+                endpoint: Endpoint::End
+            })
+        );
+        assert!(!map.is_clear(outside, nan));
+    }
+
+    #[test]
+    fn enclosed_goal_has_no_path() {
+        // A ring-shaped NFZ (polygon with a hole) around the goal.
+        let ring = Polygon::new(
+            rect(0.0, 0.0, 30.0, 30.0).exterior().clone(),
+            vec![rect(10.0, 10.0, 20.0, 20.0).exterior().clone()],
+        );
+        let map = ObstacleMap::new(&MultiPolygon(vec![ring]), 0.5);
+        let a = coord! { x: -5.0, y: -5.0 };
+        let b = coord! { x: 15.0, y: 15.0 };
+        assert!(!map.contains_point(b));
+        assert_eq!(
+            map.shortest_path(a, b),
+            Err(TransitError::NoPath { from: a, to: b })
+        );
+        // Inside the hole, paths work.
+        let inner = map.shortest_path(b, coord! { x: 11.0, y: 19.0 }).unwrap();
+        assert_eq!(inner.len(), 2);
+    }
+
+    #[test]
+    fn path_bends_around_hole_corners_inside_a_courtyard() {
+        // An L-shaped courtyard: the hole's reflex corner must be a node.
+        let outer = rect(0.0, 0.0, 40.0, 40.0);
+        let hole = geo_types::LineString::from(vec![
+            (10.0, 10.0),
+            (30.0, 10.0),
+            (30.0, 20.0),
+            (20.0, 20.0),
+            (20.0, 30.0),
+            (10.0, 30.0),
+        ]);
+        let map = ObstacleMap::new(
+            &MultiPolygon(vec![Polygon::new(outer.exterior().clone(), vec![hole])]),
+            0.0,
+        );
+        let a = coord! { x: 28.0, y: 18.0 };
+        let b = coord! { x: 18.0, y: 28.0 };
+        let path = map.shortest_path(a, b).unwrap();
+        assert_eq!(path.len(), 3);
+        assert_relative_eq!(polyline_length(&path), 2.0 * 68f64.sqrt(), epsilon = 1e-9);
+        // Touching the reflex corner itself is allowed.
+        assert!(map.is_clear(coord! { x: 28.0, y: 12.0 }, coord! { x: 12.0, y: 28.0 }));
+        assert_relative_eq!(path[1].x, 20.0, epsilon = 1e-9);
+        assert_relative_eq!(path[1].y, 20.0, epsilon = 1e-9);
+    }
+
+    #[test]
+    fn nodes_inside_other_obstacles_are_dropped() {
+        // Two squares with facing corners 0.7 m apart diagonally; a 2 m
+        // clearance pushes each facing corner's node into the other square.
+        let map = ObstacleMap::new(
+            &MultiPolygon(vec![
+                rect(0.0, 0.0, 10.0, 10.0),
+                rect(10.5, 10.5, 30.0, 30.0),
+            ]),
+            2.0,
+        );
+        assert_eq!(map.obstacle_count(), 2);
+        assert_eq!(map.node_count(), 6);
+        assert!(map.nodes.iter().all(|&n| !map.contains_point(n)));
+    }
+
+    /// Reference: the full visibility graph over the same nodes, built with
+    /// the same segment test, and an O(V²) Dijkstra.
+    fn brute_force(map: &ObstacleMap, a: Coord<f64>, b: Coord<f64>) -> Option<f64> {
+        let mut pts = map.nodes.clone();
+        pts.push(a);
+        pts.push(b);
+        let n = pts.len();
+        let (s, t) = (n - 2, n - 1);
+        let mut d = vec![f64::INFINITY; n];
+        let mut done = vec![false; n];
+        d[s] = 0.0;
+        loop {
+            let u = (0..n)
+                .filter(|&i| !done[i] && d[i].is_finite())
+                .min_by(|&i, &j| d[i].total_cmp(&d[j]))?;
+            if u == t {
+                return Some(d[t]);
+            }
+            done[u] = true;
+            for v in 0..n {
+                if !done[v] && map.is_clear(pts[u], pts[v]) {
+                    d[v] = d[v].min(d[u] + dist(pts[u], pts[v]));
+                }
+            }
+        }
+    }
+
+    /// Small deterministic generator so the comparison is reproducible.
+    struct Lcg(u64);
+
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Random star-shaped (often non-convex) polygons on a jittered grid.
+    fn random_obstacles(rng: &mut Lcg, cells: usize, cell: f64) -> MultiPolygon<f64> {
+        let mut polys = Vec::new();
+        for i in 0..cells {
+            for j in 0..cells {
+                if rng.next() < 0.3 {
+                    continue;
+                }
+                let cx = (i as f64 + 0.5) * cell + (rng.next() - 0.5) * 0.2 * cell;
+                let cy = (j as f64 + 0.5) * cell + (rng.next() - 0.5) * 0.2 * cell;
+                let k = 3 + (rng.next() * 6.0) as usize;
+                let pts: Vec<(f64, f64)> = (0..k)
+                    .map(|m| {
+                        let ang = (m as f64 + 0.8 * rng.next()) / k as f64 * std::f64::consts::TAU;
+                        let r = cell * (0.15 + 0.3 * rng.next());
+                        (cx + r * ang.cos(), cy + r * ang.sin())
+                    })
+                    .collect();
+                polys.push(Polygon::new(LineString::from(pts), vec![]));
+            }
+        }
+        MultiPolygon(polys)
+    }
+
+    #[test]
+    fn agrees_with_brute_force_on_random_obstacles() {
+        let mut rng = Lcg(7);
+        let mut compared = 0;
+        for round in 0..12 {
+            let obstacles = random_obstacles(&mut rng, 5, 20.0);
+            let clearance = [0.0, 0.5, 2.0][round % 3];
+            let map = ObstacleMap::new(&obstacles, clearance);
+            for _ in 0..15 {
+                let a = coord! { x: rng.next() * 100.0, y: rng.next() * 100.0 };
+                let b = coord! { x: rng.next() * 100.0, y: rng.next() * 100.0 };
+                if map.contains_point(a) || map.contains_point(b) {
+                    continue;
+                }
+                let fast = map.shortest_path(a, b).ok();
+                let reference = brute_force(&map, a, b);
+                match (&fast, reference) {
+                    (Some(path), Some(len)) => {
+                        assert_relative_eq!(polyline_length(path), len, max_relative = 1e-9);
+                        assert_eq!(path.first(), Some(&a));
+                        assert_eq!(path.last(), Some(&b));
+                        assert_path_clear(&map, path);
+                    }
+                    (None, None) => {}
+                    _ => panic!("fast {fast:?} vs reference {reference:?} for {a:?} → {b:?}"),
+                }
+                compared += 1;
+            }
+        }
+        assert!(compared > 100);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        #[test]
+        fn random_paths_are_clear_and_no_longer_than_detours(
+            seed in 0u64..10_000,
+            ax in 0.0..100.0f64, ay in 0.0..100.0f64,
+            bx in 0.0..100.0f64, by in 0.0..100.0f64,
+        ) {
+            let mut rng = Lcg(seed);
+            let map = ObstacleMap::new(&random_obstacles(&mut rng, 4, 25.0), 1.0);
+            let (a, b) = (coord! { x: ax, y: ay }, coord! { x: bx, y: by });
+            proptest::prop_assume!(!map.contains_point(a) && !map.contains_point(b));
+            let path = map.shortest_path(a, b).unwrap();
+            for w in path.windows(2) {
+                proptest::prop_assert!(map.is_clear(w[0], w[1]));
+            }
+            let len = polyline_length(&path);
+            proptest::prop_assert!(len >= dist(a, b) - 1e-9);
+            // Symmetric: the reverse query has the same length.
+            let back = polyline_length(&map.shortest_path(b, a).unwrap());
+            proptest::prop_assert!((len - back).abs() <= 1e-6 * len.max(1.0));
+        }
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    //! `cargo test --release -p planner-core --lib flock::transit::timing -- --ignored --nocapture`
+    use super::*;
+    use geo_types::{Polygon, coord};
+    use std::time::Instant;
+
+    #[test]
+    #[ignore = "timing run, not a check"]
+    fn large_field() {
+        let mut seed = 11u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (cells, cell) = (32, 300.0);
+        let mut polys = Vec::new();
+        for i in 0..cells {
+            for j in 0..cells {
+                let cx = (i as f64 + 0.5) * cell + (rnd() - 0.5) * 0.2 * cell;
+                let cy = (j as f64 + 0.5) * cell + (rnd() - 0.5) * 0.2 * cell;
+                let pts: Vec<(f64, f64)> = (0..8)
+                    .map(|m| {
+                        let ang = (m as f64 + 0.8 * rnd()) / 8.0 * std::f64::consts::TAU;
+                        let r = cell * (0.1 + 0.3 * rnd());
+                        (
+                            500_000.0 + cx + r * ang.cos(),
+                            5_000_000.0 + cy + r * ang.sin(),
+                        )
+                    })
+                    .collect();
+                polys.push(Polygon::new(LineString::from(pts), vec![]));
+            }
+        }
+        let t = Instant::now();
+        let map = ObstacleMap::new(&MultiPolygon(polys), 2.0);
+        println!(
+            "build: {} obstacles, {} nodes in {:?}",
+            map.obstacle_count(),
+            map.node_count(),
+            t.elapsed()
+        );
+        let side = cells as f64 * cell;
+        for (label, reach) in [("short (≤ 600 m)", 600.0), ("long (any)", side)] {
+            let mut queries = Vec::new();
+            while queries.len() < 1000 {
+                let a = coord! { x: 500_000.0 + rnd() * side, y: 5_000_000.0 + rnd() * side };
+                let b = coord! {
+                    x: (a.x + (rnd() - 0.5) * 2.0 * reach).clamp(500_000.0, 500_000.0 + side),
+                    y: (a.y + (rnd() - 0.5) * 2.0 * reach).clamp(5_000_000.0, 5_000_000.0 + side),
+                };
+                if !map.contains_point(a) && !map.contains_point(b) {
+                    queries.push((a, b));
+                }
+            }
+            let t = Instant::now();
+            let mut bent = 0;
+            let mut worst = std::time::Duration::ZERO;
+            for &(a, b) in &queries {
+                let q = Instant::now();
+                let path = map.shortest_path(a, b).expect("open field");
+                worst = worst.max(q.elapsed());
+                bent += usize::from(path.len() > 2);
+            }
+            println!(
+                "{label}: {} queries ({bent} not direct) in {:?}, worst {:?}",
+                queries.len(),
+                t.elapsed(),
+                worst
+            );
+        }
+    }
+}

@@ -1,0 +1,432 @@
+//! The surveys resource: plan, store, list, fetch, delete, and download the
+//! mission files of each UAV.
+
+use axum::Json;
+use axum::extract::{Path, Query, State, rejection::QueryRejection};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use planner_core::export::{AltitudeFrame, FencePolygon, geojson as gj};
+use planner_core::geo::Issue;
+use planner_core::survey::{SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, plan_survey};
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use utoipa::{IntoParams, ToSchema};
+
+use super::json_body::JsonBody;
+use crate::app::AppState;
+use crate::db::{SurveyRow, SurveySummaryRow};
+use crate::error::{ApiError, Problem};
+
+const NAME_MAX_CHARS: usize = 200;
+
+/// Body of `POST /api/v1/surveys`: the area, the no-fly zones and the
+/// planning parameters (the fields of the CLI's params file).
+#[derive(Deserialize, ToSchema)]
+#[allow(dead_code)] // the handler reads the body as JSON to report faults by pointer; this is its schema
+pub struct CreateSurvey {
+    /// A label for the survey (at most 200 characters).
+    name: Option<String>,
+    /// Region of interest: GeoJSON (RFC 7946, WGS84) Polygon, MultiPolygon,
+    /// Feature, FeatureCollection or GeometryCollection of areas.
+    #[schema(value_type = Object)]
+    roi: Value,
+    /// No-fly zones, each any GeoJSON area; they may overlap each other,
+    /// cross the ROI border or lie outside it.
+    #[schema(value_type = Vec<Object>)]
+    no_fly_zones: Option<Vec<Value>>,
+    #[serde(flatten)]
+    params: SurveyParams,
+}
+
+/// Download links of one UAV's files.
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct UavFiles {
+    /// `QGC WPL 110` mission.
+    waypoints: String,
+    /// QGroundControl `.plan` with geofences.
+    plan: String,
+    /// GeoJSON of the flown route (3D).
+    route: String,
+    /// Fence mission (commands 5001/5002).
+    fence: String,
+}
+
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct UavResponse {
+    id: String,
+    /// Take-off and landing point [lon, lat].
+    start: [f64; 2],
+    /// Cell ids in the order flown.
+    cells: Vec<usize>,
+    stats: UavStats,
+    /// GeoJSON LineString of [lon, lat, alt] (altitude in the survey's frame).
+    #[schema(value_type = Object)]
+    route: Value,
+    files: UavFiles,
+}
+
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct SurveyFiles {
+    /// GeoJSON of the cells.
+    cells: String,
+}
+
+/// A planned survey.
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct SurveyResponse {
+    id: String,
+    name: Option<String>,
+    /// Creation time, RFC 3339 (UTC).
+    created_at: String,
+    /// The UTM zone the plan was made in.
+    utm_epsg: u32,
+    altitude_frame: AltitudeFrame,
+    stats: SurveyStats,
+    /// GeoJSON FeatureCollection of the decomposition cells.
+    #[schema(value_type = Object)]
+    cells: Value,
+    uavs: Vec<UavResponse>,
+    /// Inclusion fence, then every no-fly zone.
+    fences: Vec<FencePolygon>,
+    warnings: Vec<String>,
+    files: SurveyFiles,
+}
+
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct SurveySummary {
+    id: String,
+    name: Option<String>,
+    created_at: String,
+    cell_count: u64,
+    uav_count: u64,
+    area_m2: f64,
+    flight_time_s: f64,
+    /// URL of the full survey.
+    url: String,
+}
+
+/// A page of surveys, newest first.
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct SurveyList {
+    items: Vec<SurveySummary>,
+    /// Surveys stored in all.
+    total: i64,
+    limit: i64,
+    offset: i64,
+}
+
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// Page size.
+    #[param(minimum = 1, maximum = 100, default = 20)]
+    limit: Option<i64>,
+    /// Surveys to skip.
+    #[param(minimum = 0, default = 0)]
+    offset: Option<i64>,
+}
+
+fn survey_url(id: &str) -> String {
+    format!("/api/v1/surveys/{id}")
+}
+
+fn not_found(id: &str) -> ApiError {
+    ApiError::NotFound(format!("there is no survey with id {id:?}"))
+}
+
+fn now_millis() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// Unix milliseconds as RFC 3339 UTC.
+fn rfc3339(millis: i64) -> String {
+    let t = std::time::UNIX_EPOCH + std::time::Duration::from_millis(millis.max(0) as u64);
+    humantime::format_rfc3339_millis(t).to_string()
+}
+
+fn parse_plan(row_plan: &str) -> Result<SurveyPlan, ApiError> {
+    serde_json::from_str(row_plan).map_err(|e| ApiError::Internal(format!("stored plan unreadable: {e}")))
+}
+
+fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
+    let plan = parse_plan(&row.plan)?;
+    let base = survey_url(&row.id);
+    let uavs = plan
+        .uavs
+        .iter()
+        .map(|u| {
+            let route = gj::route_feature(&u.mission, Map::new())["geometry"].clone();
+            let f = |name: &str| format!("{base}/uavs/{}/{name}", u.id);
+            UavResponse {
+                id: u.id.clone(),
+                start: u.start,
+                cells: u.cells.clone(),
+                stats: u.stats.clone(),
+                route,
+                files: UavFiles {
+                    waypoints: f("mission.waypoints"),
+                    plan: f("mission.plan"),
+                    route: f("route.geojson"),
+                    fence: f("fence.waypoints"),
+                },
+            }
+        })
+        .collect();
+    let cells_file = plan.files().into_iter().find(|f| f.name == "cells.geojson");
+    let cells = match cells_file {
+        Some(f) => serde_json::from_str(&f.content).map_err(|e| ApiError::Internal(e.to_string()))?,
+        None => Value::Null,
+    };
+    Ok(SurveyResponse {
+        id: row.id.clone(),
+        name: row.name.clone(),
+        created_at: rfc3339(row.created_at),
+        utm_epsg: plan.utm_epsg,
+        altitude_frame: plan.altitude_frame,
+        stats: plan.stats,
+        cells,
+        uavs,
+        fences: plan.fences,
+        warnings: plan.warnings,
+        files: SurveyFiles { cells: format!("{base}/cells.geojson") },
+    })
+}
+
+/// Take `name` out of the request document, checking it.
+fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
+    let Some(obj) = doc.as_object_mut() else {
+        return Err(ApiError::Validation(vec![Issue::new("", "the request body must be a JSON object")]));
+    };
+    match obj.remove("name") {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Ok(Some(s)),
+        Some(Value::String(_)) => Err(ApiError::Validation(vec![Issue::new(
+            "/name",
+            &format!("the name is longer than {NAME_MAX_CHARS} characters"),
+        )])),
+        Some(_) => Err(ApiError::Validation(vec![Issue::new("/name", "the name must be a string")])),
+    }
+}
+
+/// Plan a survey and store it.
+#[utoipa::path(
+    post,
+    path = "/api/v1/surveys",
+    tag = "surveys",
+    request_body(content = CreateSurvey, content_type = "application/json"),
+    responses(
+        (status = 201, description = "Planned and stored", body = SurveyResponse,
+            headers(("Location" = String, description = "URL of the new survey"))),
+        (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn create_survey(State(state): State<AppState>, JsonBody(mut doc): JsonBody) -> Result<Response, ApiError> {
+    let name = take_name(&mut doc)?;
+    let req = SurveyRequest::from_document(&doc)?;
+    let limits = state.limits.clone();
+    let started = std::time::Instant::now();
+    let plan = state
+        .run_planner(move || {
+            let t = std::time::Instant::now();
+            plan_survey(&req, &limits).map(|p| (p, t.elapsed()))
+        })
+        .await?;
+    let (plan, planning) = plan?;
+    let waited = started.elapsed().saturating_sub(planning);
+    let row = SurveyRow {
+        id: uuid::Uuid::now_v7().to_string(),
+        name,
+        created_at: now_millis(),
+        request: doc.to_string(),
+        plan: serde_json::to_string(&plan).map_err(|e| ApiError::Internal(e.to_string()))?,
+    };
+    state.db.insert_survey(&row).await?;
+    let body = response(&row)?;
+    let mut headers = HeaderMap::new();
+    if let Ok(v) = HeaderValue::from_str(&survey_url(&row.id)) {
+        headers.insert(header::LOCATION, v);
+    }
+    // Planner time and queueing time, for clients and load tests.
+    let timing = format!(
+        "plan;dur={:.3}, queue;dur={:.3}",
+        planning.as_secs_f64() * 1e3,
+        waited.as_secs_f64() * 1e3
+    );
+    if let Ok(v) = HeaderValue::from_str(&timing) {
+        headers.insert(HeaderName::from_static("server-timing"), v);
+    }
+    Ok((StatusCode::CREATED, headers, Json(body)).into_response())
+}
+
+/// A stored survey.
+#[utoipa::path(
+    get,
+    path = "/api/v1/surveys/{id}",
+    tag = "surveys",
+    params(("id" = String, Path, description = "Survey id")),
+    responses(
+        (status = 200, description = "The survey", body = SurveyResponse),
+        (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn get_survey(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SurveyResponse>, ApiError> {
+    let row = state.db.get_survey(&id).await?.ok_or_else(|| not_found(&id))?;
+    Ok(Json(response(&row)?))
+}
+
+/// Stored surveys, newest first, a page at a time.
+#[utoipa::path(
+    get,
+    path = "/api/v1/surveys",
+    tag = "surveys",
+    params(ListQuery),
+    responses(
+        (status = 200, description = "A page of surveys", body = SurveyList),
+        (status = 400, description = "Bad paging parameters", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn list_surveys(
+    State(state): State<AppState>,
+    query: Result<Query<ListQuery>, QueryRejection>,
+) -> Result<Json<SurveyList>, ApiError> {
+    let Query(q) = query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
+    let limit = q.limit.unwrap_or(20);
+    let offset = q.offset.unwrap_or(0);
+    if !(1..=100).contains(&limit) {
+        return Err(ApiError::BadRequest(format!("limit {limit} is outside [1, 100]")));
+    }
+    if offset < 0 {
+        return Err(ApiError::BadRequest(format!("offset {offset} is negative")));
+    }
+    let (rows, total) = state.db.list_surveys(limit, offset).await?;
+    let items = rows.iter().map(summary).collect::<Result<Vec<_>, _>>()?;
+    Ok(Json(SurveyList { items, total, limit, offset }))
+}
+
+fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
+    let plan: Value = serde_json::from_str(&row.plan).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let stats = &plan["stats"];
+    Ok(SurveySummary {
+        id: row.id.clone(),
+        name: row.name.clone(),
+        created_at: rfc3339(row.created_at),
+        cell_count: stats["cell_count"].as_u64().unwrap_or(0),
+        uav_count: plan["uavs"].as_array().map_or(0, |a| a.len() as u64),
+        area_m2: stats["area_m2"].as_f64().unwrap_or(0.0),
+        flight_time_s: stats["flight_time_s"].as_f64().unwrap_or(0.0),
+        url: survey_url(&row.id),
+    })
+}
+
+/// Delete a survey and its files.
+#[utoipa::path(
+    delete,
+    path = "/api/v1/surveys/{id}",
+    tag = "surveys",
+    params(("id" = String, Path, description = "Survey id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn delete_survey(State(state): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    if state.db.delete_survey(&id).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(not_found(&id))
+    }
+}
+
+/// Serve one rendered file of a stored plan as a download.
+/// `missing` describes what is absent when the survey exists but the file does not.
+async fn download(
+    state: &AppState,
+    id: &str,
+    file_name: &str,
+    download_name: &str,
+    missing: impl FnOnce() -> String,
+) -> Result<Response, ApiError> {
+    let row = state.db.get_survey(id).await?.ok_or_else(|| not_found(id))?;
+    let plan = parse_plan(&row.plan)?;
+    let file = plan
+        .files()
+        .into_iter()
+        .find(|f| f.name == file_name)
+        .ok_or_else(|| ApiError::NotFound(missing()))?;
+    let disposition = format!("attachment; filename=\"{download_name}\"");
+    let mut res = file.content.into_response();
+    let headers = res.headers_mut();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(file.content_type));
+    if let Ok(v) = HeaderValue::from_str(&disposition) {
+        headers.insert(header::CONTENT_DISPOSITION, v);
+    }
+    Ok(res)
+}
+
+fn short(id: &str) -> &str {
+    id.get(..8).unwrap_or(id)
+}
+
+/// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
+/// (QGroundControl), `route.geojson` or `fence.waypoints`.
+#[utoipa::path(
+    get,
+    path = "/api/v1/surveys/{id}/uavs/{uav}/{file}",
+    tag = "surveys",
+    params(
+        ("id" = String, Path, description = "Survey id"),
+        ("uav" = String, Path, description = "UAV id"),
+        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, fence.waypoints"),
+    ),
+    responses(
+        (status = 200, description = "The file, as an attachment", content(
+            (String = "text/plain"),
+            (Object = "application/json"),
+            (Object = "application/geo+json"),
+        )),
+        (status = 404, description = "No such survey, UAV or file", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn uav_file(
+    State(state): State<AppState>,
+    Path((id, uav, file)): Path<(String, String, String)>,
+) -> Result<Response, ApiError> {
+    let (suffix, ext) = match file.as_str() {
+        "mission.waypoints" => ("waypoints", "waypoints"),
+        "mission.plan" => ("plan", "plan"),
+        "route.geojson" => ("route.geojson", "route.geojson"),
+        "fence.waypoints" => ("fence.waypoints", "fence.waypoints"),
+        other => {
+            return Err(ApiError::NotFound(format!(
+                "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, fence.waypoints"
+            )));
+        }
+    };
+    let download_name = format!("terraplan-{}-{uav}.{ext}", short(&id));
+    download(&state, &id, &format!("{uav}.{suffix}"), &download_name, || {
+        format!("survey {id} has no UAV {uav:?}")
+    })
+    .await
+}
+
+/// The decomposition cells as GeoJSON.
+#[utoipa::path(
+    get,
+    path = "/api/v1/surveys/{id}/cells.geojson",
+    tag = "surveys",
+    params(("id" = String, Path, description = "Survey id")),
+    responses(
+        (status = 200, description = "GeoJSON FeatureCollection of the cells", content_type = "application/geo+json", body = Object),
+        (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn cells_file(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    let name = format!("terraplan-{}-cells.geojson", short(&id));
+    download(&state, &id, "cells.geojson", &name, || format!("survey {id} has no cells file")).await
+}

@@ -1,0 +1,68 @@
+//! Service configuration: command-line flags, each with an environment
+//! variable of the same meaning.
+
+use std::path::PathBuf;
+
+use planner_core::geo::Limits;
+
+#[derive(clap::Args, Clone, Debug)]
+pub struct ServeConfig {
+    /// Address to listen on.
+    #[arg(long, env = "TERRAPLAN_HOST", default_value = "127.0.0.1")]
+    pub host: String,
+    /// Port to listen on (0 picks a free one; the address is printed).
+    #[arg(long, env = "TERRAPLAN_PORT", default_value_t = 8080)]
+    pub port: u16,
+    /// Directory for the embedded SQLite database and stored files.
+    #[arg(long, env = "TERRAPLAN_DATA_DIR", default_value = "terraplan-data")]
+    pub data_dir: PathBuf,
+    /// `postgres://…` to use PostgreSQL instead of the embedded SQLite
+    /// (`sqlite:PATH` is accepted too).
+    #[arg(long, env = "DATABASE_URL")]
+    pub database_url: Option<String>,
+    /// Largest request body accepted, bytes.
+    #[arg(long, env = "TERRAPLAN_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024)]
+    pub max_body_bytes: usize,
+    /// Largest ROI accepted, km².
+    #[arg(long, env = "TERRAPLAN_MAX_ROI_AREA_KM2", default_value_t = Limits::default().max_roi_area_km2)]
+    pub max_roi_area_km2: f64,
+    /// Most vertices accepted over the ROI and all no-fly zones.
+    #[arg(long, env = "TERRAPLAN_MAX_VERTICES", default_value_t = Limits::default().max_vertices)]
+    pub max_vertices: usize,
+    /// Most no-fly zones accepted in one request.
+    #[arg(long, env = "TERRAPLAN_MAX_NO_FLY_ZONES", default_value_t = Limits::default().max_no_fly_zones)]
+    pub max_no_fly_zones: usize,
+    /// Most survey-lane kilometres one plan may need (area / line spacing).
+    #[arg(long, env = "TERRAPLAN_MAX_LANE_KM", default_value_t = Limits::default().max_lane_km)]
+    pub max_lane_km: f64,
+    /// Plans computed at once; further requests wait their turn.
+    #[arg(long, env = "TERRAPLAN_PLANNER_THREADS", default_value_t = default_threads())]
+    pub planner_threads: usize,
+    /// Allowed CORS origin (repeatable; `*` allows any). None: no CORS headers.
+    #[arg(long = "cors-origin", env = "TERRAPLAN_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
+    /// Log format.
+    #[arg(long, env = "TERRAPLAN_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LogFormat {
+    Text,
+    Json,
+}
+
+fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(2, |n| n.get())
+}
+
+impl ServeConfig {
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_roi_area_km2: self.max_roi_area_km2,
+            max_vertices: self.max_vertices,
+            max_no_fly_zones: self.max_no_fly_zones,
+            max_lane_km: self.max_lane_km,
+        }
+    }
+}

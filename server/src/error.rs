@@ -1,0 +1,131 @@
+//! One error type for the HTTP API, rendered as RFC 9457
+//! `application/problem+json`.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use planner_core::geo::Issue;
+use planner_core::survey::PlanError;
+use serde::Serialize;
+use utoipa::ToSchema;
+
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// The request is well-formed but invalid: 422 with one entry per fault.
+    #[error("invalid request")]
+    Validation(Vec<Issue>),
+    /// Malformed request (e.g. JSON syntax): 400.
+    #[error("{0}")]
+    BadRequest(String),
+    #[error("{0}")]
+    NotFound(String),
+    #[error("{0}")]
+    MethodNotAllowed(String),
+    #[error("{0}")]
+    PayloadTooLarge(String),
+    #[error("{0}")]
+    UnsupportedMediaType(String),
+    /// The planner is saturated: 503, try again.
+    #[error("{0}")]
+    Unavailable(String),
+    /// A bug: 500. The detail is logged; the client gets a generic message.
+    #[error("{0}")]
+    Internal(String),
+}
+
+/// The problem document (RFC 9457) every error response carries.
+#[derive(Debug, Serialize, serde::Deserialize, ToSchema)]
+pub struct Problem {
+    /// A URI reference naming the problem type ("about:blank": see `title`).
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Short summary of the problem type (the HTTP reason phrase).
+    pub title: String,
+    /// HTTP status code.
+    pub status: u16,
+    /// What went wrong with this request, in plain words.
+    pub detail: String,
+    /// For validation errors: every fault, with the JSON pointer of the
+    /// request member at fault.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schema(value_type = Vec<IssueSchema>)]
+    pub errors: Vec<Issue>,
+}
+
+/// One validation fault.
+#[derive(ToSchema)]
+#[allow(dead_code)] // documents the shape of `Issue` for the OpenAPI schema
+pub struct IssueSchema {
+    /// JSON pointer (RFC 6901) of the member at fault; "" for the whole body.
+    pointer: String,
+    message: String,
+}
+
+impl ApiError {
+    pub fn status(&self) -> StatusCode {
+        match self {
+            ApiError::Validation(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::BadRequest(_) => StatusCode::BAD_REQUEST,
+            ApiError::NotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::MethodNotAllowed(_) => StatusCode::METHOD_NOT_ALLOWED,
+            ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    pub fn problem(&self) -> Problem {
+        let status = self.status();
+        let (detail, errors) = match self {
+            ApiError::Validation(issues) => {
+                let detail = match issues.as_slice() {
+                    [one] => one.to_string(),
+                    many => format!("{} problems in the request; see errors", many.len()),
+                };
+                (detail, issues.clone())
+            }
+            ApiError::Internal(_) => ("the server failed to handle this request; it has been logged".to_string(), vec![]),
+            other => (other.to_string(), vec![]),
+        };
+        Problem {
+            kind: "about:blank".to_string(),
+            title: status.canonical_reason().unwrap_or("Error").to_string(),
+            status: status.as_u16(),
+            detail,
+            errors,
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        if let ApiError::Internal(m) = &self {
+            tracing::error!(error = %m, "internal error");
+        }
+        let status = self.status();
+        let body = serde_json::to_vec(&self.problem()).unwrap_or_default();
+        let mut res = (status, body).into_response();
+        res.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if status == StatusCode::SERVICE_UNAVAILABLE {
+            res.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
+        }
+        res
+    }
+}
+
+impl From<PlanError> for ApiError {
+    fn from(e: PlanError) -> Self {
+        match e {
+            PlanError::Invalid(issues) => ApiError::Validation(issues),
+            PlanError::Internal(m) => ApiError::Internal(m),
+        }
+    }
+}
+
+impl From<sqlx::Error> for ApiError {
+    fn from(e: sqlx::Error) -> Self {
+        ApiError::Internal(format!("database: {e}"))
+    }
+}
