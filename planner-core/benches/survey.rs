@@ -19,7 +19,10 @@ const SPACING_M: f64 = 27.0;
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
 }
@@ -39,7 +42,10 @@ fn nfzs(n: usize) -> Vec<Polygon<f64>> {
             let ring: Vec<Coord<f64>> = (0..8)
                 .map(|k| {
                     let t = (k as f64 + rot) * std::f64::consts::TAU / 8.0;
-                    Coord { x: cx + radius * t.cos(), y: cy + radius * t.sin() }
+                    Coord {
+                        x: cx + radius * t.cos(),
+                        y: cy + radius * t.sin(),
+                    }
                 })
                 .collect();
             Polygon::new(ring.into(), vec![])
@@ -61,7 +67,9 @@ fn cover(cells: &[Polygon<f64>], free: &MultiPolygon<f64>) -> Vec<CellPlan> {
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("survey");
-    group.sample_size(10).measurement_time(Duration::from_secs(10));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(10));
     let roi = roi();
     for n in [1usize, 10, 100, 1000] {
         let nfz = nfzs(n);
@@ -70,12 +78,20 @@ fn bench(c: &mut Criterion) {
         let plans = cover(&cells, &free);
         let obstacles = ObstacleMap::new(&MultiPolygon(nfz.clone()), 2.0);
         let start = Coord { x: -50.0, y: -50.0 };
-        eprintln!("{n} NFZs: {} cells, {} lanes", cells.len(), plans.iter().map(|p| p.lanes.len()).sum::<usize>());
+        eprintln!(
+            "{n} NFZs: {} cells, {} lanes",
+            cells.len(),
+            plans.iter().map(|p| p.lanes.len()).sum::<usize>()
+        );
 
         group.bench_with_input(BenchmarkId::new("decompose", n), &n, |b, _| {
-            b.iter(|| decompose::decompose(black_box(&decompose::free_space(&roi, &nfz)), 0.0).unwrap())
+            b.iter(|| {
+                decompose::decompose(black_box(&decompose::free_space(&roi, &nfz)), 0.0).unwrap()
+            })
         });
-        group.bench_with_input(BenchmarkId::new("coverage", n), &n, |b, _| b.iter(|| cover(black_box(&cells), &free)));
+        group.bench_with_input(BenchmarkId::new("coverage", n), &n, |b, _| {
+            b.iter(|| cover(black_box(&cells), &free))
+        });
         group.bench_with_input(BenchmarkId::new("route", n), &n, |b, _| {
             b.iter(|| plan_tour(start, black_box(&plans), &cells, &free, &obstacles).unwrap())
         });

@@ -13,7 +13,9 @@ use crate::export::{
     self, AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem, geojson as gj,
 };
 use crate::flock::{ObstacleMap, plan_tour};
-use crate::geo::{GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area};
+use crate::geo::{
+    GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area,
+};
 
 /// Free space smaller than this (m²) is treated as nothing left to survey.
 const MIN_FREE_AREA_M2: f64 = 1.0;
@@ -42,7 +44,9 @@ impl utoipa::PartialSchema for SliceAngle {
                     .schema_type(Type::Number)
                     .minimum(Some(0.0))
                     .exclusive_maximum(Some(180.0))
-                    .description(Some("bearing of the slice lines, degrees clockwise from grid north")),
+                    .description(Some(
+                        "bearing of the slice lines, degrees clockwise from grid north",
+                    )),
             )
             .item(
                 ObjectBuilder::new()
@@ -170,8 +174,15 @@ pub const DEFAULT_ALTITUDE_M: f64 = 60.0;
 fn check_range(issues: &mut Vec<Issue>, pointer: &str, v: f64, lo: f64, hi: f64, lo_open: bool) {
     let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
     if !ok {
-        let range = if lo_open { format!("({lo}, {hi}]") } else { format!("[{lo}, {hi}]") };
-        issues.push(Issue::new(pointer, &format!("{v} is outside the allowed range {range}")));
+        let range = if lo_open {
+            format!("({lo}, {hi}]")
+        } else {
+            format!("[{lo}, {hi}]")
+        };
+        issues.push(Issue::new(
+            pointer,
+            &format!("{v} is outside the allowed range {range}"),
+        ));
     }
 }
 
@@ -184,7 +195,10 @@ impl SurveyParams {
             let ptr = if path == "." {
                 pointer.to_string()
             } else {
-                format!("{pointer}/{}", path.replace('.', "/").replace('[', "/").replace(']', ""))
+                format!(
+                    "{pointer}/{}",
+                    path.replace(['.', '['], "/").replace(']', "")
+                )
             };
             vec![Issue::new(&ptr, &e.into_inner().to_string())]
         })?;
@@ -202,36 +216,90 @@ impl SurveyParams {
         if let Some(g) = self.gsd_cm_px {
             check_range(&mut issues, &p("gsd_cm_px"), g, 0.05, 100.0, false);
             if self.altitude_m.is_some() {
-                issues.push(Issue::new(&p("gsd_cm_px"), "give altitude_m or gsd_cm_px, not both"));
-            }
-        }
-        check_range(&mut issues, &p("side_overlap"), self.side_overlap, 0.0, 0.95, false);
-        check_range(&mut issues, &p("front_overlap"), self.front_overlap, 0.0, 0.95, false);
-        if let Some(s) = self.line_spacing_m {
-            check_range(&mut issues, &p("line_spacing_m"), s, 0.5, 2000.0, false);
-        }
-        if let SliceAngle::Degrees(d) = self.slice_angle_deg {
-            if !(d.is_finite() && (0.0..180.0).contains(&d)) {
                 issues.push(Issue::new(
-                    &p("slice_angle_deg"),
-                    &format!("{d} is outside the allowed range [0, 180) (or use \"auto\")"),
+                    &p("gsd_cm_px"),
+                    "give altitude_m or gsd_cm_px, not both",
                 ));
             }
         }
-        check_range(&mut issues, &p("speed_m_s"), self.speed_m_s, 0.0, 50.0, true);
-        check_range(&mut issues, &p("turn_penalty_s"), self.turn_penalty_s, 0.0, 120.0, false);
-        check_range(&mut issues, &p("nfz_clearance_m"), self.nfz_clearance_m, 0.0, 100.0, false);
-        check_range(&mut issues, &p("fence_margin_m"), self.fence_margin_m, 0.0, 1000.0, false);
+        check_range(
+            &mut issues,
+            &p("side_overlap"),
+            self.side_overlap,
+            0.0,
+            0.95,
+            false,
+        );
+        check_range(
+            &mut issues,
+            &p("front_overlap"),
+            self.front_overlap,
+            0.0,
+            0.95,
+            false,
+        );
+        if let Some(s) = self.line_spacing_m {
+            check_range(&mut issues, &p("line_spacing_m"), s, 0.5, 2000.0, false);
+        }
+        if let SliceAngle::Degrees(d) = self.slice_angle_deg
+            && !(d.is_finite() && (0.0..180.0).contains(&d))
+        {
+            issues.push(Issue::new(
+                &p("slice_angle_deg"),
+                &format!("{d} is outside the allowed range [0, 180) (or use \"auto\")"),
+            ));
+        }
+        check_range(
+            &mut issues,
+            &p("speed_m_s"),
+            self.speed_m_s,
+            0.0,
+            50.0,
+            true,
+        );
+        check_range(
+            &mut issues,
+            &p("turn_penalty_s"),
+            self.turn_penalty_s,
+            0.0,
+            120.0,
+            false,
+        );
+        check_range(
+            &mut issues,
+            &p("nfz_clearance_m"),
+            self.nfz_clearance_m,
+            0.0,
+            100.0,
+            false,
+        );
+        check_range(
+            &mut issues,
+            &p("fence_margin_m"),
+            self.fence_margin_m,
+            0.0,
+            1000.0,
+            false,
+        );
         match (&self.camera, &self.camera_preset) {
-            (Some(_), Some(_)) => issues.push(Issue::new(&p("camera_preset"), "give camera or camera_preset, not both")),
+            (Some(_), Some(_)) => issues.push(Issue::new(
+                &p("camera_preset"),
+                "give camera or camera_preset, not both",
+            )),
             (Some(c), None) => {
                 if let Err(errs) = c.validate() {
-                    issues.extend(errs.into_iter().map(|(f, m)| Issue::new(&p(&format!("camera/{f}")), &m)));
+                    issues.extend(
+                        errs.into_iter()
+                            .map(|(f, m)| Issue::new(&p(&format!("camera/{f}")), &m)),
+                    );
                 }
             }
             (None, Some(name)) if Camera::preset(name).is_none() => issues.push(Issue::new(
                 &p("camera_preset"),
-                &format!("unknown camera preset {name:?}; known presets: {}", coverage::PRESETS.join(", ")),
+                &format!(
+                    "unknown camera preset {name:?}; known presets: {}",
+                    coverage::PRESETS.join(", ")
+                ),
             )),
             _ => {}
         }
@@ -247,8 +315,15 @@ impl SurveyParams {
         }
         for (i, u) in self.uavs.iter().enumerate() {
             if u.id.trim().is_empty() || u.id.len() > 64 {
-                issues.push(Issue::new(&p(&format!("uavs/{i}/id")), "a UAV id must have 1 to 64 characters"));
-            } else if !u.id.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+                issues.push(Issue::new(
+                    &p(&format!("uavs/{i}/id")),
+                    "a UAV id must have 1 to 64 characters",
+                ));
+            } else if !u
+                .id
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+            {
                 issues.push(Issue::new(
                     &p(&format!("uavs/{i}/id")),
                     "a UAV id may only contain letters, digits, '-' and '_' (it names files)",
@@ -256,10 +331,16 @@ impl SurveyParams {
             }
             let [lon, lat] = u.start;
             if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
-                issues.push(Issue::new(&p(&format!("uavs/{i}/start/0")), &format!("longitude {lon} is outside [-180, 180]")));
+                issues.push(Issue::new(
+                    &p(&format!("uavs/{i}/start/0")),
+                    &format!("longitude {lon} is outside [-180, 180]"),
+                ));
             }
             if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
-                issues.push(Issue::new(&p(&format!("uavs/{i}/start/1")), &format!("latitude {lat} is outside [-90, 90]")));
+                issues.push(Issue::new(
+                    &p(&format!("uavs/{i}/start/1")),
+                    &format!("latitude {lat} is outside [-90, 90]"),
+                ));
             }
         }
         if self.altitude_frame == AltitudeFrame::Amsl {
@@ -269,7 +350,11 @@ impl SurveyParams {
                  not got: use \"relative\" or \"terrain\"",
             ));
         }
-        if issues.is_empty() { Ok(()) } else { Err(issues) }
+        if issues.is_empty() {
+            Ok(())
+        } else {
+            Err(issues)
+        }
     }
 
     pub fn camera(&self) -> Camera {
@@ -303,7 +388,9 @@ impl From<GeoError> for PlanError {
     fn from(e: GeoError) -> Self {
         match e {
             GeoError::Invalid(issues) => PlanError::Invalid(issues),
-            GeoError::OutsideUtm { .. } => PlanError::Invalid(vec![Issue::new(ROI_POINTER, &e.to_string())]),
+            GeoError::OutsideUtm { .. } => {
+                PlanError::Invalid(vec![Issue::new(ROI_POINTER, &e.to_string())])
+            }
             GeoError::Projection(m) => PlanError::Internal(m),
         }
     }
@@ -329,7 +416,10 @@ impl SurveyRequest {
     /// with the JSON pointer of the member at fault.
     pub fn from_document(doc: &Value) -> Result<Self, PlanError> {
         let Some(obj) = doc.as_object() else {
-            return Err(PlanError::Invalid(vec![Issue::new("", "the request must be a JSON object")]));
+            return Err(PlanError::Invalid(vec![Issue::new(
+                "",
+                "the request must be a JSON object",
+            )]));
         };
         let mut issues = Vec::new();
         let roi = match obj.get("roi") {
@@ -338,7 +428,10 @@ impl SurveyRequest {
                 Vec::new()
             }),
             None => {
-                issues.push(Issue::new(ROI_POINTER, "missing: the region of interest (GeoJSON) is required"));
+                issues.push(Issue::new(
+                    ROI_POINTER,
+                    "missing: the region of interest (GeoJSON) is required",
+                ));
                 Vec::new()
             }
         };
@@ -353,7 +446,10 @@ impl SurveyRequest {
                     }
                 }
             }
-            Some(_) => issues.push(Issue::new(NO_FLY_POINTER, "must be an array of GeoJSON areas")),
+            Some(_) => issues.push(Issue::new(
+                NO_FLY_POINTER,
+                "must be an array of GeoJSON areas",
+            )),
         }
         let mut rest = obj.clone();
         rest.remove("roi");
@@ -363,7 +459,11 @@ impl SurveyRequest {
             SurveyParams::default()
         });
         if issues.is_empty() {
-            Ok(SurveyRequest { roi, no_fly, params })
+            Ok(SurveyRequest {
+                roi,
+                no_fly,
+                params,
+            })
         } else {
             Err(PlanError::Invalid(issues))
         }
@@ -472,12 +572,21 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             &format!("this GSD needs an altitude of {altitude:.1} m, outside [1, 1000] m"),
         )]));
     }
-    let geometry =
-        coverage::survey_geometry(&camera, altitude, params.side_overlap, params.front_overlap, params.line_spacing_m);
+    let geometry = coverage::survey_geometry(
+        &camera,
+        altitude,
+        params.side_overlap,
+        params.front_overlap,
+        params.line_spacing_m,
+    );
 
     let lane_km = free_area / geometry.line_spacing_m / 1000.0;
     if lane_km > limits.max_lane_km {
-        let ptr = if params.line_spacing_m.is_some() { "/line_spacing_m" } else { "/altitude_m" };
+        let ptr = if params.line_spacing_m.is_some() {
+            "/line_spacing_m"
+        } else {
+            "/altitude_m"
+        };
         return Err(PlanError::Invalid(vec![Issue::new(
             ptr,
             &format!(
@@ -487,14 +596,25 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             ),
         )]));
     }
-    let (slice_angle, cells, plans) = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
+    let Decomposition {
+        slice_angle_deg: slice_angle,
+        cells,
+        plans,
+        ..
+    } = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
 
     // One UAV (flock assignment comes with its own stage).
     let uav = params.uavs.first().cloned().unwrap_or_else(|| {
         let c = req.roi[0].polygon.exterior().0[0];
-        UavSpec { id: "uav1".to_string(), start: [c.x, c.y] }
+        UavSpec {
+            id: "uav1".to_string(),
+            start: [c.x, c.y],
+        }
     });
-    let start_utm = proj.to_utm(Coord { x: uav.start[0], y: uav.start[1] })?;
+    let start_utm = proj.to_utm(Coord {
+        x: uav.start[0],
+        y: uav.start[1],
+    })?;
     let nfz_union = nfz_union(&area.no_fly);
     let obstacles = ObstacleMap::new(&nfz_union, params.nfz_clearance_m);
     if obstacles.contains_point(start_utm) {
@@ -503,14 +623,24 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             "the UAV's start position is inside a no-fly zone",
         )]));
     }
-    let tour = plan_tour(start_utm, &plans, &cells, &free, &obstacles).map_err(|e| PlanError::Internal(e.to_string()))?;
+    let tour = plan_tour(start_utm, &plans, &cells, &free, &obstacles)
+        .map_err(|e| PlanError::Internal(e.to_string()))?;
 
     let mut warnings = Vec::new();
-    let home = GeoPoint { lon: uav.start[0], lat: uav.start[1], alt: 0.0 };
+    let home = GeoPoint {
+        lon: uav.start[0],
+        lat: uav.start[1],
+        alt: 0.0,
+    };
     let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
     let path = tour.path();
     let path_len: f64 = path.windows(2).map(|w| dist(w[0], w[1])).sum();
-    let survey_len: f64 = tour.visits.iter().flat_map(|v| &v.lanes).map(|l| dist(l.start, l.end)).sum();
+    let survey_len: f64 = tour
+        .visits
+        .iter()
+        .flat_map(|v| &v.lanes)
+        .map(|l| dist(l.start, l.end))
+        .sum();
     let turns = count_turns(&path);
     let photos: usize = tour
         .visits
@@ -619,6 +749,15 @@ fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
     acc
 }
 
+/// Cells at one slice angle and the lawnmower plan of each.
+struct Decomposition {
+    slice_angle_deg: f64,
+    cells: Vec<Polygon<f64>>,
+    plans: Vec<CellPlan>,
+    turns: usize,
+    length_m: f64,
+}
+
 /// Decompose at the requested angle, or at every candidate angle for
 /// `auto`, and plan the lanes of every cell. `auto` keeps the angle with
 /// the fewest turns in total, then the shortest lanes-and-links length.
@@ -626,37 +765,48 @@ fn decompose_and_cover(
     free: &MultiPolygon<f64>,
     angle: SliceAngle,
     spacing: f64,
-) -> Result<(f64, Vec<Polygon<f64>>, Vec<CellPlan>), PlanError> {
+) -> Result<Decomposition, PlanError> {
     let candidates = match angle {
         SliceAngle::Degrees(d) => vec![d],
         SliceAngle::Auto => auto_candidates(free),
     };
-    let mut best: Option<(usize, f64, f64, Vec<Polygon<f64>>, Vec<CellPlan>)> = None;
+    let mut best: Option<Decomposition> = None;
     for a in candidates {
-        let cells = decompose::decompose(free, a).map_err(|e| PlanError::Internal(e.to_string()))?;
+        let cells = decompose::decompose(free, a).map_err(|e| match e {
+            decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
+                NO_FLY_POINTER,
+                "the no-fly zones cover the whole region of interest: nothing is left to survey",
+            )]),
+            other => PlanError::Internal(other.to_string()),
+        })?;
         let plans: Vec<CellPlan> = cells
             .iter()
             .enumerate()
             .filter_map(|(i, c)| coverage::plan_cell(i, c, free, spacing, a))
             .collect();
         let turns: usize = plans.iter().map(CellPlan::turns).sum();
-        let len: f64 = plans.iter().map(CellPlan::length_m).sum();
-        let better = match &best {
-            None => true,
-            Some((t, l, ..)) => turns < *t || (turns == *t && len < *l - 1e-6),
-        };
+        let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();
+        let better = best
+            .as_ref()
+            .is_none_or(|b| turns < b.turns || (turns == b.turns && length_m < b.length_m - 1e-6));
         if better {
-            best = Some((turns, len, a, cells, plans));
+            best = Some(Decomposition {
+                slice_angle_deg: a,
+                cells,
+                plans,
+                turns,
+                length_m,
+            });
         }
     }
-    let (_, _, a, cells, plans) = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
-    if plans.is_empty() {
+    let best = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
+    if best.plans.is_empty() {
         return Err(PlanError::Invalid(vec![Issue::new(
             ROI_POINTER,
             "the free area is too small or too thin for a single survey lane",
         )]));
     }
-    Ok((a, cells, plans))
+    Ok(best)
 }
 
 /// Candidate slice angles for `auto`: every 15°, and the bearings of the
@@ -670,7 +820,9 @@ fn auto_candidates(free: &MultiPolygon<f64>) -> Vec<f64> {
         .map(|l| (Euclidean.length(&l), bearing_mod_180(l.start, l.end)))
         .collect();
     edges.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut out: Vec<f64> = (0..(180.0 / AUTO_STEP_DEG) as usize).map(|i| i as f64 * AUTO_STEP_DEG).collect();
+    let mut out: Vec<f64> = (0..(180.0 / AUTO_STEP_DEG) as usize)
+        .map(|i| i as f64 * AUTO_STEP_DEG)
+        .collect();
     for (_, b) in edges.into_iter().take(AUTO_EDGE_CANDIDATES) {
         for c in [b, (b + 90.0) % 180.0] {
             if out.iter().all(|o| angle_gap(*o, c) > 0.5) {
@@ -702,7 +854,9 @@ fn count_turns(path: &[Coord<f64>]) -> usize {
         .windows(2)
         .filter(|w| dist(w[0], w[1]) > 1e-6)
         .map(|w| (w[1].y - w[0].y).atan2(w[1].x - w[0].x));
-    let Some(mut prev) = headings.next() else { return 0 };
+    let Some(mut prev) = headings.next() else {
+        return 0;
+    };
     let mut turns = 0;
     for h in headings {
         let mut d = (h - prev).abs();
@@ -729,26 +883,39 @@ fn build_mission(
 ) -> Result<Mission, GeoError> {
     let wp = |c: Coord<f64>| -> Result<MissionItem, GeoError> {
         let ll = proj.to_wgs84(c)?;
-        Ok(MissionItem::Waypoint(GeoPoint { lon: ll.x, lat: ll.y, alt: altitude }))
+        Ok(MissionItem::Waypoint(GeoPoint {
+            lon: ll.x,
+            lat: ll.y,
+            alt: altitude,
+        }))
     };
     let mut items = vec![
         MissionItem::Takeoff { alt: altitude },
-        MissionItem::ChangeSpeed { speed_m_s: params.speed_m_s },
+        MissionItem::ChangeSpeed {
+            speed_m_s: params.speed_m_s,
+        },
     ];
-    let transit = |items: &mut Vec<MissionItem>, t: &[Coord<f64>], keep_last: bool| -> Result<(), GeoError> {
-        // The first point is where we already are; the last is the next lane
-        // start, written by the lane itself, except on the way home.
-        let end = if keep_last { t.len() } else { t.len().saturating_sub(1) };
-        for &c in t.iter().take(end).skip(1) {
-            items.push(wp(c)?);
-        }
-        Ok(())
-    };
+    let transit =
+        |items: &mut Vec<MissionItem>, t: &[Coord<f64>], keep_last: bool| -> Result<(), GeoError> {
+            // The first point is where we already are; the last is the next lane
+            // start, written by the lane itself, except on the way home.
+            let end = if keep_last {
+                t.len()
+            } else {
+                t.len().saturating_sub(1)
+            };
+            for &c in t.iter().take(end).skip(1) {
+                items.push(wp(c)?);
+            }
+            Ok(())
+        };
     for (i, visit) in tour.visits.iter().enumerate() {
         transit(&mut items, &tour.transits[i], false)?;
         for (k, lane) in visit.lanes.iter().enumerate() {
             items.push(wp(lane.start)?);
-            items.push(MissionItem::CameraTriggerDistance { distance_m: geometry.trigger_distance_m });
+            items.push(MissionItem::CameraTriggerDistance {
+                distance_m: geometry.trigger_distance_m,
+            });
             items.push(wp(lane.end)?);
             items.push(MissionItem::CameraTriggerDistance { distance_m: 0.0 });
             if let Some(link) = visit.links.get(k) {
@@ -762,14 +929,28 @@ fn build_mission(
         transit(&mut items, last, true)?;
     }
     items.push(MissionItem::ReturnToLaunch);
-    Ok(Mission { home, frame: params.altitude_frame, cruise_speed_m_s: params.speed_m_s, items })
+    Ok(Mission {
+        home,
+        frame: params.altitude_frame,
+        cruise_speed_m_s: params.speed_m_s,
+        items,
+    })
 }
 
 /// The inclusion fence (convex hull of the ROI and the flown path, grown by
 /// `margin`) followed by every no-fly zone as an exclusion fence.
-fn fences(area: &SurveyArea, path: &[Coord<f64>], margin: f64) -> Result<Vec<FencePolygon>, GeoError> {
+fn fences(
+    area: &SurveyArea,
+    path: &[Coord<f64>],
+    margin: f64,
+) -> Result<Vec<FencePolygon>, GeoError> {
     let proj = &area.projection;
-    let mut pts: Vec<Point<f64>> = area.roi.0.iter().flat_map(|p| p.exterior().0.iter().map(|&c| Point(c))).collect();
+    let mut pts: Vec<Point<f64>> = area
+        .roi
+        .0
+        .iter()
+        .flat_map(|p| p.exterior().0.iter().map(|&c| Point(c)))
+        .collect();
     pts.extend(path.iter().map(|&c| Point(c)));
     // Grow the hull by `margin`: a 16-gon around every hull vertex, hulled
     // again, stays within 2 % of a true buffer.
@@ -782,16 +963,26 @@ fn fences(area: &SurveyArea, path: &[Coord<f64>], margin: f64) -> Result<Vec<Fen
         }
     }
     let hull = MultiPoint(grown).convex_hull();
-    let mut out = vec![FencePolygon { inclusion: true, vertices: ring_lonlat(&proj.polygon_to_wgs84(&hull)?) }];
+    let mut out = vec![FencePolygon {
+        inclusion: true,
+        vertices: ring_lonlat(&proj.polygon_to_wgs84(&hull)?),
+    }];
     for nfz in &area.no_fly_wgs84 {
-        out.push(FencePolygon { inclusion: false, vertices: ring_lonlat(nfz) });
+        out.push(FencePolygon {
+            inclusion: false,
+            vertices: ring_lonlat(nfz),
+        });
     }
     Ok(out)
 }
 
 fn ring_lonlat(p: &Polygon<f64>) -> Vec<[f64; 2]> {
     let ring = &p.exterior().0;
-    let n = if ring.len() > 1 && ring.first() == ring.last() { ring.len() - 1 } else { ring.len() };
+    let n = if ring.len() > 1 && ring.first() == ring.last() {
+        ring.len() - 1
+    } else {
+        ring.len()
+    };
     ring[..n].iter().map(|c| [c.x, c.y]).collect()
 }
 
@@ -835,7 +1026,11 @@ impl SurveyPlan {
             props.insert("lanes".into(), json!(c.lanes));
             (c.polygon.clone(), props)
         }));
-        out.push(PlanFile { name: "cells.geojson".into(), content_type: "application/geo+json", content: pretty(&cells) });
+        out.push(PlanFile {
+            name: "cells.geojson".into(),
+            content_type: "application/geo+json",
+            content: pretty(&cells),
+        });
         out
     }
 }
@@ -849,6 +1044,7 @@ fn pretty(v: &Value) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use geo_types::polygon;
 
     #[test]
     fn params_defaults_and_ranges() {
@@ -859,15 +1055,20 @@ mod tests {
         assert_eq!(p.slice_angle_deg, SliceAngle::Auto);
         assert_eq!(p.altitude(&p.camera()), DEFAULT_ALTITUDE_M);
 
-        let e = SurveyParams::from_json(&json!({"side_overlap": 1.0, "altitude_m": -5}), "").unwrap_err();
+        let e = SurveyParams::from_json(&json!({"side_overlap": 1.0, "altitude_m": -5}), "")
+            .unwrap_err();
         let ptrs: Vec<&str> = e.iter().map(|i| i.pointer.as_str()).collect();
-        assert!(ptrs.contains(&"/side_overlap") && ptrs.contains(&"/altitude_m"), "{e:?}");
+        assert!(
+            ptrs.contains(&"/side_overlap") && ptrs.contains(&"/altitude_m"),
+            "{e:?}"
+        );
 
         let e = SurveyParams::from_json(&json!({"slice_angle_deg": "sideways"}), "").unwrap_err();
         assert_eq!(e[0].pointer, "/slice_angle_deg");
         let e = SurveyParams::from_json(&json!({"altitude": 50}), "").unwrap_err();
         assert!(e[0].message.contains("unknown field"), "{e:?}");
-        let e = SurveyParams::from_json(&json!({"camera": {"sensor_width_mm": "x"}}), "").unwrap_err();
+        let e =
+            SurveyParams::from_json(&json!({"camera": {"sensor_width_mm": "x"}}), "").unwrap_err();
         assert!(e[0].pointer.starts_with("/camera"), "{e:?}");
         let p = SurveyParams::from_json(&json!({"slice_angle_deg": 30}), "").unwrap();
         assert_eq!(p.slice_angle_deg, SliceAngle::Degrees(30.0));
@@ -877,14 +1078,21 @@ mod tests {
     fn turns_are_heading_changes() {
         let c = |x: f64, y: f64| Coord { x, y };
         // A lawnmower with two lane changes: four 90° turns.
-        let path = [c(0., 0.), c(10., 0.), c(10., 1.), c(0., 1.), c(0., 2.), c(10., 2.)];
+        let path = [
+            c(0., 0.),
+            c(10., 0.),
+            c(10., 1.),
+            c(0., 1.),
+            c(0., 2.),
+            c(10., 2.),
+        ];
         assert_eq!(count_turns(&path), 4);
         assert_eq!(count_turns(&[c(0., 0.), c(1., 0.), c(2., 0.01)]), 0);
     }
 
     #[test]
     fn auto_candidates_include_edge_bearings() {
-        let p = geo_types::polygon![(x: 0.0, y: 0.0), (x: 100.0, y: 100.0), (x: 90.0, y: 110.0), (x: -10.0, y: 10.0)];
+        let p = polygon![(x: 0.0, y: 0.0), (x: 100.0, y: 100.0), (x: 90.0, y: 110.0), (x: -10.0, y: 10.0)];
         let c = auto_candidates(&MultiPolygon(vec![p]));
         assert!(c.iter().any(|a| angle_gap(*a, 45.0) < 1e-9));
         assert!(c.iter().any(|a| angle_gap(*a, 135.0) < 1e-9));

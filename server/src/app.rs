@@ -5,16 +5,18 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Router;
+use axum::extract::DefaultBodyLimit;
 use axum::extract::Request;
 use axum::http::{HeaderName, HeaderValue, Method, StatusCode};
+use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use planner_core::geo::Limits;
 use tokio::sync::Semaphore;
+use tower_http::LatencyUnit;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::compression::CompressionLayer;
 use tower_http::cors::{AllowOrigin, Any, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
-use tower_http::LatencyUnit;
 use tower_http::trace::{DefaultOnResponse, TraceLayer};
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -44,10 +46,13 @@ impl AppState {
         &self,
         job: impl FnOnce() -> T + Send + 'static,
     ) -> Result<T, ApiError> {
-        let permit = tokio::time::timeout(PLANNER_QUEUE_TIMEOUT, self.planner.clone().acquire_owned())
-            .await
-            .map_err(|_| ApiError::Unavailable("the planner is busy: retry in a moment".into()))?
-            .map_err(|_| ApiError::Unavailable("the service is shutting down".into()))?;
+        let permit =
+            tokio::time::timeout(PLANNER_QUEUE_TIMEOUT, self.planner.clone().acquire_owned())
+                .await
+                .map_err(|_| {
+                    ApiError::Unavailable("the planner is busy: retry in a moment".into())
+                })?
+                .map_err(|_| ApiError::Unavailable("the service is shutting down".into()))?;
         tokio::task::spawn_blocking(move || {
             let _permit = permit;
             job()
@@ -74,7 +79,7 @@ impl AppState {
 struct ApiDoc;
 
 /// The OpenAPI document and the router it describes.
-pub fn router(state: AppState, cors_origins: &[String]) -> Router {
+pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -> Router {
     let (api, openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
         .routes(routes!(health::healthz))
         .routes(routes!(surveys::create_survey, surveys::list_surveys))
@@ -98,6 +103,10 @@ pub fn router(state: AppState, cors_origins: &[String]) -> Router {
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(state)
+        .layer(DefaultBodyLimit::max(max_body_bytes))
+        .layer(middleware::from_fn(move |req: Request, next: Next| {
+            reject_declared_oversize(req, next, max_body_bytes)
+        }))
         .layer(CompressionLayer::new())
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(
@@ -126,21 +135,53 @@ fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
     let layer = CorsLayer::new()
         .allow_methods([Method::GET, Method::POST, Method::DELETE])
         .allow_headers(Any)
-        .expose_headers([axum::http::header::LOCATION, axum::http::header::CONTENT_DISPOSITION]);
+        .expose_headers([
+            axum::http::header::LOCATION,
+            axum::http::header::CONTENT_DISPOSITION,
+        ]);
     Some(if origins.iter().any(|o| o == "*") {
         layer.allow_origin(Any)
     } else {
-        let list: Vec<HeaderValue> = origins.iter().filter_map(|o| HeaderValue::from_str(o).ok()).collect();
+        let list: Vec<HeaderValue> = origins
+            .iter()
+            .filter_map(|o| HeaderValue::from_str(o).ok())
+            .collect();
         layer.allow_origin(AllowOrigin::list(list))
     })
 }
 
+/// Refuse a body whose declared Content-Length is over the limit before
+/// reading any of it (DefaultBodyLimit alone only notices once that much
+/// has arrived).
+async fn reject_declared_oversize(req: Request, next: Next, limit: usize) -> Response {
+    let declared = req
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    match declared {
+        Some(n) if n > limit as u64 => ApiError::PayloadTooLarge(format!(
+            "the request body is too large: {n} bytes declared, the limit is {limit} bytes"
+        ))
+        .into_response(),
+        _ => next.run(req).await,
+    }
+}
+
 async fn not_found(req: Request) -> ApiError {
-    ApiError::NotFound(format!("there is no resource at {} {}", req.method(), req.uri().path()))
+    ApiError::NotFound(format!(
+        "there is no resource at {} {}",
+        req.method(),
+        req.uri().path()
+    ))
 }
 
 async fn method_not_allowed(req: Request) -> ApiError {
-    ApiError::MethodNotAllowed(format!("{} is not allowed on {}", req.method(), req.uri().path()))
+    ApiError::MethodNotAllowed(format!(
+        "{} is not allowed on {}",
+        req.method(),
+        req.uri().path()
+    ))
 }
 
 fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {

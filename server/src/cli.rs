@@ -13,7 +13,11 @@ use serde_json::{Value, json};
 use crate::config::ServeConfig;
 
 #[derive(Parser)]
-#[command(name = "terraplan", version, about = "Mission planning for UAV survey flocks and ground robots")]
+#[command(
+    name = "terraplan",
+    version,
+    about = "Mission planning for UAV survey flocks and ground robots"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -54,10 +58,16 @@ struct Failure {
 
 impl Failure {
     fn input(message: impl Into<String>) -> Self {
-        Failure { status: 2, message: message.into() }
+        Failure {
+            status: 2,
+            message: message.into(),
+        }
     }
     fn other(message: impl Into<String>) -> Self {
-        Failure { status: 1, message: message.into() }
+        Failure {
+            status: 1,
+            message: message.into(),
+        }
     }
 }
 
@@ -88,14 +98,19 @@ fn serve(config: ServeConfig) -> Result<(), Failure> {
         .enable_all()
         .build()
         .map_err(|e| Failure::other(format!("cannot start the async runtime: {e}")))?;
-    runtime.block_on(crate::serve::serve(config)).map_err(Failure::other)
+    runtime
+        .block_on(crate::serve::serve(config))
+        .map_err(Failure::other)
 }
 
 fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| Failure::input(format!("cannot read {what} file {}: {e}", path.display())))?;
     serde_json::from_str(&text).map_err(|e| {
-        Failure::input(format!("{what} file {} is not valid JSON: {e}", path.display()))
+        Failure::input(format!(
+            "{what} file {} is not valid JSON: {e}",
+            path.display()
+        ))
     })
 }
 
@@ -117,10 +132,17 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         }
     }
     obj.insert("roi".into(), read_json(&args.roi, "ROI")?);
-    let zones = args.no_fly.iter().map(|p| read_json(p, "no-fly")).collect::<Result<Vec<_>, _>>()?;
+    let zones = args
+        .no_fly
+        .iter()
+        .map(|p| read_json(p, "no-fly"))
+        .collect::<Result<Vec<_>, _>>()?;
     obj.insert("no_fly_zones".into(), Value::Array(zones));
 
-    let limits = Limits { max_roi_area_km2: args.max_roi_area_km2, ..Limits::default() };
+    let limits = Limits {
+        max_roi_area_km2: args.max_roi_area_km2,
+        ..Limits::default()
+    };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
     let req = SurveyRequest::from_document(&doc).map_err(|e| plan_failure(e, &describe))?;
     let plan = plan_survey(&req, &limits).map_err(|e| plan_failure(e, &describe))?;
@@ -129,10 +151,16 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
     let files = plan.files();
     let mut doc = serde_json::to_value(&plan).map_err(|e| Failure::other(e.to_string()))?;
-    doc["files"] = json!(files.iter().map(|f| json!({"name": f.name, "content_type": f.content_type})).collect::<Vec<_>>());
+    doc["files"] = json!(
+        files
+            .iter()
+            .map(|f| json!({"name": f.name, "content_type": f.content_type}))
+            .collect::<Vec<_>>()
+    );
     let write = |name: &str, content: &str| {
         let path = args.out.join(name);
-        std::fs::write(&path, content).map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+        std::fs::write(&path, content)
+            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
     };
     for f in &files {
         write(&f.name, &f.content)?;
@@ -175,15 +203,25 @@ fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
             let rest = rest.trim_start_matches('/');
             let (idx, tail) = rest.split_once('/').unwrap_or((rest, ""));
             if let Some(p) = idx.parse::<usize>().ok().and_then(|i| args.no_fly.get(i)) {
-                let tail = if tail.is_empty() { String::new() } else { format!("/{tail}") };
+                let tail = if tail.is_empty() {
+                    String::new()
+                } else {
+                    format!("/{tail}")
+                };
                 return format!("{}#{tail}", p.display());
             }
             return "no-fly zones".to_string();
         }
-        let file = args.params.as_ref().map_or("params".to_string(), |p| p.display().to_string());
+        let file = args
+            .params
+            .as_ref()
+            .map_or("params".to_string(), |p| p.display().to_string());
         format!("{file}#{ptr}")
     };
-    let lines: Vec<String> = issues.iter().map(|i| format!("{}: {}", locate(&i.pointer), i.message)).collect();
+    let lines: Vec<String> = issues
+        .iter()
+        .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
+        .collect();
     if lines.len() == 1 {
         format!("invalid input: {}", lines[0])
     } else {

@@ -39,7 +39,11 @@ pub struct ServeConfig {
     #[arg(long, env = "TERRAPLAN_PLANNER_THREADS", default_value_t = default_threads())]
     pub planner_threads: usize,
     /// Allowed CORS origin (repeatable; `*` allows any). None: no CORS headers.
-    #[arg(long = "cors-origin", env = "TERRAPLAN_CORS_ORIGINS", value_delimiter = ',')]
+    #[arg(
+        long = "cors-origin",
+        env = "TERRAPLAN_CORS_ORIGINS",
+        value_delimiter = ','
+    )]
     pub cors_origins: Vec<String>,
     /// Log format.
     #[arg(long, env = "TERRAPLAN_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]

@@ -7,7 +7,9 @@ use std::str::FromStr;
 use std::time::Duration;
 
 use sqlx::postgres::{PgPool, PgPoolOptions};
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
 
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
 
@@ -51,17 +53,22 @@ impl Db {
     /// `data_dir`) and run the migrations.
     pub async fn connect(database_url: Option<&str>, data_dir: &Path) -> Result<Db, sqlx::Error> {
         let db = match database_url {
-            Some(url) if url.starts_with("postgres://") || url.starts_with("postgresql://") => Db::Postgres(
-                PgPoolOptions::new()
-                    .max_connections(16)
-                    .acquire_timeout(Duration::from_secs(10))
-                    .connect(url)
-                    .await?,
-            ),
-            Some(url) if url.starts_with("sqlite:") => Db::Sqlite(sqlite_pool(SqliteConnectOptions::from_str(url)?).await?),
+            Some(url) if url.starts_with("postgres://") || url.starts_with("postgresql://") => {
+                Db::Postgres(
+                    PgPoolOptions::new()
+                        .max_connections(16)
+                        .acquire_timeout(Duration::from_secs(10))
+                        .connect(url)
+                        .await?,
+                )
+            }
+            Some(url) if url.starts_with("sqlite:") => {
+                Db::Sqlite(sqlite_pool(SqliteConnectOptions::from_str(url)?).await?)
+            }
             Some(url) => {
                 return Err(sqlx::Error::Configuration(
-                    format!("DATABASE_URL must start with postgres:// or sqlite:, got {url:?}").into(),
+                    format!("DATABASE_URL must start with postgres:// or sqlite:, got {url:?}")
+                        .into(),
                 ));
             }
             None => {
@@ -85,7 +92,8 @@ impl Db {
     }
 
     pub async fn insert_survey(&self, row: &SurveyRow) -> Result<(), sqlx::Error> {
-        const SQL: &str = "INSERT INTO surveys (id, name, created_at, request, plan) VALUES ($1, $2, $3, $4, $5)";
+        const SQL: &str =
+            "INSERT INTO surveys (id, name, created_at, request, plan) VALUES ($1, $2, $3, $4, $5)";
         on_pool!(self, pool => sqlx::query(SQL)
             .bind(&row.id)
             .bind(&row.name)
@@ -103,9 +111,12 @@ impl Db {
     }
 
     /// Newest first.
-    pub async fn list_surveys(&self, limit: i64, offset: i64) -> Result<(Vec<SurveySummaryRow>, i64), sqlx::Error> {
-        const SQL: &str =
-            "SELECT id, name, created_at, plan FROM surveys ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
+    pub async fn list_surveys(
+        &self,
+        limit: i64,
+        offset: i64,
+    ) -> Result<(Vec<SurveySummaryRow>, i64), sqlx::Error> {
+        const SQL: &str = "SELECT id, name, created_at, plan FROM surveys ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
         const COUNT: &str = "SELECT COUNT(*) FROM surveys";
         on_pool!(self, pool => {
             let rows = sqlx::query_as::<_, SurveySummaryRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
@@ -132,5 +143,8 @@ async fn sqlite_pool(opts: SqliteConnectOptions) -> Result<SqlitePool, sqlx::Err
         .synchronous(SqliteSynchronous::Normal)
         .busy_timeout(Duration::from_secs(10))
         .foreign_keys(true);
-    SqlitePoolOptions::new().max_connections(8).connect_with(opts).await
+    SqlitePoolOptions::new()
+        .max_connections(8)
+        .connect_with(opts)
+        .await
 }

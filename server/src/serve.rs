@@ -3,7 +3,6 @@
 use std::io::IsTerminal;
 use std::sync::Arc;
 
-use axum::extract::DefaultBodyLimit;
 use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 use tracing_subscriber::EnvFilter;
@@ -13,7 +12,8 @@ use crate::config::{LogFormat, ServeConfig};
 use crate::db::Db;
 
 pub fn init_tracing(format: LogFormat) {
-    let filter = EnvFilter::try_from_env("TERRAPLAN_LOG").unwrap_or_else(|_| EnvFilter::new("info,sqlx=warn"));
+    let filter = EnvFilter::try_from_env("TERRAPLAN_LOG")
+        .unwrap_or_else(|_| EnvFilter::new("info,sqlx=warn"));
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
@@ -29,8 +29,12 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     if config.planner_threads == 0 {
         return Err("--planner-threads must be at least 1".into());
     }
-    std::fs::create_dir_all(&config.data_dir)
-        .map_err(|e| format!("cannot create data directory {}: {e}", config.data_dir.display()))?;
+    std::fs::create_dir_all(&config.data_dir).map_err(|e| {
+        format!(
+            "cannot create data directory {}: {e}",
+            config.data_dir.display()
+        )
+    })?;
     let db = Db::connect(config.database_url.as_deref(), &config.data_dir)
         .await
         .map_err(|e| format!("cannot open the database: {e}"))?;
@@ -41,7 +45,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         limits: config.limits(),
         planner: Arc::new(Semaphore::new(config.planner_threads)),
     };
-    let app = router(state, &config.cors_origins).layer(DefaultBodyLimit::max(config.max_body_bytes));
+    let app = router(state, &config.cors_origins, config.max_body_bytes);
     let listener = TcpListener::bind((config.host.as_str(), config.port))
         .await
         .map_err(|e| format!("cannot listen on {}:{}: {e}", config.host, config.port))?;

@@ -6,7 +6,10 @@ use std::process::{Command, Output};
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace root")
+        .to_path_buf()
 }
 
 /// The `terraplan` binary built by `cargo build --workspace --bins` (the
@@ -15,7 +18,8 @@ pub fn terraplan_bin() -> PathBuf {
     if let Ok(p) = std::env::var("TERRAPLAN_BIN") {
         return PathBuf::from(p);
     }
-    let target = std::env::var("CARGO_TARGET_DIR").map_or_else(|_| workspace().join("target"), PathBuf::from);
+    let target = std::env::var("CARGO_TARGET_DIR")
+        .map_or_else(|_| workspace().join("target"), PathBuf::from);
     let bin = target.join("debug").join("terraplan");
     assert!(
         bin.exists(),
@@ -37,7 +41,8 @@ pub fn shared_data(rel: &str) -> PathBuf {
 
 /// Python of the validators' venv (made by `scripts/setup.sh --with-validators`).
 pub fn venv_python() -> PathBuf {
-    let venv = std::env::var("TERRAPLAN_VENV").map_or_else(|_| workspace().join(".venv"), PathBuf::from);
+    let venv =
+        std::env::var("TERRAPLAN_VENV").map_or_else(|_| workspace().join(".venv"), PathBuf::from);
     let py = venv.join("bin").join("python");
     assert!(
         py.exists(),
@@ -49,7 +54,10 @@ pub fn venv_python() -> PathBuf {
 
 /// Run `terraplan` with `args`.
 pub fn terraplan(args: &[&str]) -> Output {
-    Command::new(terraplan_bin()).args(args).output().expect("run terraplan")
+    Command::new(terraplan_bin())
+        .args(args)
+        .output()
+        .expect("run terraplan")
 }
 
 /// Run a validator script from `tests/validators` with the venv's Python.
@@ -92,13 +100,19 @@ impl Server {
         let mut child = cmd.spawn().expect("start terraplan serve");
         let stdout = child.stdout.take().expect("stdout");
         let mut line = String::new();
-        BufReader::new(stdout).read_line(&mut line).expect("read address");
+        BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("read address");
         let base = line
             .trim()
             .strip_prefix("listening on ")
             .unwrap_or_else(|| panic!("unexpected first line from terraplan serve: {line:?}"))
             .to_string();
-        Server { child: Some(child), base, data_dir: data_dir.to_path_buf() }
+        Server {
+            child: Some(child),
+            base,
+            data_dir: data_dir.to_path_buf(),
+        }
     }
 
     pub fn url(&self, path: &str) -> String {
@@ -112,7 +126,9 @@ impl Server {
 
     fn terminate(&mut self) -> Option<std::process::ExitStatus> {
         let mut child = self.child.take()?;
-        let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
+        let _ = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status();
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
         loop {
             if let Ok(Some(status)) = child.try_wait() {
@@ -142,10 +158,14 @@ pub struct Reply {
 
 impl Reply {
     pub fn header(&self, name: &str) -> Option<&str> {
-        self.headers.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str())
+        self.headers
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.as_str())
     }
     pub fn json(&self) -> serde_json::Value {
-        serde_json::from_slice(&self.body).unwrap_or_else(|e| panic!("body is not JSON ({e}): {}", text(&self.body)))
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("body is not JSON ({e}): {}", text(&self.body)))
     }
     pub fn text(&self) -> String {
         text(&self.body)
@@ -153,7 +173,10 @@ impl Reply {
 }
 
 fn agent() -> ureq::Agent {
-    ureq::Agent::config_builder().http_status_as_error(false).build().into()
+    ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into()
 }
 
 fn reply(res: Result<ureq::http::Response<ureq::Body>, ureq::Error>) -> Reply {
@@ -164,8 +187,17 @@ fn reply(res: Result<ureq::http::Response<ureq::Body>, ureq::Error>) -> Reply {
         .iter()
         .map(|(k, v)| (k.as_str().to_string(), v.to_str().unwrap_or("").to_string()))
         .collect();
-    let body = res.body_mut().with_config().limit(256 * 1024 * 1024).read_to_vec().expect("read body");
-    Reply { status, headers, body }
+    let body = res
+        .body_mut()
+        .with_config()
+        .limit(256 * 1024 * 1024)
+        .read_to_vec()
+        .expect("read body");
+    Reply {
+        status,
+        headers,
+        body,
+    }
 }
 
 pub fn get(url: &str) -> Reply {
@@ -177,7 +209,12 @@ pub fn delete(url: &str) -> Reply {
 }
 
 pub fn post(url: &str, content_type: &str, body: &[u8]) -> Reply {
-    reply(agent().post(url).header("Content-Type", content_type).send(body))
+    reply(
+        agent()
+            .post(url)
+            .header("Content-Type", content_type)
+            .send(body),
+    )
 }
 
 pub fn post_json(url: &str, body: &serde_json::Value) -> Reply {

@@ -11,11 +11,16 @@ use terraplan_e2e::{Server, post_json, workspace};
 
 #[test]
 fn thirty_two_clients_posting_surveys() {
-    let seconds: u64 = std::env::var("TERRAPLAN_LOAD_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(20);
+    let seconds: u64 = std::env::var("TERRAPLAN_LOAD_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20);
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(dir.path(), &[]);
     let ex = workspace().join("examples");
-    let read = |f: &str| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap() };
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap()
+    };
     let body = json!({"roi": read("field.geojson"), "no_fly_zones": [read("field-nfz.geojson")], "slice_angle_deg": 0});
     let url = server.url("/api/v1/surveys");
     let deadline = Instant::now() + Duration::from_secs(seconds);
@@ -39,7 +44,10 @@ fn thirty_two_clients_posting_surveys() {
             })
         })
         .collect();
-    let results: Vec<(u16, Duration, Option<f64>)> = handles.into_iter().flat_map(|h| h.join().unwrap()).collect();
+    let results: Vec<(u16, Duration, Option<f64>)> = handles
+        .into_iter()
+        .flat_map(|h| h.join().unwrap())
+        .collect();
     let elapsed = started.elapsed().as_secs_f64();
     let failures: Vec<u16> = results.iter().filter(|r| r.0 != 201).map(|r| r.0).collect();
     let mut lat: Vec<f64> = results.iter().map(|r| r.1.as_secs_f64() * 1e3).collect();
@@ -47,7 +55,11 @@ fn thirty_two_clients_posting_surveys() {
     let mut plan: Vec<f64> = results.iter().filter_map(|r| r.2).collect();
     plan.sort_by(f64::total_cmp);
     let pct = |v: &[f64], p: f64| v[((v.len() as f64 - 1.0) * p).round() as usize];
-    let backend = if std::env::var("TERRAPLAN_TEST_DATABASE_URL").is_ok() { "postgres" } else { "sqlite" };
+    let backend = if std::env::var("TERRAPLAN_TEST_DATABASE_URL").is_ok() {
+        "postgres"
+    } else {
+        "sqlite"
+    };
     eprintln!(
         "load[{backend}]: {} requests in {elapsed:.1} s = {:.1} req/s; latency p50 {:.1} ms, p99 {:.1} ms; \
          planner alone p50 {:.1} ms, p99 {:.1} ms; failures {}",
@@ -60,6 +72,16 @@ fn thirty_two_clients_posting_surveys() {
         failures.len()
     );
     assert!(!results.is_empty());
-    assert!(failures.is_empty(), "{} of {} requests failed: {:?}", failures.len(), results.len(), &failures[..failures.len().min(10)]);
-    assert_eq!(plan.len(), results.len(), "every response carries the planner's time");
+    assert!(
+        failures.is_empty(),
+        "{} of {} requests failed: {:?}",
+        failures.len(),
+        results.len(),
+        &failures[..failures.len().min(10)]
+    );
+    assert_eq!(
+        plan.len(),
+        results.len(),
+        "every response carries the planner's time"
+    );
 }

@@ -10,7 +10,9 @@ use terraplan_e2e::{Server, delete, get, post, post_json, validator, workspace};
 
 fn example_request() -> Value {
     let ex = workspace().join("examples");
-    let read = |f: &str| -> Value { serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap() };
+    let read = |f: &str| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap()
+    };
     json!({
         "name": "field with a mast",
         "roi": read("field.geojson"),
@@ -23,7 +25,12 @@ fn example_request() -> Value {
 
 fn assert_problem(r: &terraplan_e2e::Reply, status: u16, detail_has: &str) -> Value {
     assert_eq!(r.status, status, "{}", r.text());
-    assert_eq!(r.header("content-type"), Some("application/problem+json"), "{}", r.text());
+    assert_eq!(
+        r.header("content-type"),
+        Some("application/problem+json"),
+        "{}",
+        r.text()
+    );
     let p = r.json();
     assert_eq!(p["status"], status);
     assert!(p["title"].is_string());
@@ -44,7 +51,10 @@ fn create_get_list_download_delete() {
     assert_eq!(r.status, 201, "{}", r.text());
     let created = r.json();
     let id = created["id"].as_str().unwrap().to_string();
-    assert_eq!(r.header("location"), Some(format!("/api/v1/surveys/{id}").as_str()));
+    assert_eq!(
+        r.header("location"),
+        Some(format!("/api/v1/surveys/{id}").as_str())
+    );
     assert_eq!(created["name"], "field with a mast");
     assert!(created["stats"]["coverage_ratio"].as_f64().unwrap() >= 0.995);
     assert_eq!(created["cells"]["type"], "FeatureCollection");
@@ -59,7 +69,13 @@ fn create_get_list_download_delete() {
     let r = get(&server.url("/api/v1/surveys?limit=10"));
     assert_eq!(r.status, 200);
     let list = r.json();
-    assert!(list["items"].as_array().unwrap().iter().any(|s| s["id"] == id.as_str()));
+    assert!(
+        list["items"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["id"] == id.as_str())
+    );
 
     // Every file, with its content type and download name.
     let files = &uav["files"];
@@ -67,14 +83,28 @@ fn create_get_list_download_delete() {
     assert_eq!(wp.status, 200);
     assert!(wp.header("content-type").unwrap().starts_with("text/plain"));
     let disposition = wp.header("content-disposition").unwrap();
-    assert!(disposition.starts_with("attachment; filename=\"terraplan-") && disposition.ends_with("-uav1.waypoints\""), "{disposition}");
+    assert!(
+        disposition.starts_with("attachment; filename=\"terraplan-")
+            && disposition.ends_with("-uav1.waypoints\""),
+        "{disposition}"
+    );
     let wp_path = dir.path().join("m.waypoints");
     std::fs::write(&wp_path, &wp.body).unwrap();
     let loaded = validator("load_waypoints.py", &[&wp_path]);
-    assert!(loaded.status.success(), "{}", terraplan_e2e::text(&loaded.stderr));
+    assert!(
+        loaded.status.success(),
+        "{}",
+        terraplan_e2e::text(&loaded.stderr)
+    );
     let loaded: Value = serde_json::from_slice(&loaded.stdout).unwrap();
     // pymavlink's waypoints equal the route's points (route = home, waypoints, home).
-    let nav: Vec<&Value> = loaded["items"].as_array().unwrap().iter().skip(1).filter(|i| i["command"] == 16).collect();
+    let nav: Vec<&Value> = loaded["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .skip(1)
+        .filter(|i| i["command"] == 16)
+        .collect();
     let route = uav["route"]["coordinates"].as_array().unwrap();
     assert_eq!(nav.len() + 2, route.len());
     for (w, c) in nav.iter().zip(&route[1..]) {
@@ -85,22 +115,45 @@ fn create_get_list_download_delete() {
     let plan = get(&server.url(files["plan"].as_str().unwrap()));
     assert_eq!(plan.header("content-type"), Some("application/json"));
     assert_eq!(plan.json()["fileType"], "Plan");
-    assert_eq!(plan.json()["geoFence"]["polygons"].as_array().unwrap().len(), 3);
+    assert_eq!(
+        plan.json()["geoFence"]["polygons"]
+            .as_array()
+            .unwrap()
+            .len(),
+        3
+    );
     let route_file = get(&server.url(files["route"].as_str().unwrap()));
-    assert_eq!(route_file.header("content-type"), Some("application/geo+json"));
+    assert_eq!(
+        route_file.header("content-type"),
+        Some("application/geo+json")
+    );
     assert_eq!(route_file.json()["features"][0]["geometry"], uav["route"]);
     let fence = get(&server.url(files["fence"].as_str().unwrap()));
     assert!(fence.text().starts_with("QGC WPL 110\n"));
     let cells = get(&server.url(created["files"]["cells"].as_str().unwrap()));
     assert_eq!(cells.header("content-type"), Some("application/geo+json"));
     assert_eq!(cells.json(), created["cells"]);
-    assert_eq!(get(&server.url(&format!("/api/v1/surveys/{id}/uavs/nope/mission.plan"))).status, 404);
-    assert_eq!(get(&server.url(&format!("/api/v1/surveys/{id}/uavs/uav1/mission.exe"))).status, 404);
+    assert_eq!(
+        get(&server.url(&format!("/api/v1/surveys/{id}/uavs/nope/mission.plan"))).status,
+        404
+    );
+    assert_eq!(
+        get(&server.url(&format!("/api/v1/surveys/{id}/uavs/uav1/mission.exe"))).status,
+        404
+    );
 
     let r = delete(&server.url(&format!("/api/v1/surveys/{id}")));
     assert_eq!(r.status, 204);
-    assert_problem(&get(&server.url(&format!("/api/v1/surveys/{id}"))), 404, "no survey");
-    assert_problem(&delete(&server.url(&format!("/api/v1/surveys/{id}"))), 404, "no survey");
+    assert_problem(
+        &get(&server.url(&format!("/api/v1/surveys/{id}"))),
+        404,
+        "no survey",
+    );
+    assert_problem(
+        &delete(&server.url(&format!("/api/v1/surveys/{id}"))),
+        404,
+        "no survey",
+    );
     assert!(server.stop().success());
 }
 
@@ -135,7 +188,12 @@ fn newest_first_pagination() {
         ids.push(r.json()["id"].as_str().unwrap().to_string());
     }
     let page = get(&server.url("/api/v1/surveys?limit=2&offset=0")).json();
-    let got: Vec<&str> = page["items"].as_array().unwrap().iter().map(|s| s["id"].as_str().unwrap()).collect();
+    let got: Vec<&str> = page["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["id"].as_str().unwrap())
+        .collect();
     // Other tests may share a PostgreSQL database: check order among ours.
     let ours: Vec<&String> = ids.iter().rev().collect();
     let pos = |id: &str| ours.iter().position(|o| o.as_str() == id);
@@ -157,38 +215,116 @@ fn bad_input_is_a_problem_naming_the_fault() {
     let rect = |x0: f64, y0: f64, x1: f64, y1: f64| json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]});
     let small = rect(5.0, 52.0, 5.005, 52.003);
     let cases: Vec<(&str, Value, &str, &str)> = vec![
-        ("self-intersecting ROI", json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 52.003], [5.005, 52.0], [5.0, 52.003], [5.0, 52.0]]]}}), "/roi/coordinates/0", "self-intersects"),
-        ("NFZ covering the ROI", json!({"roi": small, "no_fly_zones": [rect(4.99, 51.99, 5.01, 52.01)]}), "/no_fly_zones", "cover the whole"),
-        ("empty ring", json!({"roi": {"type": "Polygon", "coordinates": [[]]}}), "/roi/coordinates/0", "empty"),
-        ("unclosable ring", json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.1, 52.1]]]}}), "/roi/coordinates/0", "too short"),
-        ("latitude 95", json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 95.0], [5.0, 52.003], [5.0, 52.0]]]}}), "/roi/coordinates/0/1/1", "latitude 95"),
-        ("NaN", json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, "NaN"], [5.0, 52.003], [5.0, 52.0]]]}}), "/roi/coordinates/0/1/1", "finite number"),
-        ("overlap 1", json!({"roi": small, "side_overlap": 1.0}), "/side_overlap", "outside"),
-        ("negative altitude", json!({"roi": small, "altitude_m": -10}), "/altitude_m", "outside"),
-        ("unknown geometry type", json!({"roi": {"type": "Circle", "coordinates": [5.0, 52.0]}}), "/roi/type", "unknown GeoJSON type"),
+        (
+            "self-intersecting ROI",
+            json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 52.003], [5.005, 52.0], [5.0, 52.003], [5.0, 52.0]]]}}),
+            "/roi/coordinates/0",
+            "self-intersects",
+        ),
+        (
+            "NFZ covering the ROI",
+            json!({"roi": small, "no_fly_zones": [rect(4.99, 51.99, 5.01, 52.01)]}),
+            "/no_fly_zones",
+            "cover the whole",
+        ),
+        (
+            "empty ring",
+            json!({"roi": {"type": "Polygon", "coordinates": [[]]}}),
+            "/roi/coordinates/0",
+            "empty",
+        ),
+        (
+            "unclosable ring",
+            json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.1, 52.1]]]}}),
+            "/roi/coordinates/0",
+            "too short",
+        ),
+        (
+            "latitude 95",
+            json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 95.0], [5.0, 52.003], [5.0, 52.0]]]}}),
+            "/roi/coordinates/0/1/1",
+            "latitude 95",
+        ),
+        (
+            "NaN",
+            json!({"roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, "NaN"], [5.0, 52.003], [5.0, 52.0]]]}}),
+            "/roi/coordinates/0/1/1",
+            "finite number",
+        ),
+        (
+            "overlap 1",
+            json!({"roi": small, "side_overlap": 1.0}),
+            "/side_overlap",
+            "outside",
+        ),
+        (
+            "negative altitude",
+            json!({"roi": small, "altitude_m": -10}),
+            "/altitude_m",
+            "outside",
+        ),
+        (
+            "unknown geometry type",
+            json!({"roi": {"type": "Circle", "coordinates": [5.0, 52.0]}}),
+            "/roi/type",
+            "unknown GeoJSON type",
+        ),
         ("missing ROI", json!({"altitude_m": 50}), "/roi", "required"),
-        ("unknown field", json!({"roi": small, "altitud_m": 50}), "/altitud_m", "unknown field"),
-        ("wrong type", json!({"roi": small, "speed_m_s": "fast"}), "/speed_m_s", "invalid type"),
-        ("two UAVs", json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "b", "start": [5.0, 52.0]}]}), "/uavs", "not available yet"),
+        (
+            "unknown field",
+            json!({"roi": small, "altitud_m": 50}),
+            "/altitud_m",
+            "unknown field",
+        ),
+        (
+            "wrong type",
+            json!({"roi": small, "speed_m_s": "fast"}),
+            "/speed_m_s",
+            "invalid type",
+        ),
+        (
+            "two UAVs",
+            json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "b", "start": [5.0, 52.0]}]}),
+            "/uavs",
+            "not available yet",
+        ),
         ("not an object", json!([1, 2]), "", "JSON object"),
     ];
     for (name, body, pointer, msg) in cases {
         let r = post_json(&url, &body);
         let p = assert_problem(&r, 422, msg);
-        let errors = p["errors"].as_array().unwrap_or_else(|| panic!("{name}: no errors in {p}"));
-        assert!(errors.iter().any(|e| e["pointer"] == pointer), "{name}: pointer {pointer:?} not in {p}");
+        let errors = p["errors"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{name}: no errors in {p}"));
+        assert!(
+            errors.iter().any(|e| e["pointer"] == pointer),
+            "{name}: pointer {pointer:?} not in {p}"
+        );
     }
-    assert_problem(&post(&url, "application/json", b"{\"roi\": "), 400, "not valid JSON");
+    assert_problem(
+        &post(&url, "application/json", b"{\"roi\": "),
+        400,
+        "not valid JSON",
+    );
     assert_problem(&post(&url, "application/json", b""), 400, "empty");
     assert_problem(&post(&url, "text/plain", b"{}"), 415, "Content-Type");
-    assert_problem(&get(&server.url("/api/v1/nothing-here")), 404, "no resource");
-    assert_problem(&get(&server.url("/api/v1/surveys/00000000-0000-0000-0000-000000000000")), 404, "no survey");
+    assert_problem(
+        &get(&server.url("/api/v1/nothing-here")),
+        404,
+        "no resource",
+    );
+    assert_problem(
+        &get(&server.url("/api/v1/surveys/00000000-0000-0000-0000-000000000000")),
+        404,
+        "no survey",
+    );
     assert_problem(&delete(&server.url("/healthz")), 405, "not allowed");
 
     // A 100 MB body is refused from its Content-Length, without reading it.
     let addr = server.base.trim_start_matches("http://").to_string();
     let mut s = std::net::TcpStream::connect(&addr).unwrap();
-    s.set_read_timeout(Some(std::time::Duration::from_secs(30))).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(30)))
+        .unwrap();
     let len = 100 * 1024 * 1024;
     write!(s, "POST /api/v1/surveys HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n").unwrap();
     let _ = s.write_all(&vec![b' '; 1024 * 1024]);
@@ -196,7 +332,10 @@ fn bad_input_is_a_problem_naming_the_fault() {
     let _ = s.read_to_end(&mut resp);
     let resp = String::from_utf8_lossy(&resp);
     assert!(resp.starts_with("HTTP/1.1 413"), "{resp}");
-    assert!(resp.contains("application/problem+json") && resp.contains("too large"), "{resp}");
+    assert!(
+        resp.contains("application/problem+json") && resp.contains("too large"),
+        "{resp}"
+    );
 
     // The server is still healthy after all that.
     assert_eq!(get(&server.url("/healthz")).status, 200);
@@ -211,13 +350,29 @@ fn openapi_document_and_docs_page() {
     let doc = r.json();
     assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
     let paths = doc["paths"].as_object().unwrap();
-    for p in ["/healthz", "/api/v1/surveys", "/api/v1/surveys/{id}", "/api/v1/surveys/{id}/uavs/{uav}/{file}", "/api/v1/surveys/{id}/cells.geojson"] {
-        assert!(paths.contains_key(p), "{p} missing from the OpenAPI document");
+    for p in [
+        "/healthz",
+        "/api/v1/surveys",
+        "/api/v1/surveys/{id}",
+        "/api/v1/surveys/{id}/uavs/{uav}/{file}",
+        "/api/v1/surveys/{id}/cells.geojson",
+    ] {
+        assert!(
+            paths.contains_key(p),
+            "{p} missing from the OpenAPI document"
+        );
     }
-    let params = &doc["components"]["schemas"]["SurveyParams"]["properties"];
+    let params = &doc["components"]["schemas"]["CreateSurvey"]["properties"];
+    assert_eq!(
+        doc["components"]["schemas"]["CreateSurvey"]["required"],
+        json!(["roi"])
+    );
     assert_eq!(params["side_overlap"]["maximum"], 0.95);
     assert_eq!(params["side_overlap"]["default"], 0.7);
     let page = get(&server.url("/api/docs/"));
     assert_eq!(page.status, 200);
-    assert!(page.text().contains("swagger"), "docs page is served locally");
+    assert!(
+        page.text().contains("swagger"),
+        "docs page is served locally"
+    );
 }

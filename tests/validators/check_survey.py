@@ -16,7 +16,8 @@ from pathlib import Path
 from pymavlink import mavutil, mavwp
 from pyproj import Transformer
 from shapely.geometry import LineString, Point, shape
-from shapely.ops import transform, unary_union
+import shapely
+from shapely.ops import unary_union
 
 CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
 CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
@@ -48,8 +49,12 @@ def main():
     plan = json.loads((out / "plan.json").read_text())
     epsg = plan["utm_epsg"]
     fwd = Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform
-    roi = transform(fwd, roi_ll)
-    nfz = transform(fwd, nfz_ll) if nfz_ll is not None else None
+
+    def project(g):
+        return shapely.transform(g, fwd, interleaved=False)
+
+    roi = project(roi_ll)
+    nfz = project(nfz_ll) if nfz_ll is not None else None
     free = roi.difference(nfz) if nfz is not None else roi
     nfz_core = nfz.buffer(-GEOM_TOL_M) if nfz is not None else None
     roi_grown = roi.buffer(GEOM_TOL_M)

@@ -24,14 +24,17 @@ pub fn route_feature(mission: &Mission, properties: Map<String, Value>) -> Value
 pub fn polygon_geometry(p: &Polygon<f64>) -> Value {
     use geo::{Orient, orient::Direction};
     let p = p.orient(Direction::Default);
-    let ring = |ls: &LineString<f64>| -> Vec<[f64; 2]> { ls.0.iter().map(|c| [c.x, c.y]).collect() };
+    let ring =
+        |ls: &LineString<f64>| -> Vec<[f64; 2]> { ls.0.iter().map(|c| [c.x, c.y]).collect() };
     let mut rings = vec![ring(p.exterior())];
     rings.extend(p.interiors().iter().map(ring));
     json!({ "type": "Polygon", "coordinates": rings })
 }
 
 /// A FeatureCollection from (geometry, properties) pairs.
-pub fn feature_collection(features: impl IntoIterator<Item = (Value, Map<String, Value>)>) -> Value {
+pub fn feature_collection(
+    features: impl IntoIterator<Item = (Value, Map<String, Value>)>,
+) -> Value {
     let features: Vec<Value> = features
         .into_iter()
         .map(|(geometry, properties)| json!({"type": "Feature", "properties": properties, "geometry": geometry}))
@@ -53,12 +56,20 @@ mod tests {
     #[test]
     fn route_is_3d_and_closed_at_home() {
         let m = Mission {
-            home: GeoPoint { lon: 1.0, lat: 2.0, alt: 0.0 },
+            home: GeoPoint {
+                lon: 1.0,
+                lat: 2.0,
+                alt: 0.0,
+            },
             frame: AltitudeFrame::Relative,
             cruise_speed_m_s: 5.0,
             items: vec![
                 MissionItem::Takeoff { alt: 30.0 },
-                MissionItem::Waypoint(GeoPoint { lon: 1.1, lat: 2.1, alt: 30.0 }),
+                MissionItem::Waypoint(GeoPoint {
+                    lon: 1.1,
+                    lat: 2.1,
+                    alt: 30.0,
+                }),
                 MissionItem::ReturnToLaunch,
             ],
         };
@@ -74,8 +85,14 @@ mod tests {
         let cw = polygon![(x: 0.0, y: 0.0), (x: 0.0, y: 1.0), (x: 1.0, y: 1.0), (x: 1.0, y: 0.0)];
         let g = polygon_geometry(&cw);
         let ring = g["coordinates"][0].as_array().unwrap();
-        let pts: Vec<(f64, f64)> = ring.iter().map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap())).collect();
-        let twice_area: f64 = pts.windows(2).map(|w| w[0].0 * w[1].1 - w[1].0 * w[0].1).sum();
+        let pts: Vec<(f64, f64)> = ring
+            .iter()
+            .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+            .collect();
+        let twice_area: f64 = pts
+            .windows(2)
+            .map(|w| w[0].0 * w[1].1 - w[1].0 * w[0].1)
+            .sum();
         assert!(twice_area > 0.0);
     }
 }

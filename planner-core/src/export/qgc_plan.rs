@@ -24,17 +24,41 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
                 MissionItem::Takeoff { alt } => (
                     cmd::NAV_TAKEOFF,
                     f,
-                    [0.into(), 0.into(), 0.into(), Value::Null, home.lat.into(), home.lon.into(), alt.into()],
+                    [
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        Value::Null,
+                        home.lat.into(),
+                        home.lon.into(),
+                        alt.into(),
+                    ],
                 ),
                 MissionItem::ChangeSpeed { speed_m_s } => (
                     cmd::DO_CHANGE_SPEED,
                     frame::MISSION,
-                    [1.into(), speed_m_s.into(), (-1).into(), 0.into(), 0.into(), 0.into(), 0.into()],
+                    [
+                        1.into(),
+                        speed_m_s.into(),
+                        (-1).into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                    ],
                 ),
                 MissionItem::Waypoint(p) => (
                     cmd::NAV_WAYPOINT,
                     f,
-                    [0.into(), 0.into(), 0.into(), Value::Null, p.lat.into(), p.lon.into(), p.alt.into()],
+                    [
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        Value::Null,
+                        p.lat.into(),
+                        p.lon.into(),
+                        p.alt.into(),
+                    ],
                 ),
                 MissionItem::CameraTriggerDistance { distance_m } => (
                     cmd::DO_SET_CAM_TRIGG_DIST,
@@ -52,7 +76,15 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
                 MissionItem::ReturnToLaunch => (
                     cmd::NAV_RETURN_TO_LAUNCH,
                     f,
-                    [0.into(), 0.into(), 0.into(), 0.into(), 0.into(), 0.into(), 0.into()],
+                    [
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                        0.into(),
+                    ],
                 ),
             };
             json!({
@@ -102,16 +134,27 @@ mod tests {
     #[test]
     fn plan_structure_matches_qgc() {
         let m = Mission {
-            home: GeoPoint { lon: 8.5, lat: 47.4, alt: 400.0 },
+            home: GeoPoint {
+                lon: 8.5,
+                lat: 47.4,
+                alt: 400.0,
+            },
             frame: AltitudeFrame::Terrain,
             cruise_speed_m_s: 12.0,
             items: vec![
                 MissionItem::Takeoff { alt: 50.0 },
-                MissionItem::Waypoint(GeoPoint { lon: 8.51, lat: 47.41, alt: 50.0 }),
+                MissionItem::Waypoint(GeoPoint {
+                    lon: 8.51,
+                    lat: 47.41,
+                    alt: 50.0,
+                }),
                 MissionItem::ReturnToLaunch,
             ],
         };
-        let fences = [FencePolygon { inclusion: false, vertices: vec![[8.5, 47.4], [8.6, 47.4], [8.6, 47.5]] }];
+        let fences = [FencePolygon {
+            inclusion: false,
+            vertices: vec![[8.5, 47.4], [8.6, 47.4], [8.6, 47.5]],
+        }];
         let plan = write_plan(&m, &fences);
         assert_eq!(plan["fileType"], "Plan");
         assert_eq!(plan["version"], 1);

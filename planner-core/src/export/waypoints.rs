@@ -59,7 +59,12 @@ pub fn write_waypoints(mission: &Mission) -> String {
                 command: cmd::DO_SET_CAM_TRIGG_DIST,
                 frame: frame::MISSION,
                 // param3 1 = take a photo at once when a distance is set.
-                params: [distance_m, 0.0, if distance_m > 0.0 { 1.0 } else { 0.0 }, 0.0],
+                params: [
+                    distance_m,
+                    0.0,
+                    if distance_m > 0.0 { 1.0 } else { 0.0 },
+                    0.0,
+                ],
                 lat: 0.0,
                 lon: 0.0,
                 alt: 0.0,
@@ -121,7 +126,11 @@ mod tests {
     use crate::export::mission::{AltitudeFrame, GeoPoint};
 
     fn mission() -> Mission {
-        let home = GeoPoint { lon: 5.1, lat: 52.2, alt: 3.0 };
+        let home = GeoPoint {
+            lon: 5.1,
+            lat: 52.2,
+            alt: 3.0,
+        };
         Mission {
             home,
             frame: AltitudeFrame::Relative,
@@ -129,9 +138,17 @@ mod tests {
             items: vec![
                 MissionItem::Takeoff { alt: 60.0 },
                 MissionItem::ChangeSpeed { speed_m_s: 8.0 },
-                MissionItem::Waypoint(GeoPoint { lon: 5.123456789, lat: 52.2, alt: 60.0 }),
+                MissionItem::Waypoint(GeoPoint {
+                    lon: 5.123456789,
+                    lat: 52.2,
+                    alt: 60.0,
+                }),
                 MissionItem::CameraTriggerDistance { distance_m: 12.5 },
-                MissionItem::Waypoint(GeoPoint { lon: 5.13, lat: 52.21, alt: 60.0 }),
+                MissionItem::Waypoint(GeoPoint {
+                    lon: 5.13,
+                    lat: 52.21,
+                    alt: 60.0,
+                }),
                 MissionItem::CameraTriggerDistance { distance_m: 0.0 },
                 MissionItem::ReturnToLaunch,
             ],
@@ -148,7 +165,10 @@ mod tests {
         for l in &lines[1..] {
             assert_eq!(l.split('\t').count(), 12, "{l}");
         }
-        assert_eq!(lines[1], "0\t1\t0\t16\t0.000000\t0.000000\t0.000000\t0.000000\t52.20000000\t5.10000000\t3.000000\t1");
+        assert_eq!(
+            lines[1],
+            "0\t1\t0\t16\t0.000000\t0.000000\t0.000000\t0.000000\t52.20000000\t5.10000000\t3.000000\t1"
+        );
         let cols: Vec<&str> = lines[4].split('\t').collect();
         assert_eq!((cols[2], cols[3], cols[9]), ("3", "16", "5.12345679"));
         let cols: Vec<&str> = lines[5].split('\t').collect();
@@ -159,8 +179,14 @@ mod tests {
     #[test]
     fn fence_rows_carry_vertex_count() {
         let text = write_fence(&[
-            FencePolygon { inclusion: true, vertices: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]] },
-            FencePolygon { inclusion: false, vertices: vec![[0.2, 0.2], [0.4, 0.2], [0.3, 0.4]] },
+            FencePolygon {
+                inclusion: true,
+                vertices: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]],
+            },
+            FencePolygon {
+                inclusion: false,
+                vertices: vec![[0.2, 0.2], [0.4, 0.2], [0.3, 0.4]],
+            },
         ]);
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines.len(), 8);

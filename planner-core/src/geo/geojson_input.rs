@@ -56,7 +56,10 @@ fn collect(value: &Value, pointer: &str, out: &mut Vec<ParsedPolygon>, issues: &
             if let Some(coords) = coordinates(obj, pointer, issues) {
                 let ptr = format!("{pointer}/coordinates");
                 if let Some(polygon) = polygon(coords, &ptr, issues) {
-                    out.push(ParsedPolygon { polygon, pointer: ptr });
+                    out.push(ParsedPolygon {
+                        polygon,
+                        pointer: ptr,
+                    });
                 }
             }
         }
@@ -68,7 +71,10 @@ fn collect(value: &Value, pointer: &str, out: &mut Vec<ParsedPolygon>, issues: &
                         for (i, part) in parts.iter().enumerate() {
                             let ptr = format!("{ptr}/{i}");
                             if let Some(polygon) = polygon(part, &ptr, issues) {
-                                out.push(ParsedPolygon { polygon, pointer: ptr });
+                                out.push(ParsedPolygon {
+                                    polygon,
+                                    pointer: ptr,
+                                });
                             }
                         }
                     }
@@ -203,7 +209,10 @@ fn ring(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Option<LineStr
 
 fn position(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Option<Coord<f64>> {
     let Some(items) = value.as_array() else {
-        issues.push(Issue::new(pointer, "a position must be an array [lon, lat]"));
+        issues.push(Issue::new(
+            pointer,
+            "a position must be an array [lon, lat]",
+        ));
         return None;
     };
     if items.len() < 2 || items.len() > 3 {
@@ -313,10 +322,18 @@ mod tests {
         assert!(e[0].message.contains("finite number"));
 
         let v = json!({"type": "Polygon", "coordinates": [[]]});
-        assert!(parse_polygons(&v, "").unwrap_err()[0].message.contains("empty"));
+        assert!(
+            parse_polygons(&v, "").unwrap_err()[0]
+                .message
+                .contains("empty")
+        );
 
         let v = json!({"type": "Polygon", "coordinates": [[[0.0, 0.0], [1.0, 1.0], [0.0, 0.0]]]});
-        assert!(parse_polygons(&v, "").unwrap_err()[0].message.contains("too short"));
+        assert!(
+            parse_polygons(&v, "").unwrap_err()[0]
+                .message
+                .contains("too short")
+        );
 
         let v = json!({"type": "Circle", "coordinates": []});
         let e = parse_polygons(&v, "").unwrap_err();
@@ -324,6 +341,10 @@ mod tests {
         assert!(e[0].message.contains("unknown GeoJSON type"));
 
         let v = json!({"type": "LineString", "coordinates": [[0.0, 0.0], [1.0, 1.0]]});
-        assert!(parse_polygons(&v, "").unwrap_err()[0].message.contains("not an area"));
+        assert!(
+            parse_polygons(&v, "").unwrap_err()[0]
+                .message
+                .contains("not an area")
+        );
     }
 }

@@ -51,7 +51,11 @@ pub enum GeoError {
 }
 
 pub(crate) fn join_issues(issues: &[Issue]) -> String {
-    issues.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
+    issues
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// Size limits on input geometry; all configurable.
@@ -101,7 +105,10 @@ pub fn prepare_area(
 ) -> Result<SurveyArea, GeoError> {
     let mut issues = Vec::new();
     if roi.is_empty() {
-        issues.push(Issue::new(roi_pointer, "the region of interest has no polygon"));
+        issues.push(Issue::new(
+            roi_pointer,
+            "the region of interest has no polygon",
+        ));
     }
     if no_fly.len() > limits.max_no_fly_zones {
         issues.push(Issue::new(
@@ -113,7 +120,11 @@ pub fn prepare_area(
             ),
         ));
     }
-    let vertices: usize = roi.iter().chain(no_fly).map(|p| p.polygon.coords_count()).sum();
+    let vertices: usize = roi
+        .iter()
+        .chain(no_fly)
+        .map(|p| p.polygon.coords_count())
+        .sum();
     if vertices > limits.max_vertices {
         issues.push(Issue::new(
             roi_pointer,
@@ -197,7 +208,10 @@ pub fn prepare_area(
         )]));
     }
     if area_km2 <= 0.0 {
-        return Err(GeoError::Invalid(vec![Issue::new(roi_pointer, "the ROI has no area")]));
+        return Err(GeoError::Invalid(vec![Issue::new(
+            roi_pointer,
+            "the ROI has no area",
+        )]));
     }
     Ok(SurveyArea {
         projection,
@@ -240,7 +254,10 @@ mod tests {
         );
         let e = prepare_area(&big, &[], "/roi", "/no_fly", &Limits::default()).unwrap_err();
         assert!(e.to_string().contains("too large"), "{e}");
-        let limits = Limits { max_roi_area_km2: 1e6, ..Limits::default() };
+        let limits = Limits {
+            max_roi_area_km2: 1e6,
+            ..Limits::default()
+        };
         let wide = parsed(
             json!({"type": "Polygon", "coordinates": [[[0.5, 10.0], [9.5, 10.0], [9.5, 10.001], [0.5, 10.001]]]}),
             "/roi",

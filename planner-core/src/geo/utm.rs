@@ -96,7 +96,10 @@ impl UtmProjection {
         map_polygon(p, |c| self.to_wgs84(c))
     }
 
-    pub fn multi_polygon_to_wgs84(&self, mp: &MultiPolygon<f64>) -> Result<MultiPolygon<f64>, GeoError> {
+    pub fn multi_polygon_to_wgs84(
+        &self,
+        mp: &MultiPolygon<f64>,
+    ) -> Result<MultiPolygon<f64>, GeoError> {
         mp.0.iter()
             .map(|p| self.polygon_to_wgs84(p))
             .collect::<Result<Vec<_>, _>>()
@@ -113,11 +116,19 @@ fn map_polygon(
     p: &Polygon<f64>,
     mut f: impl FnMut(Coord<f64>) -> Result<Coord<f64>, GeoError>,
 ) -> Result<Polygon<f64>, GeoError> {
-    let mut ring = |ls: &geo_types::LineString<f64>| -> Result<geo_types::LineString<f64>, GeoError> {
-        ls.0.iter().map(|&c| f(c)).collect::<Result<Vec<_>, _>>().map(geo_types::LineString::new)
-    };
+    let mut ring =
+        |ls: &geo_types::LineString<f64>| -> Result<geo_types::LineString<f64>, GeoError> {
+            ls.0.iter()
+                .map(|&c| f(c))
+                .collect::<Result<Vec<_>, _>>()
+                .map(geo_types::LineString::new)
+        };
     let ext = ring(p.exterior())?;
-    let holes = p.interiors().iter().map(&mut ring).collect::<Result<Vec<_>, _>>()?;
+    let holes = p
+        .interiors()
+        .iter()
+        .map(&mut ring)
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(Polygon::new(ext, holes))
 }
 
@@ -133,7 +144,10 @@ mod tests {
         assert_eq!(p.central_meridian(), 3.0);
         let en = p.to_utm(Coord { x: 3.0, y: 0.0 }).unwrap();
         // The central meridian at the equator maps to the false easting.
-        assert!((en.x - 500_000.0).abs() < 1e-6 && en.y.abs() < 1e-6, "{en:?}");
+        assert!(
+            (en.x - 500_000.0).abs() < 1e-6 && en.y.abs() < 1e-6,
+            "{en:?}"
+        );
         let c = Coord { x: 5.66, y: 51.97 };
         let back = p.to_wgs84(p.to_utm(c).unwrap()).unwrap();
         assert!((back.x - c.x).abs() < 1e-9 && (back.y - c.y).abs() < 1e-9);
@@ -149,7 +163,17 @@ mod tests {
             UtmProjection::for_lonlat(Coord { x: 0.0, y: 85.0 }),
             Err(GeoError::OutsideUtm { .. })
         ));
-        assert_eq!(UtmProjection::for_lonlat(Coord { x: 180.0, y: 0.0 }).unwrap().zone(), 60);
-        assert_eq!(UtmProjection::for_lonlat(Coord { x: -180.0, y: 0.0 }).unwrap().zone(), 1);
+        assert_eq!(
+            UtmProjection::for_lonlat(Coord { x: 180.0, y: 0.0 })
+                .unwrap()
+                .zone(),
+            60
+        );
+        assert_eq!(
+            UtmProjection::for_lonlat(Coord { x: -180.0, y: 0.0 })
+                .unwrap()
+                .zone(),
+            1
+        );
     }
 }

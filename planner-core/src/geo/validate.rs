@@ -1,8 +1,8 @@
 //! Topological checks of input polygons: self-intersections, holes that
 //! cross or leave their exterior.
 
-use geo::{Contains, Intersects};
 use geo::line_intersection::{LineIntersection, line_intersection};
+use geo::{Contains, Intersects};
 use geo_types::{Coord, Line, LineString, Polygon};
 use rstar::{AABB, RTree, RTreeObject};
 
@@ -37,13 +37,15 @@ pub fn polygon_issues(polygon: &Polygon<f64>, pointer: &str) -> Vec<Issue> {
         .collect();
     let mut edges = Vec::new();
     for (r, ring) in rings.iter().enumerate() {
-        let mut index = 0;
-        for line in ring.lines() {
+        for (index, line) in ring.lines().enumerate() {
             // Repeated consecutive positions are harmless: skip zero-length edges.
             if line.start != line.end {
-                edges.push(Edge { ring: r, index, line });
+                edges.push(Edge {
+                    ring: r,
+                    index,
+                    line,
+                });
             }
-            index += 1;
         }
     }
     let ring_len: Vec<usize> = rings.iter().map(|r| r.0.len().saturating_sub(1)).collect();
@@ -61,7 +63,11 @@ pub fn polygon_issues(polygon: &Polygon<f64>, pointer: &str) -> Vec<Issue> {
                 LineIntersection::SinglePoint { intersection, .. } => {
                     if a.ring == b.ring && adjacent(a.index, b.index, ring_len[a.ring]) {
                         // Neighbouring edges share their common vertex by construction.
-                        let shared = if b.index == a.index + 1 { a.line.end } else { a.line.start };
+                        let shared = if b.index == a.index + 1 {
+                            a.line.end
+                        } else {
+                            a.line.start
+                        };
                         if close(intersection, shared) {
                             continue;
                         }
@@ -119,7 +125,11 @@ fn close(a: Coord<f64>, b: Coord<f64>) -> bool {
 }
 
 fn ring_name(r: usize) -> String {
-    if r == 0 { "exterior ring".to_string() } else { format!("hole {r}") }
+    if r == 0 {
+        "exterior ring".to_string()
+    } else {
+        format!("hole {r}")
+    }
 }
 
 #[cfg(test)]
@@ -144,7 +154,11 @@ mod tests {
         let issues = polygon_issues(&p, "/roi/coordinates");
         assert_eq!(issues.len(), 1, "{issues:?}");
         assert_eq!(issues[0].pointer, "/roi/coordinates/0");
-        assert!(issues[0].message.contains("self-intersects at (1.00000000, 1.00000000)"));
+        assert!(
+            issues[0]
+                .message
+                .contains("self-intersects at (1.00000000, 1.00000000)")
+        );
     }
 
     #[test]
@@ -163,7 +177,11 @@ mod tests {
             exterior: [(x: 0.0, y: 0.0), (x: 2.0, y: 0.0), (x: 2.0, y: 2.0), (x: 0.0, y: 2.0)],
             interiors: [[(x: 1.0, y: 1.0), (x: 3.0, y: 1.0), (x: 3.0, y: 1.5)]],
         );
-        assert!(polygon_issues(&crossing, "")[0].message.contains("intersect"));
+        assert!(
+            polygon_issues(&crossing, "")[0]
+                .message
+                .contains("intersect")
+        );
         let outside = polygon!(
             exterior: [(x: 0.0, y: 0.0), (x: 2.0, y: 0.0), (x: 2.0, y: 2.0), (x: 0.0, y: 2.0)],
             interiors: [[(x: 5.0, y: 5.0), (x: 6.0, y: 5.0), (x: 6.0, y: 6.0)]],

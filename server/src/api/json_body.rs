@@ -23,23 +23,37 @@ impl<S: Send + Sync> FromRequest<S> for JsonBody {
             .and_then(|v| v.to_str().ok())
             .unwrap_or("")
             .to_string();
-        let essence = content_type.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
-        if !(essence == "application/json" || (essence.starts_with("application/") && essence.ends_with("+json"))) {
+        let essence = content_type
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        if !(essence == "application/json"
+            || (essence.starts_with("application/") && essence.ends_with("+json")))
+        {
             return Err(ApiError::UnsupportedMediaType(if content_type.is_empty() {
                 "the request has no Content-Type: send the body as application/json".to_string()
             } else {
-                format!("Content-Type {content_type:?} is not supported: send the body as application/json")
+                format!(
+                    "Content-Type {content_type:?} is not supported: send the body as application/json"
+                )
             }));
         }
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::PayloadTooLarge(format!("the request body is too large: {}", e.body_text()))
+                ApiError::PayloadTooLarge(format!(
+                    "the request body is too large: {}",
+                    e.body_text()
+                ))
             } else {
                 ApiError::BadRequest(format!("cannot read the request body: {}", e.body_text()))
             }
         })?;
         if bytes.is_empty() {
-            return Err(ApiError::BadRequest("the request body is empty: a JSON object is expected".into()));
+            return Err(ApiError::BadRequest(
+                "the request body is empty: a JSON object is expected".into(),
+            ));
         }
         serde_json::from_slice(&bytes)
             .map(JsonBody)

@@ -7,7 +7,9 @@ use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::export::{AltitudeFrame, FencePolygon, geojson as gj};
 use planner_core::geo::Issue;
-use planner_core::survey::{SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, plan_survey};
+use planner_core::survey::{
+    SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, plan_survey,
+};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use utoipa::{IntoParams, ToSchema};
@@ -20,22 +22,68 @@ use crate::error::{ApiError, Problem};
 const NAME_MAX_CHARS: usize = 200;
 
 /// Body of `POST /api/v1/surveys`: the area, the no-fly zones and the
-/// planning parameters (the fields of the CLI's params file).
-#[derive(Deserialize, ToSchema)]
-#[allow(dead_code)] // the handler reads the body as JSON to report faults by pointer; this is its schema
-pub struct CreateSurvey {
-    /// A label for the survey (at most 200 characters).
-    name: Option<String>,
-    /// Region of interest: GeoJSON (RFC 7946, WGS84) Polygon, MultiPolygon,
-    /// Feature, FeatureCollection or GeometryCollection of areas.
-    #[schema(value_type = Object)]
-    roi: Value,
-    /// No-fly zones, each any GeoJSON area; they may overlap each other,
-    /// cross the ROI border or lie outside it.
-    #[schema(value_type = Vec<Object>)]
-    no_fly_zones: Option<Vec<Value>>,
-    #[serde(flatten)]
-    params: SurveyParams,
+/// planning parameters (the fields of the CLI's params file) in one object.
+/// The handler reads the body as JSON so that every fault is reported by
+/// pointer; this type only carries its OpenAPI schema: the
+/// [`SurveyParams`] object with `name`, `roi` and `no_fly_zones` added.
+pub struct CreateSurvey;
+
+impl utoipa::PartialSchema for CreateSurvey {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::RefOr;
+        use utoipa::openapi::schema::{ArrayBuilder, Object, ObjectBuilder, Schema, Type};
+        let mut body = match SurveyParams::schema() {
+            RefOr::T(Schema::Object(o)) => o,
+            _ => Object::new(),
+        };
+        let geojson = |d: &str| {
+            ObjectBuilder::new()
+                .schema_type(Type::Object)
+                .description(Some(d.to_string()))
+                .build()
+        };
+        body.properties.insert(
+            "name".into(),
+            ObjectBuilder::new()
+                .schema_type(Type::String)
+                .max_length(Some(NAME_MAX_CHARS))
+                .description(Some("A label for the survey."))
+                .into(),
+        );
+        body.properties.insert(
+            "roi".into(),
+            geojson(
+                "Region of interest: GeoJSON (RFC 7946, WGS84 lon/lat) Polygon, MultiPolygon, \
+                 Feature, FeatureCollection or GeometryCollection of areas.",
+            )
+            .into(),
+        );
+        body.properties.insert(
+            "no_fly_zones".into(),
+            ArrayBuilder::new()
+                .items(geojson("A no-fly zone: any GeoJSON area."))
+                .description(Some(
+                    "No-fly zones; they may overlap each other, cross the ROI border or lie outside it.",
+                ))
+                .into(),
+        );
+        body.required.push("roi".into());
+        body.description =
+            Some("A survey request: area, no-fly zones and planning parameters.".into());
+        RefOr::T(Schema::Object(body))
+    }
+}
+
+impl ToSchema for CreateSurvey {
+    fn schemas(
+        schemas: &mut Vec<(
+            String,
+            utoipa::openapi::RefOr<utoipa::openapi::schema::Schema>,
+        )>,
+    ) {
+        // The body inlines SurveyParams' properties, so it references what they reference.
+        <SurveyParams as ToSchema>::schemas(schemas);
+    }
 }
 
 /// Download links of one UAV's files.
@@ -147,7 +195,8 @@ fn rfc3339(millis: i64) -> String {
 }
 
 fn parse_plan(row_plan: &str) -> Result<SurveyPlan, ApiError> {
-    serde_json::from_str(row_plan).map_err(|e| ApiError::Internal(format!("stored plan unreadable: {e}")))
+    serde_json::from_str(row_plan)
+        .map_err(|e| ApiError::Internal(format!("stored plan unreadable: {e}")))
 }
 
 fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
@@ -176,7 +225,9 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
         .collect();
     let cells_file = plan.files().into_iter().find(|f| f.name == "cells.geojson");
     let cells = match cells_file {
-        Some(f) => serde_json::from_str(&f.content).map_err(|e| ApiError::Internal(e.to_string()))?,
+        Some(f) => {
+            serde_json::from_str(&f.content).map_err(|e| ApiError::Internal(e.to_string()))?
+        }
         None => Value::Null,
     };
     Ok(SurveyResponse {
@@ -190,14 +241,19 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
         uavs,
         fences: plan.fences,
         warnings: plan.warnings,
-        files: SurveyFiles { cells: format!("{base}/cells.geojson") },
+        files: SurveyFiles {
+            cells: format!("{base}/cells.geojson"),
+        },
     })
 }
 
 /// Take `name` out of the request document, checking it.
 fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
     let Some(obj) = doc.as_object_mut() else {
-        return Err(ApiError::Validation(vec![Issue::new("", "the request body must be a JSON object")]));
+        return Err(ApiError::Validation(vec![Issue::new(
+            "",
+            "the request body must be a JSON object",
+        )]));
     };
     match obj.remove("name") {
         None | Some(Value::Null) => Ok(None),
@@ -206,7 +262,10 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
             "/name",
             &format!("the name is longer than {NAME_MAX_CHARS} characters"),
         )])),
-        Some(_) => Err(ApiError::Validation(vec![Issue::new("/name", "the name must be a string")])),
+        Some(_) => Err(ApiError::Validation(vec![Issue::new(
+            "/name",
+            "the name must be a string",
+        )])),
     }
 }
 
@@ -226,7 +285,10 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
         (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn create_survey(State(state): State<AppState>, JsonBody(mut doc): JsonBody) -> Result<Response, ApiError> {
+pub async fn create_survey(
+    State(state): State<AppState>,
+    JsonBody(mut doc): JsonBody,
+) -> Result<Response, ApiError> {
     let name = take_name(&mut doc)?;
     let req = SurveyRequest::from_document(&doc)?;
     let limits = state.limits.clone();
@@ -275,8 +337,15 @@ pub async fn create_survey(State(state): State<AppState>, JsonBody(mut doc): Jso
         (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn get_survey(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SurveyResponse>, ApiError> {
-    let row = state.db.get_survey(&id).await?.ok_or_else(|| not_found(&id))?;
+pub async fn get_survey(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<SurveyResponse>, ApiError> {
+    let row = state
+        .db
+        .get_survey(&id)
+        .await?
+        .ok_or_else(|| not_found(&id))?;
     Ok(Json(response(&row)?))
 }
 
@@ -295,22 +364,31 @@ pub async fn list_surveys(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<SurveyList>, ApiError> {
-    let Query(q) = query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
+    let Query(q) =
+        query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
     let limit = q.limit.unwrap_or(20);
     let offset = q.offset.unwrap_or(0);
     if !(1..=100).contains(&limit) {
-        return Err(ApiError::BadRequest(format!("limit {limit} is outside [1, 100]")));
+        return Err(ApiError::BadRequest(format!(
+            "limit {limit} is outside [1, 100]"
+        )));
     }
     if offset < 0 {
         return Err(ApiError::BadRequest(format!("offset {offset} is negative")));
     }
     let (rows, total) = state.db.list_surveys(limit, offset).await?;
     let items = rows.iter().map(summary).collect::<Result<Vec<_>, _>>()?;
-    Ok(Json(SurveyList { items, total, limit, offset }))
+    Ok(Json(SurveyList {
+        items,
+        total,
+        limit,
+        offset,
+    }))
 }
 
 fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
-    let plan: Value = serde_json::from_str(&row.plan).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let plan: Value =
+        serde_json::from_str(&row.plan).map_err(|e| ApiError::Internal(e.to_string()))?;
     let stats = &plan["stats"];
     Ok(SurveySummary {
         id: row.id.clone(),
@@ -335,7 +413,10 @@ fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
         (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn delete_survey(State(state): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+pub async fn delete_survey(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
     if state.db.delete_survey(&id).await? {
         Ok(StatusCode::NO_CONTENT)
     } else {
@@ -352,7 +433,11 @@ async fn download(
     download_name: &str,
     missing: impl FnOnce() -> String,
 ) -> Result<Response, ApiError> {
-    let row = state.db.get_survey(id).await?.ok_or_else(|| not_found(id))?;
+    let row = state
+        .db
+        .get_survey(id)
+        .await?
+        .ok_or_else(|| not_found(id))?;
     let plan = parse_plan(&row.plan)?;
     let file = plan
         .files()
@@ -362,7 +447,10 @@ async fn download(
     let disposition = format!("attachment; filename=\"{download_name}\"");
     let mut res = file.content.into_response();
     let headers = res.headers_mut();
-    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(file.content_type));
+    headers.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(file.content_type),
+    );
     if let Ok(v) = HeaderValue::from_str(&disposition) {
         headers.insert(header::CONTENT_DISPOSITION, v);
     }
@@ -409,9 +497,13 @@ pub async fn uav_file(
         }
     };
     let download_name = format!("terraplan-{}-{uav}.{ext}", short(&id));
-    download(&state, &id, &format!("{uav}.{suffix}"), &download_name, || {
-        format!("survey {id} has no UAV {uav:?}")
-    })
+    download(
+        &state,
+        &id,
+        &format!("{uav}.{suffix}"),
+        &download_name,
+        || format!("survey {id} has no UAV {uav:?}"),
+    )
     .await
 }
 
@@ -426,7 +518,13 @@ pub async fn uav_file(
         (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
     )
 )]
-pub async fn cells_file(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+pub async fn cells_file(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
     let name = format!("terraplan-{}-cells.geojson", short(&id));
-    download(&state, &id, "cells.geojson", &name, || format!("survey {id} has no cells file")).await
+    download(&state, &id, "cells.geojson", &name, || {
+        format!("survey {id} has no cells file")
+    })
+    .await
 }
