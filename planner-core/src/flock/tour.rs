@@ -212,12 +212,20 @@ impl Job {
         free: &MultiPolygon<f64>,
     ) -> CellPlan {
         let plan = &plans[self.plan];
-        let cell = cells.get(plan.cell_index);
-        let candidates: [(bool, bool); 3] = match (way, cell) {
-            (0, _) | (2, None) => return plan.clone(),
-            (1, _) | (_, None) => return reversed(plan),
-            (2, _) => [(false, true), (true, false), (true, true)],
-            _ => [(true, false), (false, true), (true, true)],
+        let forwards = way.is_multiple_of(2);
+        let Some(cell) = cells.get(plan.cell_index).filter(|_| way >= 2) else {
+            // The planned path forwards or backwards; ways 2 and 3 of a
+            // plan whose cell is missing are these too (see `new`).
+            return if forwards {
+                plan.clone()
+            } else {
+                reversed(plan)
+            };
+        };
+        let candidates: [(bool, bool); 3] = if forwards {
+            [(false, true), (true, false), (true, true)]
+        } else {
+            [(true, false), (false, true), (true, true)]
         };
         let want = self.ways[way as usize];
         let mismatch = |p: &CellPlan| match (p.entry(), p.exit()) {
@@ -226,12 +234,7 @@ impl Job {
         };
         let mut best: Option<(f64, CellPlan)> = None;
         for (reverse_order, flip_lanes) in candidates {
-            let p = plan.reoriented(
-                reverse_order,
-                flip_lanes,
-                cell.unwrap_or_else(|| unreachable!()),
-                free,
-            );
+            let p = plan.reoriented(reverse_order, flip_lanes, cell, free);
             let m = mismatch(&p);
             if m <= END_MATCH_TOL {
                 return p;

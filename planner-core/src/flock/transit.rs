@@ -35,8 +35,12 @@ use rstar::{AABB, RTree, RTreeObject, SelectionFunction};
 
 /// Geometric tolerance in metres. Lane ends computed on an NFZ border may be
 /// off it by rounding noise; a point closer than this to an obstacle boundary
-/// counts as *on* the boundary, never strictly inside.
-const EPS: f64 = 1e-6;
+/// counts as *on* the boundary, never strictly inside. The free space that
+/// lanes are clipped to and the NFZ union here come from separate boolean
+/// operations, each snapped to a grid of ~1e-9 of its extent (micrometres to
+/// tens of micrometres at survey scale), so the tolerance must sit well
+/// above that; a millimetre is still far below anything a UAV can fly.
+const EPS: f64 = 1e-3;
 
 /// Sideways probe distance used to tell an edge shared by two touching
 /// obstacles (interior on both sides) from an outer boundary.
@@ -304,7 +308,7 @@ impl ObstacleMap {
     /// interior. Touching a boundary, running along an edge, or starting on a
     /// boundary and leaving outward are all clear.
     pub fn is_clear(&self, a: Coord<f64>, b: Coord<f64>) -> bool {
-        is_finite(a) && is_finite(b) && self.segment_clear(a, b, false)
+        is_finite(a) && is_finite(b) && self.segment_clear(a, b)
     }
 
     /// Shortest polyline from `a` to `b` (both included) that avoids every
@@ -325,7 +329,7 @@ impl ObstacleMap {
                 return Err(TransitError::InsideObstacle { endpoint, point: p });
             }
         }
-        if self.segment_clear(a, b, true) {
+        if self.segment_clear(a, b) {
             return Ok(vec![a, b]);
         }
         self.find(&self.graph, a, b)
@@ -376,21 +380,16 @@ impl ObstacleMap {
 
     /// Segment test. The segment is split at every contact with an obstacle
     /// edge and each piece's midpoint is tested for strict interior; a clean
-    /// transversal crossing is an immediate "blocked". With `ends_outside`
-    /// the caller vouches that neither end is strictly inside, which lets a
-    /// segment touching no edge at all skip the point-in-polygon test.
-    fn segment_clear(&self, a: Coord<f64>, b: Coord<f64>, ends_outside: bool) -> bool {
-        self.segment_check(a, b, ends_outside).is_ok()
+    /// transversal crossing is an immediate "blocked". (A segment touching
+    /// no edge still gets its midpoint tested: it may be a chord between two
+    /// boundary points that rounding put a hair inside the obstacle.)
+    fn segment_clear(&self, a: Coord<f64>, b: Coord<f64>) -> bool {
+        self.segment_check(a, b).is_ok()
     }
 
     /// [`ObstacleMap::segment_clear`], reporting on failure the edge that
     /// was crossed cleanly, if that is what blocked the segment.
-    fn segment_check(
-        &self,
-        a: Coord<f64>,
-        b: Coord<f64>,
-        ends_outside: bool,
-    ) -> Result<(), Option<Edge>> {
+    fn segment_check(&self, a: Coord<f64>, b: Coord<f64>) -> Result<(), Option<Edge>> {
         let d = b - a;
         let len = (d.x * d.x + d.y * d.y).sqrt();
         if len <= EPS {
@@ -408,9 +407,6 @@ impl ObstacleMap {
                 Contact::Crossing => return Err(Some(*edge)),
                 Contact::Touch(ts) => cuts.extend(ts.into_iter().flatten()),
             }
-        }
-        if cuts.is_empty() && ends_outside {
-            return Ok(());
         }
         cuts.push(0.0);
         cuts.push(1.0);
@@ -571,7 +567,7 @@ impl<'m> AStar<'m> {
                 known[..=k].rotate_right(1);
                 continue;
             }
-            if let Err(blocker) = self.map.segment_check(pf, pt, true) {
+            if let Err(blocker) = self.map.segment_check(pf, pt) {
                 if let Some(edge) = blocker {
                     if known.len() == MAX_OCCLUDERS {
                         known.pop();
@@ -1047,6 +1043,18 @@ mod tests {
         // Rounding noise: a lane end a nanometre inside still counts as on it.
         let noisy = coord! { x: 10.0 - 1e-9, y: 5.0 };
         assert!(map.is_clear(noisy, coord! { x: 20.0, y: 5.0 }));
+
+        // A chord between two boundary points that rounding put a hair
+        // inside is still a chord through the obstacle.
+        let (left, right) = (
+            coord! { x: 1e-9, y: 3.0 },
+            coord! { x: 10.0 - 1e-9, y: 7.0 },
+        );
+        assert!(!map.contains_point(left) && !map.contains_point(right));
+        assert!(!map.is_clear(left, right));
+        let path = map.shortest_path(left, right).unwrap();
+        assert!(path.len() > 2);
+        assert_path_clear(&map, &path);
 
         let path = map
             .shortest_path(on_edge, coord! { x: -5.0, y: 5.0 })
