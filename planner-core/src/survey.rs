@@ -987,8 +987,8 @@ fn ring_lonlat(p: &Polygon<f64>) -> Vec<[f64; 2]> {
 }
 
 impl SurveyPlan {
-    /// The files of the plan: per UAV `.waypoints`, `.plan`, route GeoJSON
-    /// and fence `.waypoints`; the cells as GeoJSON.
+    /// The files of the plan: per UAV `.waypoints`, `.plan`, route GeoJSON,
+    /// KML and fence `.waypoints`; the cells as GeoJSON.
     pub fn files(&self) -> Vec<PlanFile> {
         let mut out = Vec::new();
         for u in &self.uavs {
@@ -1012,6 +1012,17 @@ impl SurveyPlan {
                 content_type: "application/geo+json",
                 content: pretty(&json!({"type": "FeatureCollection", "features": [gj::route_feature(&u.mission, props)]})),
             });
+            let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
+                .cells
+                .iter()
+                .filter(|c| u.cells.contains(&c.id))
+                .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
+                .collect();
+            out.push(PlanFile {
+                name: format!("{}.kml", u.id),
+                content_type: "application/vnd.google-earth.kml+xml",
+                content: export::write_kml(&format!("terraplan survey, UAV {}", u.id), &u.mission, &cell_rings),
+            });
             out.push(PlanFile {
                 name: format!("{}.fence.waypoints", u.id),
                 content_type: "text/plain; charset=utf-8",
@@ -1033,6 +1044,18 @@ impl SurveyPlan {
         });
         out
     }
+}
+
+/// The exterior ring of a GeoJSON Polygon geometry as [lon, lat] pairs.
+fn geojson_exterior(polygon: &Value) -> Vec<[f64; 2]> {
+    polygon["coordinates"][0]
+        .as_array()
+        .map(|ring| {
+            ring.iter()
+                .filter_map(|p| Some([p[0].as_f64()?, p[1].as_f64()?]))
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 fn pretty(v: &Value) -> String {

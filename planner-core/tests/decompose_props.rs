@@ -83,11 +83,7 @@ fn assert_invariants(free: &MultiPolygon<f64>, cells: &[Polygon<f64>], deg: f64,
         // Monotone: just beside every vertex (where a fold would show) a
         // slice line meets the boundary at most twice.
         let hs: Vec<f64> = open.iter().map(|&p| h(p)).collect();
-        let (lo, hi) = hs
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
-                (l.min(v), u.max(v))
-            });
+        let (lo, hi) = min_max(hs.iter().copied());
         for &v in &hs {
             for level in [v - 1e-7 * (hi - lo), v + 1e-7 * (hi - lo)] {
                 if level > lo && level < hi {
@@ -156,10 +152,16 @@ fn assert_invariants(free: &MultiPolygon<f64>, cells: &[Polygon<f64>], deg: f64,
     );
 }
 
-fn h_range<'a>(vertices: impl Iterator<Item = &'a (f64, f64)>) -> (f64, f64) {
-    vertices.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| {
-        (l.min(v.0), u.max(v.0))
+/// Smallest and largest of `values`; (∞, −∞) if there are none.
+fn min_max(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    values.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| {
+        (l.min(v), u.max(v))
     })
+}
+
+/// Range of h (the first slice coordinate) over `vertices`.
+fn h_range<'a>(vertices: impl Iterator<Item = &'a (f64, f64)>) -> (f64, f64) {
+    min_max(vertices.map(|v| v.0))
 }
 
 /// ∫ f(h) dh over the h-range of `rings`, for f piecewise smooth between
@@ -429,47 +431,60 @@ fn edge_aligned_survey() -> impl Strategy<Value = (Polygon<f64>, Vec<Polygon<f64
         })
 }
 
+/// Eight random slice lines, as fractions of the free space's extent.
+fn slice_lines() -> impl Strategy<Value = Vec<f64>> {
+    prop::collection::vec(0.0f64..1.0, 8)
+}
+
+/// Decomposes `roi` minus `zones` at `deg` and asserts all invariants on the
+/// cells. Zones may cover the whole ROI; that is the one allowed error, and
+/// then the free space is returned for the caller's own checks.
+fn check_survey(
+    roi: &Polygon<f64>,
+    zones: &[Polygon<f64>],
+    deg: f64,
+    lines: &[f64],
+) -> Result<Option<MultiPolygon<f64>>, TestCaseError> {
+    let free = free_space(roi, zones);
+    match decompose(&free, deg) {
+        Ok(cells) => {
+            assert_invariants(&free, &cells, deg, lines);
+            Ok(None)
+        }
+        Err(e) => {
+            prop_assert_eq!(e, DecomposeError::EmptyFreeSpace);
+            Ok(Some(free))
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(128))]
 
     #[test]
     fn random_surveys_decompose_validly(
         (roi, zones, deg) in survey(),
-        lines in prop::collection::vec(0.0f64..1.0, 8),
+        lines in slice_lines(),
     ) {
-        let free = free_space(&roi, &zones);
-        // Zones may cover the whole ROI; that is the one allowed error.
-        match decompose(&free, deg) {
-            Ok(cells) => assert_invariants(&free, &cells, deg, &lines),
-            Err(e) => {
-                prop_assert_eq!(e, DecomposeError::EmptyFreeSpace);
-                prop_assert!(free.unsigned_area() <= 1e-9 * roi.unsigned_area());
-            }
+        if let Some(free) = check_survey(&roi, &zones, deg, &lines)? {
+            prop_assert!(free.unsigned_area() <= 1e-9 * roi.unsigned_area());
         }
     }
 
     #[test]
     fn rectilinear_grid_surveys_decompose_validly(
         (roi, zones, deg) in grid_survey(),
-        lines in prop::collection::vec(0.0f64..1.0, 8),
+        lines in slice_lines(),
     ) {
-        let free = free_space(&roi, &zones);
-        match decompose(&free, deg) {
-            Ok(cells) => assert_invariants(&free, &cells, deg, &lines),
-            Err(e) => prop_assert_eq!(e, DecomposeError::EmptyFreeSpace),
-        }
+        check_survey(&roi, &zones, deg, &lines)?;
     }
 
     #[test]
     fn edge_aligned_slices_decompose_validly(
         (roi, zones, deg) in edge_aligned_survey(),
-        lines in prop::collection::vec(0.0f64..1.0, 8),
+        lines in slice_lines(),
     ) {
-        let free = free_space(&roi, &zones);
-        match decompose(&free, deg) {
-            Ok(cells) => assert_invariants(&free, &cells, deg, &lines),
-            Err(e) => prop_assert_eq!(e, DecomposeError::EmptyFreeSpace),
-        }
+        check_survey(&roi, &zones, deg, &lines)?;
     }
 
     /// Unit squares of a small grid given directly as a multipolygon: parts
@@ -478,7 +493,7 @@ proptest! {
     fn touching_parts_decompose_as_their_union(
         squares in prop::collection::btree_set((0i32..6, 0i32..6), 1..20),
         deg in angle(),
-        lines in prop::collection::vec(0.0f64..1.0, 8),
+        lines in slice_lines(),
     ) {
         let parts = MultiPolygon::new(
             squares.iter().map(|&(x, y)| rect(x as f64, y as f64, x as f64 + 1.0, y as f64 + 1.0)).collect(),
@@ -531,11 +546,7 @@ fn thousand_zones() {
         for cell in &cells {
             assert!(cell.is_valid() && cell.exterior().is_ccw() && cell.interiors().is_empty());
             let hs: Vec<f64> = cell.exterior().0.iter().map(|&p| h(p)).collect();
-            let (lo, hi) = hs
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), &v| {
-                    (l.min(v), u.max(v))
-                });
+            let (lo, hi) = min_max(hs.iter().copied());
             for t in [0.1, 0.5, 0.9] {
                 assert!(crossings(cell, &h, lo + t * (hi - lo)) <= 2);
             }

@@ -220,3 +220,18 @@ pub fn post(url: &str, content_type: &str, body: &[u8]) -> Reply {
 pub fn post_json(url: &str, body: &serde_json::Value) -> Reply {
     post(url, "application/json", body.to_string().as_bytes())
 }
+
+/// The example field (`examples/`) with its two no-fly zones as a
+/// `POST /api/v1/surveys` body, at slice angle 0.
+pub fn example_survey_request() -> serde_json::Value {
+    let ex = workspace().join("examples");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(ex.join(f)).expect("example file"))
+            .expect("example JSON")
+    };
+    serde_json::json!({
+        "roi": read("field.geojson"),
+        "no_fly_zones": [read("field-nfz.geojson")],
+        "slice_angle_deg": 0,
+    })
+}

@@ -6,8 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use serde_json::json;
-use terraplan_e2e::{Server, post_json, workspace};
+use terraplan_e2e::{Server, example_survey_request, post_json};
 
 #[test]
 fn thirty_two_clients_posting_surveys() {
@@ -17,11 +16,7 @@ fn thirty_two_clients_posting_surveys() {
         .unwrap_or(20);
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(dir.path(), &[]);
-    let ex = workspace().join("examples");
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap()
-    };
-    let body = json!({"roi": read("field.geojson"), "no_fly_zones": [read("field-nfz.geojson")], "slice_angle_deg": 0});
+    let body = example_survey_request();
     let url = server.url("/api/v1/surveys");
     let deadline = Instant::now() + Duration::from_secs(seconds);
     let started = Instant::now();

@@ -6,21 +6,14 @@
 use std::io::{Read, Write};
 
 use serde_json::{Value, json};
-use terraplan_e2e::{Server, delete, get, post, post_json, validator, workspace};
+use terraplan_e2e::{Server, delete, example_survey_request, get, post, post_json, validator};
 
 fn example_request() -> Value {
-    let ex = workspace().join("examples");
-    let read = |f: &str| -> Value {
-        serde_json::from_str(&std::fs::read_to_string(ex.join(f)).unwrap()).unwrap()
-    };
-    json!({
-        "name": "field with a mast",
-        "roi": read("field.geojson"),
-        "no_fly_zones": [read("field-nfz.geojson")],
-        "altitude_m": 60,
-        "slice_angle_deg": 0,
-        "uavs": [{"id": "uav1", "start": [6.0620, 51.5110]}],
-    })
+    let mut req = example_survey_request();
+    req["name"] = json!("field with a mast");
+    req["altitude_m"] = json!(60);
+    req["uavs"] = json!([{"id": "uav1", "start": [6.0620, 51.5110]}]);
+    req
 }
 
 fn assert_problem(r: &terraplan_e2e::Reply, status: u16, detail_has: &str) -> Value {
@@ -128,6 +121,9 @@ fn create_get_list_download_delete() {
         Some("application/geo+json")
     );
     assert_eq!(route_file.json()["features"][0]["geometry"], uav["route"]);
+    let kml = get(&server.url(files["kml"].as_str().unwrap()));
+    assert_eq!(kml.header("content-type"), Some("application/vnd.google-earth.kml+xml"));
+    assert!(kml.text().contains("<LineString>"));
     let fence = get(&server.url(files["fence"].as_str().unwrap()));
     assert!(fence.text().starts_with("QGC WPL 110\n"));
     let cells = get(&server.url(created["files"]["cells"].as_str().unwrap()));
@@ -374,5 +370,33 @@ fn openapi_document_and_docs_page() {
     assert!(
         page.text().contains("swagger"),
         "docs page is served locally"
+    );
+}
+
+/// SIGTERM while a heavy plan is being computed: the request still gets
+/// its 201, the survey is stored, and the server exits cleanly.
+#[test]
+fn graceful_shutdown_finishes_in_flight_requests() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    // ~90 km² at 25 m: about a second of planning (debug build).
+    let body = json!({
+        "roi": {"type": "Polygon", "coordinates": [[[8.50, 47.0], [8.62, 47.0], [8.62, 47.085], [8.50, 47.085], [8.50, 47.0]]]},
+        "altitude_m": 25,
+    });
+    let url = server.url("/api/v1/surveys");
+    let client = std::thread::spawn(move || post_json(&url, &body));
+    // The request is sent at once; planning it takes ~0.5 s, so SIGTERM lands mid-plan.
+    std::thread::sleep(std::time::Duration::from_millis(150));
+    let data_dir = server.data_dir.clone();
+    let status = server.stop();
+    let reply = client.join().unwrap();
+    assert_eq!(reply.status, 201, "{}", reply.text());
+    assert!(status.success(), "exit status {status:?}");
+    let id = reply.json()["id"].as_str().unwrap().to_string();
+    let server = Server::start(&data_dir, &[]);
+    assert_eq!(
+        get(&server.url(&format!("/api/v1/surveys/{id}"))).status,
+        200
     );
 }

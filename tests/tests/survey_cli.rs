@@ -103,6 +103,7 @@ fn example_field_with_nfz_inside_and_across_border() {
             "uav1.plan",
             "uav1.route.geojson",
             "uav1.fence.waypoints",
+            "uav1.kml",
             "cells.geojson",
         ] {
             assert!(dir.path().join("out").join(f).exists(), "{f} missing");

@@ -11,6 +11,7 @@ Prints a JSON summary; exits 1 with a message on the first failed check.
 """
 import json
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from pymavlink import mavutil, mavwp
@@ -110,6 +111,16 @@ def main():
                     trig = None
             elif it.command == CMD_WAYPOINT:
                 last_wp = it
+        # The KML route parses as XML and holds home, the waypoints, home.
+        kml = ET.parse(out / f"{uid}.kml").getroot()
+        ns = {"k": "http://www.opengis.net/kml/2.2"}
+        coords = kml.find(".//k:LineString/k:coordinates", ns).text.split()
+        if len(coords) != len(got_wps) + 2:
+            fail(f"{uid}.kml: {len(coords)} route points, expected {len(got_wps) + 2}")
+        for c, w in zip(coords[1:], got_wps):
+            lon, lat, _ = map(float, c.split(","))
+            if abs(lon - w.y) > POS_TOL_DEG or abs(lat - w.x) > POS_TOL_DEG:
+                fail(f"{uid}.kml: route point {c} differs from the mission")
         summary["uavs"][uid] = {"items": n, "waypoints": len(got_wps)}
 
     if len(lanes) != plan["stats"]["lane_count"]:

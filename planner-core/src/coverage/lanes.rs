@@ -411,6 +411,39 @@ mod tests {
         (c.x - X0, c.y - Y0)
     }
 
+    /// A 100 m square with a thin wedge cut into its east side, its tip at
+    /// (30, 20): between the first two east–west lanes at spacing 20.
+    fn wedge_cell() -> Polygon<f64> {
+        poly(&[
+            (0., 0.),
+            (100., 0.),
+            (100., 15.),
+            (30., 20.),
+            (100., 25.),
+            (100., 100.),
+            (0., 100.),
+        ])
+    }
+
+    /// A 300 × 100 m block with a notch 100 m wide and 60 m deep cut from
+    /// the north (x = 100 … 200, down to y = 40) and, if `east_notch`, one
+    /// 50 m deep cut from the east (y = 40 … 60, in to x = 250).
+    fn notched_cell(east_notch: bool) -> Polygon<f64> {
+        let mut pts = vec![(0., 0.), (300., 0.)];
+        if east_notch {
+            pts.extend([(300., 40.), (250., 40.), (250., 60.), (300., 60.)]);
+        }
+        pts.extend([
+            (300., 100.),
+            (200., 100.),
+            (200., 40.),
+            (100., 40.),
+            (100., 100.),
+            (0., 100.),
+        ]);
+        poly(&pts)
+    }
+
     /// Every flown segment (lanes and links) stays in `free`, checked with
     /// geo's exact predicates against free space grown by a micrometre.
     fn assert_flown_in_free(plan: &CellPlan, free: &MultiPolygon<f64>) {
@@ -602,18 +635,9 @@ mod tests {
 
     #[test]
     fn concave_monotone_cell_gets_safe_links() {
-        // A thin wedge cut into the east side between the first two lanes:
-        // every east–west line meets the cell once, but the straight link
-        // between their east ends would cross the wedge.
-        let cell = poly(&[
-            (0., 0.),
-            (100., 0.),
-            (100., 15.),
-            (30., 20.),
-            (100., 25.),
-            (100., 100.),
-            (0., 100.),
-        ]);
+        // Every east–west line meets the cell once, but the straight link
+        // between the east ends of the first two lanes would cross the wedge.
+        let cell = wedge_cell();
         let free = MultiPolygon(vec![cell.clone()]);
         let plan = plan_cell(0, &cell, &free, 20.0, 90.0).unwrap();
         assert_abs_diff_eq!(plan.direction_deg, 90.0, epsilon = 1e-9);
@@ -631,15 +655,7 @@ mod tests {
 
     #[test]
     fn reoriented_variants_keep_lanes_and_stay_safe() {
-        let cell = poly(&[
-            (0., 0.),
-            (100., 0.),
-            (100., 15.),
-            (30., 20.),
-            (100., 25.),
-            (100., 100.),
-            (0., 100.),
-        ]);
+        let cell = wedge_cell();
         let free = MultiPolygon(vec![cell.clone()]);
         let plan = plan_cell(0, &cell, &free, 20.0, 90.0).unwrap();
         assert_eq!(plan.reoriented(false, false, &cell, &free), plan);
@@ -690,16 +706,7 @@ mod tests {
     fn non_monotone_direction_is_rejected() {
         // A notch cut from the north: north–south lines (the slices) meet the
         // cell once, east–west lines through the notch meet it twice.
-        let cell = poly(&[
-            (0., 0.),
-            (300., 0.),
-            (300., 100.),
-            (200., 100.),
-            (200., 40.),
-            (100., 40.),
-            (100., 100.),
-            (0., 100.),
-        ]);
+        let cell = notched_cell(false);
         let free = MultiPolygon(vec![cell.clone()]);
         let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
         // East–west would need only 5 lanes, but 15 north–south ones are
@@ -730,20 +737,7 @@ mod tests {
     fn non_monotone_cell_still_gets_a_safe_plan() {
         // Notches from the north and from the east: no candidate direction
         // is monotone, so every piece of every line becomes a lane.
-        let cell = poly(&[
-            (0., 0.),
-            (300., 0.),
-            (300., 40.),
-            (250., 40.),
-            (250., 60.),
-            (300., 60.),
-            (300., 100.),
-            (200., 100.),
-            (200., 40.),
-            (100., 40.),
-            (100., 100.),
-            (0., 100.),
-        ]);
+        let cell = notched_cell(true);
         let free = MultiPolygon(vec![cell.clone()]);
         let plan = plan_cell(0, &cell, &free, 20.0, 0.0).unwrap();
         // East–west rows at y = 10 … 90: one piece each at 10 and 30, two

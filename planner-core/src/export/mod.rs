@@ -1,10 +1,12 @@
 //! Export stage: missions and their file formats (SPEC §3.6).
 
 pub mod geojson;
+pub mod kml;
 pub mod mission;
 pub mod qgc_plan;
 pub mod waypoints;
 
 pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};
+pub use kml::write_kml;
 pub use qgc_plan::write_plan;
 pub use waypoints::{write_fence, write_waypoints};

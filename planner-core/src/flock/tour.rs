@@ -786,45 +786,25 @@ fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
 mod tests {
     use super::*;
     use crate::coverage::Lane;
+    use crate::flock::test_support::{Lcg, lawnmower, rect};
     use approx::assert_relative_eq;
-    use geo_types::{LineString, coord};
-
-    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
-        Polygon::new(
-            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
-            vec![],
-        )
-    }
-
-    /// A cell `[x0, x1] × [y0, y1]` with `n` north–south lanes, the first
-    /// flown northwards.
-    fn lawnmower(cell_index: usize, cell: &Polygon<f64>, n: usize) -> CellPlan {
-        let r = cell.exterior().0.clone();
-        let (x0, y0, x1, y1) = (r[0].x, r[0].y, r[2].x, r[2].y);
-        let spacing = (x1 - x0) / n as f64;
-        let lanes: Vec<Lane> = (0..n)
-            .map(|k| {
-                let x = x0 + (k as f64 + 0.5) * spacing;
-                let (s, e) = (coord! { x: x, y: y0 + 1.0 }, coord! { x: x, y: y1 - 1.0 });
-                if k % 2 == 0 {
-                    Lane { start: s, end: e }
-                } else {
-                    Lane { start: e, end: s }
-                }
-            })
-            .collect();
-        CellPlan {
-            cell_index,
-            direction_deg: 0.0,
-            links: vec![Vec::new(); n - 1],
-            lanes,
-        }
-    }
+    use geo_types::coord;
 
     struct Case {
         cells: Vec<Polygon<f64>>,
         plans: Vec<CellPlan>,
         free: MultiPolygon<f64>,
+    }
+
+    impl Case {
+        /// The jobs `plan_tour` makes of the plans (every cell is present).
+        fn jobs(&self) -> Vec<Job> {
+            self.plans
+                .iter()
+                .enumerate()
+                .filter_map(|(i, p)| Job::new(i, p, true))
+                .collect()
+        }
     }
 
     fn case(cells: Vec<Polygon<f64>>, lanes: usize, order: &[usize]) -> Case {
@@ -943,12 +923,7 @@ mod tests {
         assert!(planned < given / 4.0, "{planned} vs {given}");
         // At least as good as the hand-made answer: a row-by-row serpentine
         // with the best ways for that order.
-        let jobs: Vec<Job> = c
-            .plans
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| Job::new(i, p, true))
-            .collect();
+        let jobs = c.jobs();
         let mut search = Search::new(start, &jobs);
         let job_of_cell = |cell: usize| c.plans.iter().position(|p| p.cell_index == cell).unwrap();
         for j in 0..6 {
@@ -1013,34 +988,27 @@ mod tests {
 
     #[test]
     fn small_random_instances_are_solved_optimally() {
-        let mut seed = 3u64;
-        let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Lcg(3);
         let map = ObstacleMap::new(&MultiPolygon(vec![]), 1.0);
         let mut worse = 0;
         for _ in 0..40 {
             let cells: Vec<_> = (0..6)
                 .map(|_| {
-                    let (x, y) = (rnd() * 300.0, rnd() * 300.0);
-                    rect(x, y, x + 10.0 + rnd() * 40.0, y + 10.0 + rnd() * 40.0)
+                    let (x, y) = (rng.next() * 300.0, rng.next() * 300.0);
+                    rect(
+                        x,
+                        y,
+                        x + 10.0 + rng.next() * 40.0,
+                        y + 10.0 + rng.next() * 40.0,
+                    )
                 })
                 .collect();
-            let lanes = 1 + (rnd() * 4.0) as usize;
+            let lanes = 1 + (rng.next() * 4.0) as usize;
             let c = case(cells, lanes, &[0, 1, 2, 3, 4, 5]);
-            let start = coord! { x: rnd() * 300.0, y: rnd() * 300.0 };
+            let start = coord! { x: rng.next() * 300.0, y: rng.next() * 300.0 };
             let tour = plan_tour(start, &c.plans, &c.cells, &c.free, &map).unwrap();
             check_tour(&tour, start, &map, &c);
-            let jobs: Vec<Job> = c
-                .plans
-                .iter()
-                .enumerate()
-                .filter_map(|(i, p)| Job::new(i, p, true))
-                .collect();
-            let optimum = brute_force(start, &jobs);
+            let optimum = brute_force(start, &c.jobs());
             let got = tour.transit_length_m();
             assert!(got >= optimum - 1e-6);
             if got > optimum + 1e-6 {
@@ -1140,15 +1108,9 @@ mod timing {
     //! `cargo test --release -p planner-core --lib flock::tour::timing -- --ignored --nocapture`
     use super::*;
     use crate::coverage::Lane;
+    use crate::flock::test_support::{Lcg, lawnmower, octagon_field, rect};
     use geo_types::{LineString, coord};
     use std::time::Instant;
-
-    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
-        Polygon::new(
-            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
-            vec![],
-        )
-    }
 
     #[test]
     #[ignore = "timing run, not a check"]
@@ -1156,34 +1118,14 @@ mod timing {
         // ~1000 random 8-gon NFZs on a 32 × 32 grid of 300 m blocks, and
         // 2000 small 20 × 20 m cells dropped wherever they fit: most legs
         // have to bend round NFZs.
-        let mut seed = 5u64;
-        let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Lcg(5);
         let (blocks, block) = (32, 300.0);
-        let mut nfz = Vec::new();
-        for i in 0..blocks {
-            for j in 0..blocks {
-                let cx = (i as f64 + 0.5) * block + (rnd() - 0.5) * 0.2 * block;
-                let cy = (j as f64 + 0.5) * block + (rnd() - 0.5) * 0.2 * block;
-                let pts: Vec<(f64, f64)> = (0..8)
-                    .map(|m| {
-                        let ang = (m as f64 + 0.8 * rnd()) / 8.0 * std::f64::consts::TAU;
-                        let r = block * (0.1 + 0.3 * rnd());
-                        (cx + r * ang.cos(), cy + r * ang.sin())
-                    })
-                    .collect();
-                nfz.push(Polygon::new(LineString::from(pts), vec![]));
-            }
-        }
+        let nfz = octagon_field(&mut rng, blocks, block, coord! { x: 0.0, y: 0.0 });
         let map = ObstacleMap::new(&MultiPolygon(nfz), 2.0);
         let side = blocks as f64 * block;
         let mut cells = Vec::new();
         while cells.len() < 2000 {
-            let (x, y) = (rnd() * (side - 20.0), rnd() * (side - 20.0));
+            let (x, y) = (rng.next() * (side - 20.0), rng.next() * (side - 20.0));
             let c = rect(x, y, x + 20.0, y + 20.0);
             let ring = &c.exterior().0;
             if ring.windows(2).all(|w| map.is_clear(w[0], w[1]))
@@ -1262,27 +1204,7 @@ mod timing {
         let plans: Vec<CellPlan> = (0..n)
             .map(|k| {
                 let i = (k * 7 + 3) % n;
-                let c = cells[i].exterior().0.clone();
-                let lanes = (0..4)
-                    .map(|l| {
-                        let x = c[0].x + 5.0 + 10.0 * l as f64;
-                        let (s, e) = (
-                            coord! { x: x, y: c[0].y + 1.0 },
-                            coord! { x: x, y: c[2].y - 1.0 },
-                        );
-                        if l % 2 == 0 {
-                            Lane { start: s, end: e }
-                        } else {
-                            Lane { start: e, end: s }
-                        }
-                    })
-                    .collect();
-                CellPlan {
-                    cell_index: i,
-                    direction_deg: 0.0,
-                    lanes,
-                    links: vec![Vec::new(); 3],
-                }
+                lawnmower(i, &cells[i], 4)
             })
             .collect();
         let t = Instant::now();

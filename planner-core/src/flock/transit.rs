@@ -945,15 +945,9 @@ fn clean_ring(ring: &LineString<f64>, ccw: bool) -> Option<Vec<Coord<f64>>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::flock::test_support::{Lcg, rect};
     use approx::assert_relative_eq;
     use geo_types::{Polygon, coord};
-
-    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Polygon<f64> {
-        Polygon::new(
-            LineString::from(vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]),
-            vec![],
-        )
-    }
 
     fn assert_path_clear(map: &ObstacleMap, path: &[Coord<f64>]) {
         for w in path.windows(2) {
@@ -1315,19 +1309,6 @@ mod tests {
         }
     }
 
-    /// Small deterministic generator so the comparison is reproducible.
-    struct Lcg(u64);
-
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
-
     /// Random star-shaped (often non-convex) polygons on a jittered grid.
     fn random_obstacles(rng: &mut Lcg, cells: usize, cell: f64) -> MultiPolygon<f64> {
         let mut polys = Vec::new();
@@ -1415,38 +1396,21 @@ mod tests {
 mod timing {
     //! `cargo test --release -p planner-core --lib flock::transit::timing -- --ignored --nocapture`
     use super::*;
+    use crate::flock::test_support::{Lcg, octagon_field};
     use geo_types::{Polygon, coord};
     use std::time::Instant;
 
     #[test]
     #[ignore = "timing run, not a check"]
     fn large_field() {
-        let mut seed = 11u64;
-        let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Lcg(11);
         let (cells, cell) = (32, 300.0);
-        let mut polys = Vec::new();
-        for i in 0..cells {
-            for j in 0..cells {
-                let cx = (i as f64 + 0.5) * cell + (rnd() - 0.5) * 0.2 * cell;
-                let cy = (j as f64 + 0.5) * cell + (rnd() - 0.5) * 0.2 * cell;
-                let pts: Vec<(f64, f64)> = (0..8)
-                    .map(|m| {
-                        let ang = (m as f64 + 0.8 * rnd()) / 8.0 * std::f64::consts::TAU;
-                        let r = cell * (0.1 + 0.3 * rnd());
-                        (
-                            500_000.0 + cx + r * ang.cos(),
-                            5_000_000.0 + cy + r * ang.sin(),
-                        )
-                    })
-                    .collect();
-                polys.push(Polygon::new(LineString::from(pts), vec![]));
-            }
-        }
+        let mut polys = octagon_field(
+            &mut rng,
+            cells,
+            cell,
+            coord! { x: 500_000.0, y: 5_000_000.0 },
+        );
         // A walled yard outside the field, for unreachable goals.
         polys.push(Polygon::new(
             LineString::from(vec![
@@ -1482,10 +1446,11 @@ mod timing {
         for (label, reach) in [("short (≤ 600 m)", 600.0), ("long (any)", side)] {
             let mut queries = Vec::new();
             while queries.len() < 1000 {
-                let a = coord! { x: 500_000.0 + rnd() * side, y: 5_000_000.0 + rnd() * side };
+                let a =
+                    coord! { x: 500_000.0 + rng.next() * side, y: 5_000_000.0 + rng.next() * side };
                 let b = coord! {
-                    x: (a.x + (rnd() - 0.5) * 2.0 * reach).clamp(500_000.0, 500_000.0 + side),
-                    y: (a.y + (rnd() - 0.5) * 2.0 * reach).clamp(5_000_000.0, 5_000_000.0 + side),
+                    x: (a.x + (rng.next() - 0.5) * 2.0 * reach).clamp(500_000.0, 500_000.0 + side),
+                    y: (a.y + (rng.next() - 0.5) * 2.0 * reach).clamp(5_000_000.0, 5_000_000.0 + side),
                 };
                 if !map.contains_point(a) && !map.contains_point(b) {
                     queries.push((a, b));

@@ -97,6 +97,8 @@ pub struct UavFiles {
     route: String,
     /// Fence mission (commands 5001/5002).
     fence: String,
+    /// KML of the route and the UAV's cells, for Google Earth.
+    kml: String,
 }
 
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -219,6 +221,7 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
                     plan: f("mission.plan"),
                     route: f("route.geojson"),
                     fence: f("fence.waypoints"),
+                    kml: f("route.kml"),
                 },
             }
         })
@@ -462,7 +465,7 @@ fn short(id: &str) -> &str {
 }
 
 /// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
-/// (QGroundControl), `route.geojson` or `fence.waypoints`.
+/// (QGroundControl), `route.geojson`, `route.kml` or `fence.waypoints`.
 #[utoipa::path(
     get,
     path = "/api/v1/surveys/{id}/uavs/{uav}/{file}",
@@ -470,13 +473,14 @@ fn short(id: &str) -> &str {
     params(
         ("id" = String, Path, description = "Survey id"),
         ("uav" = String, Path, description = "UAV id"),
-        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, fence.waypoints"),
+        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints"),
     ),
     responses(
         (status = 200, description = "The file, as an attachment", content(
             (String = "text/plain"),
             (Object = "application/json"),
             (Object = "application/geo+json"),
+            (String = "application/vnd.google-earth.kml+xml"),
         )),
         (status = 404, description = "No such survey, UAV or file", body = Problem, content_type = "application/problem+json"),
     )
@@ -490,9 +494,11 @@ pub async fn uav_file(
         "mission.plan" => ("plan", "plan"),
         "route.geojson" => ("route.geojson", "route.geojson"),
         "fence.waypoints" => ("fence.waypoints", "fence.waypoints"),
+        "route.kml" => ("kml", "kml"),
         other => {
             return Err(ApiError::NotFound(format!(
-                "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, fence.waypoints"
+                "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, route.kml, \
+                 fence.waypoints"
             )));
         }
     };
