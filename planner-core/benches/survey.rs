@@ -57,11 +57,13 @@ fn roi() -> Polygon<f64> {
     polygon![(x: 0.0, y: 0.0), (x: SIDE_M, y: 0.0), (x: SIDE_M, y: SIDE_M), (x: 0.0, y: SIDE_M)]
 }
 
+/// Plans every cell, indexing the free space once (as the survey does).
 fn cover(cells: &[Polygon<f64>], free: &MultiPolygon<f64>) -> Vec<CellPlan> {
+    let free = coverage::FreeSpace::new(free);
     cells
         .iter()
         .enumerate()
-        .filter_map(|(i, c)| coverage::plan_cell(i, c, free, SPACING_M, 0.0))
+        .filter_map(|(i, c)| coverage::plan_cell_in(i, c, &free, SPACING_M, 0.0))
         .collect()
 }
 

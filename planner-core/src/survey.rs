@@ -2,7 +2,7 @@
 //! stage by stage (SPEC §3). The CLI and the service both call
 //! [`plan_survey`] and write [`SurveyPlan::files`].
 
-use geo::{Area, BooleanOps, ConvexHull, Euclidean, Length, MultiPoint};
+use geo::{Area, ConvexHull, Euclidean, Length, MultiPoint};
 use geo_types::{Coord, MultiPolygon, Point, Polygon};
 use serde::{Deserialize, Deserializer, Serialize};
 use serde_json::{Map, Value, json};
@@ -731,22 +731,15 @@ fn free_space(area: &SurveyArea) -> MultiPolygon<f64> {
     }
     if area.roi.0.len() > 1 {
         // Overlapping ROI parts must not be surveyed twice.
-        let mut acc = MultiPolygon::<f64>(Vec::new());
-        for p in parts {
-            acc = acc.union(&MultiPolygon(vec![p]));
-        }
-        acc
+        geo::unary_union(parts.iter())
     } else {
         MultiPolygon(parts)
     }
 }
 
+/// One pass over all zones: folding pairwise unions is quadratic.
 fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
-    let mut acc = MultiPolygon::<f64>(Vec::new());
-    for p in no_fly {
-        acc = acc.union(&MultiPolygon(vec![p.clone()]));
-    }
-    acc
+    geo::unary_union(no_fly.iter())
 }
 
 /// Cells at one slice angle and the lawnmower plan of each.
@@ -771,6 +764,8 @@ fn decompose_and_cover(
         SliceAngle::Auto => auto_candidates(free),
     };
     let mut best: Option<Decomposition> = None;
+    // Index the free space once for every cell of every candidate angle.
+    let free_space = coverage::FreeSpace::new(free);
     for a in candidates {
         let cells = decompose::decompose(free, a).map_err(|e| match e {
             decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
@@ -782,7 +777,7 @@ fn decompose_and_cover(
         let plans: Vec<CellPlan> = cells
             .iter()
             .enumerate()
-            .filter_map(|(i, c)| coverage::plan_cell(i, c, free, spacing, a))
+            .filter_map(|(i, c)| coverage::plan_cell_in(i, c, &free_space, spacing, a))
             .collect();
         let turns: usize = plans.iter().map(CellPlan::turns).sum();
         let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();
@@ -1021,7 +1016,11 @@ impl SurveyPlan {
             out.push(PlanFile {
                 name: format!("{}.kml", u.id),
                 content_type: "application/vnd.google-earth.kml+xml",
-                content: export::write_kml(&format!("terraplan survey, UAV {}", u.id), &u.mission, &cell_rings),
+                content: export::write_kml(
+                    &format!("terraplan survey, UAV {}", u.id),
+                    &u.mission,
+                    &cell_rings,
+                ),
             });
             out.push(PlanFile {
                 name: format!("{}.fence.waypoints", u.id),

@@ -122,7 +122,10 @@ fn create_get_list_download_delete() {
     );
     assert_eq!(route_file.json()["features"][0]["geometry"], uav["route"]);
     let kml = get(&server.url(files["kml"].as_str().unwrap()));
-    assert_eq!(kml.header("content-type"), Some("application/vnd.google-earth.kml+xml"));
+    assert_eq!(
+        kml.header("content-type"),
+        Some("application/vnd.google-earth.kml+xml")
+    );
     assert!(kml.text().contains("<LineString>"));
     let fence = get(&server.url(files["fence"].as_str().unwrap()));
     assert!(fence.text().starts_with("QGC WPL 110\n"));

@@ -11,7 +11,7 @@ use geo::Area;
 use geo_types::{Coord, MultiPolygon, Polygon};
 
 use super::links::LinkRouter;
-use super::region::{EPS, Region, dot, is_positive};
+use super::region::{EPS, FreeSpace, Region, dot, is_positive};
 use super::{CellPlan, Lane};
 
 /// More lanes than this in one cell means the spacing is absurdly small for
@@ -26,10 +26,31 @@ const MAX_ROWS: usize = 100_000;
 /// Returns `None` for a degenerate cell (fewer than three distinct vertices,
 /// no area, non-finite coordinates) or a spacing that is not a positive
 /// number (or so small that the cell would need more than 100 000 lanes).
+///
+/// Prepares `free` on every call; to plan many cells in the same free space,
+/// prepare it once and use [`plan_cell_in`].
 pub fn plan_cell(
     cell_index: usize,
     cell: &Polygon<f64>,
     free: &MultiPolygon<f64>,
+    line_spacing_m: f64,
+    slice_angle_deg: f64,
+) -> Option<CellPlan> {
+    plan_cell_in(
+        cell_index,
+        cell,
+        &FreeSpace::new(free),
+        line_spacing_m,
+        slice_angle_deg,
+    )
+}
+
+/// [`plan_cell`] against free space prepared once ([`FreeSpace::new`]):
+/// the same plan, but each query only looks at the free-space edges near it.
+pub fn plan_cell_in(
+    cell_index: usize,
+    cell: &Polygon<f64>,
+    free: &FreeSpace,
     line_spacing_m: f64,
     slice_angle_deg: f64,
 ) -> Option<CellPlan> {
@@ -83,11 +104,11 @@ pub fn plan_cell(
             .filter(|l| l.lane_count() == fewest)
             .collect();
     }
-    let free_region = Region::from_multi_polygon(free);
+    let free_region = free.region();
     let router = LinkRouter::new(cell, free);
     let mut best: Option<CellPlan> = None;
     for layout in &finalists {
-        let lanes = layout.lanes(&ring, &free_region);
+        let lanes = layout.lanes(&ring, free_region);
         if lanes.is_empty() {
             continue;
         }
@@ -823,5 +844,51 @@ mod tests {
         assert_eq!(b.len(), 5);
         assert_abs_diff_eq!(b[0], 150.0, epsilon = 1e-9);
         assert!(b.iter().all(|x| (0.0..180.0).contains(x)));
+    }
+
+    #[test]
+    fn indexed_free_space_gives_identical_plans() {
+        // Many NFZs (some overlapping each other or the ROI border): every
+        // cell's plan and every re-orientation must be exactly the same
+        // with the R-tree as with a scan over all free-space edges.
+        let free = super::super::region::tests::field_with_nfzs(120);
+        let indexed = FreeSpace::new(&free);
+        let plain = FreeSpace::unindexed(&free);
+        let (mut plans, mut routed) = (0, 0);
+        for angle in [0.0, 37.0, 90.0] {
+            let cells = crate::decompose::decompose(&free, angle).unwrap();
+            assert!(cells.len() > 100, "{}", cells.len());
+            for (i, cell) in cells.iter().enumerate() {
+                for spacing in [9.0, 27.0] {
+                    let want = plan_cell_in(i, cell, &plain, spacing, angle);
+                    let got = plan_cell_in(i, cell, &indexed, spacing, angle);
+                    assert_eq!(got, want, "cell {i} at {angle}°, spacing {spacing}");
+                    let Some(plan) = want else { continue };
+                    plans += 1;
+                    routed += plan.links.iter().filter(|l| !l.is_empty()).count();
+                    for (rev, flip) in [(false, true), (true, false), (true, true)] {
+                        assert_eq!(
+                            plan.reoriented_in(rev, flip, cell, &indexed),
+                            plan.reoriented_in(rev, flip, cell, &plain),
+                            "cell {i} at {angle}°: {rev} {flip}"
+                        );
+                    }
+                }
+            }
+        }
+        // The field exercises the interesting paths: many plans, and links
+        // that had to be routed round something.
+        assert!(
+            plans > 500 && routed > 10,
+            "{plans} plans, {routed} routed links"
+        );
+        // The convenience entry point agrees too.
+        let cells = crate::decompose::decompose(&free, 0.0).unwrap();
+        for (i, cell) in cells.iter().enumerate().step_by(17) {
+            assert_eq!(
+                plan_cell(i, cell, &free, 27.0, 0.0),
+                plan_cell_in(i, cell, &indexed, 27.0, 0.0)
+            );
+        }
     }
 }

@@ -10,7 +10,7 @@
 
 use geo_types::{Coord, MultiPolygon, Polygon};
 
-use super::region::{EPS, Region, closest_on_segment, dist};
+use super::region::{EPS, FreeSpace, Region, closest_on_segment, dist};
 use super::{CellPlan, Lane};
 
 impl CellPlan {
@@ -22,12 +22,27 @@ impl CellPlan {
     ///
     /// `reoriented(false, false, ..)` on a plan from
     /// [`plan_cell`](super::plan_cell) gives back the same plan.
+    ///
+    /// Prepares `free` on every call; to re-orient many plans in the same
+    /// free space, prepare it once and use [`CellPlan::reoriented_in`].
     pub fn reoriented(
         &self,
         reverse_order: bool,
         flip_lanes: bool,
         cell: &Polygon<f64>,
         free: &MultiPolygon<f64>,
+    ) -> CellPlan {
+        self.reoriented_in(reverse_order, flip_lanes, cell, &FreeSpace::new(free))
+    }
+
+    /// [`CellPlan::reoriented`] against free space prepared once
+    /// ([`FreeSpace::new`]); same result.
+    pub fn reoriented_in(
+        &self,
+        reverse_order: bool,
+        flip_lanes: bool,
+        cell: &Polygon<f64>,
+        free: &FreeSpace,
     ) -> CellPlan {
         let mut lanes = self.lanes.clone();
         if reverse_order {
@@ -52,15 +67,15 @@ impl CellPlan {
 }
 
 /// Computes links inside one cell; holds the prepared cell and free space.
-pub(crate) struct LinkRouter {
+pub(crate) struct LinkRouter<'a> {
     cell: Region,
-    free: Region,
+    free: &'a Region,
     /// Exterior ring of the cell without the closing point.
     ring: Vec<Coord<f64>>,
 }
 
-impl LinkRouter {
-    pub(crate) fn new(cell: &Polygon<f64>, free: &MultiPolygon<f64>) -> Self {
+impl<'a> LinkRouter<'a> {
+    pub(crate) fn new(cell: &Polygon<f64>, free: &'a FreeSpace) -> Self {
         let mut ring: Vec<Coord<f64>> = Vec::with_capacity(cell.exterior().0.len());
         for &c in &cell.exterior().0 {
             if ring.last().is_none_or(|l| dist(*l, c) > 0.0) {
@@ -72,7 +87,7 @@ impl LinkRouter {
         }
         LinkRouter {
             cell: Region::from_polygon(cell),
-            free: Region::from_multi_polygon(free),
+            free: free.region(),
             ring,
         }
     }
@@ -247,7 +262,8 @@ mod tests {
     fn straight_link_when_free() {
         let cell = c_cell();
         let free = MultiPolygon(vec![cell.clone()]);
-        let router = LinkRouter::new(&cell, &free);
+        let free_space = FreeSpace::new(&free);
+        let router = LinkRouter::new(&cell, &free_space);
         let from = Lane {
             start: coord! { x: 10., y: 10. },
             end: coord! { x: 10., y: 90. },
@@ -263,7 +279,8 @@ mod tests {
     fn link_round_the_notch() {
         let cell = c_cell();
         let free = MultiPolygon(vec![cell.clone()]);
-        let router = LinkRouter::new(&cell, &free);
+        let free_space = FreeSpace::new(&free);
+        let router = LinkRouter::new(&cell, &free_space);
         // Lane along the bottom arm flown west to east, next lane along the
         // top arm: the straight link would cross the notch.
         let from = Lane {
@@ -306,7 +323,7 @@ mod tests {
         let plan = CellPlan {
             cell_index: 3,
             direction_deg: 90.0,
-            links: LinkRouter::new(&cell, &free).links(&lanes),
+            links: LinkRouter::new(&cell, &FreeSpace::new(&free)).links(&lanes),
             lanes,
         };
         let flipped = plan.reoriented(false, true, &cell, &free);

@@ -6,7 +6,10 @@ use super::mission::{AltitudeFrame, Mission};
 
 /// Escape text for XML character data and attribute values.
 fn xml(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 /// A KML document with the route of `mission` as a 3D LineString and each
@@ -30,8 +33,14 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
         out,
         "<Style id=\"cell\"><LineStyle><color>ffffaa00</color></LineStyle><PolyStyle><color>3fffaa00</color></PolyStyle></Style>"
     );
-    let _ = writeln!(out, "<Placemark>\n<name>route</name>\n<styleUrl>#route</styleUrl>");
-    let _ = writeln!(out, "<LineString>\n<altitudeMode>{mode}</altitudeMode>\n<coordinates>");
+    let _ = writeln!(
+        out,
+        "<Placemark>\n<name>route</name>\n<styleUrl>#route</styleUrl>"
+    );
+    let _ = writeln!(
+        out,
+        "<LineString>\n<altitudeMode>{mode}</altitudeMode>\n<coordinates>"
+    );
     let home = mission.home;
     let _ = writeln!(out, "{:.8},{:.8},0", home.lon, home.lat);
     for w in mission.waypoints() {
@@ -40,7 +49,11 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
     let _ = writeln!(out, "{:.8},{:.8},0", home.lon, home.lat);
     let _ = writeln!(out, "</coordinates>\n</LineString>\n</Placemark>");
     for (cell_name, ring) in cells {
-        let _ = writeln!(out, "<Placemark>\n<name>{}</name>\n<styleUrl>#cell</styleUrl>", xml(cell_name));
+        let _ = writeln!(
+            out,
+            "<Placemark>\n<name>{}</name>\n<styleUrl>#cell</styleUrl>",
+            xml(cell_name)
+        );
         let _ = writeln!(
             out,
             "<Polygon>\n<altitudeMode>clampToGround</altitudeMode>\n<outerBoundaryIs><LinearRing><coordinates>"
@@ -48,7 +61,10 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
         for p in ring {
             let _ = writeln!(out, "{:.8},{:.8},0", p[0], p[1]);
         }
-        let _ = writeln!(out, "</coordinates></LinearRing></outerBoundaryIs>\n</Polygon>\n</Placemark>");
+        let _ = writeln!(
+            out,
+            "</coordinates></LinearRing></outerBoundaryIs>\n</Polygon>\n</Placemark>"
+        );
     }
     let _ = writeln!(out, "</Document>\n</kml>");
     out
@@ -62,22 +78,46 @@ mod tests {
     #[test]
     fn route_and_cells_in_order() {
         let m = Mission {
-            home: GeoPoint { lon: 1.0, lat: 2.0, alt: 0.0 },
+            home: GeoPoint {
+                lon: 1.0,
+                lat: 2.0,
+                alt: 0.0,
+            },
             frame: AltitudeFrame::Relative,
             cruise_speed_m_s: 5.0,
             items: vec![
                 MissionItem::Takeoff { alt: 30.0 },
-                MissionItem::Waypoint(GeoPoint { lon: 1.5, lat: 2.5, alt: 30.0 }),
+                MissionItem::Waypoint(GeoPoint {
+                    lon: 1.5,
+                    lat: 2.5,
+                    alt: 30.0,
+                }),
                 MissionItem::ReturnToLaunch,
             ],
         };
-        let cells = vec![("cell <0>".to_string(), vec![[1.0, 2.0], [1.1, 2.0], [1.1, 2.1], [1.0, 2.0]])];
+        let cells = vec![(
+            "cell <0>".to_string(),
+            vec![[1.0, 2.0], [1.1, 2.0], [1.1, 2.1], [1.0, 2.0]],
+        )];
         let k = write_kml("a & b", &m, &cells);
         assert!(k.contains("<name>a &amp; b</name>"));
         assert!(k.contains("<name>cell &lt;0&gt;</name>"));
         assert!(k.contains("<altitudeMode>relativeToGround</altitudeMode>"));
-        let route = k.split("<coordinates>").nth(1).unwrap().split("</coordinates>").next().unwrap();
+        let route = k
+            .split("<coordinates>")
+            .nth(1)
+            .unwrap()
+            .split("</coordinates>")
+            .next()
+            .unwrap();
         let lines: Vec<&str> = route.trim().lines().collect();
-        assert_eq!(lines, ["1.00000000,2.00000000,0", "1.50000000,2.50000000,30.000", "1.00000000,2.00000000,0"]);
+        assert_eq!(
+            lines,
+            [
+                "1.00000000,2.00000000,0",
+                "1.50000000,2.50000000,30.000",
+                "1.00000000,2.00000000,0"
+            ]
+        );
     }
 }

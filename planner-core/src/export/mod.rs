@@ -6,7 +6,7 @@ pub mod mission;
 pub mod qgc_plan;
 pub mod waypoints;
 
-pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};
 pub use kml::write_kml;
+pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};
 pub use qgc_plan::write_plan;
 pub use waypoints::{write_fence, write_waypoints};

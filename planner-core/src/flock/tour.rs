@@ -31,7 +31,7 @@ use rstar::RTree;
 use rstar::primitives::GeomWithData;
 
 use super::transit::{Endpoint, ObstacleMap, TransitError, polyline_length};
-use crate::coverage::CellPlan;
+use crate::coverage::{CellPlan, FreeSpace};
 
 /// The flight of one UAV: its cells in order and the transits around them.
 #[derive(Clone, Debug, PartialEq)]
@@ -135,10 +135,12 @@ pub fn plan_tour(
     legs.budget = QUERY_BUDGET_BASE + QUERY_BUDGET_PER_CELL * jobs.len();
     search.improve(&mut legs);
 
+    // Indexed once for all re-oriented cells.
+    let free = FreeSpace::new(free);
     let visits: Vec<CellPlan> = search
         .seq
         .iter()
-        .map(|&(j, way)| jobs[j].materialise(way, plans, cells, free))
+        .map(|&(j, way)| jobs[j].materialise(way, plans, cells, &free))
         .collect();
     let mut transits = Vec::with_capacity(visits.len() + 1);
     let mut at = start;
@@ -209,7 +211,7 @@ impl Job {
         way: u8,
         plans: &[CellPlan],
         cells: &[Polygon<f64>],
-        free: &MultiPolygon<f64>,
+        free: &FreeSpace,
     ) -> CellPlan {
         let plan = &plans[self.plan];
         let forwards = way.is_multiple_of(2);
@@ -234,7 +236,7 @@ impl Job {
         };
         let mut best: Option<(f64, CellPlan)> = None;
         for (reverse_order, flip_lanes) in candidates {
-            let p = plan.reoriented(reverse_order, flip_lanes, cell, free);
+            let p = plan.reoriented_in(reverse_order, flip_lanes, cell, free);
             let m = mismatch(&p);
             if m <= END_MATCH_TOL {
                 return p;
