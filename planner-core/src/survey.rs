@@ -982,68 +982,112 @@ fn ring_lonlat(p: &Polygon<f64>) -> Vec<[f64; 2]> {
 }
 
 impl SurveyPlan {
-    /// The files of the plan: per UAV `.waypoints`, `.plan`, route GeoJSON,
-    /// KML and fence `.waypoints`; the cells as GeoJSON.
+    /// Names of the plan's files: per UAV `<id>.waypoints`, `<id>.plan`,
+    /// `<id>.route.geojson`, `<id>.kml` and `<id>.fence.waypoints`; then
+    /// `cells.geojson`.
+    pub fn file_names(&self) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .uavs
+            .iter()
+            .flat_map(|u| {
+                UAV_FILE_SUFFIXES
+                    .iter()
+                    .map(move |suffix| format!("{}.{suffix}", u.id))
+            })
+            .collect();
+        out.push(CELLS_FILE.to_string());
+        out
+    }
+
+    /// Every file of the plan, rendered.
     pub fn files(&self) -> Vec<PlanFile> {
-        let mut out = Vec::new();
-        for u in &self.uavs {
-            out.push(PlanFile {
-                name: format!("{}.waypoints", u.id),
-                content_type: "text/plain; charset=utf-8",
-                content: export::write_waypoints(&u.mission),
-            });
-            out.push(PlanFile {
-                name: format!("{}.plan", u.id),
-                content_type: "application/json",
-                content: pretty(&export::write_plan(&u.mission, &self.fences)),
-            });
-            let mut props = Map::new();
-            props.insert("uav".into(), json!(u.id));
-            props.insert("altitude_frame".into(), json!(self.altitude_frame));
-            props.insert("length_m".into(), json!(u.stats.length_m));
-            props.insert("flight_time_s".into(), json!(u.stats.flight_time_s));
-            out.push(PlanFile {
-                name: format!("{}.route.geojson", u.id),
+        self.file_names()
+            .iter()
+            .filter_map(|n| self.file(n))
+            .collect()
+    }
+
+    /// One file of the plan by name (see [`SurveyPlan::file_names`]),
+    /// rendered alone; `None` for an unknown name.
+    pub fn file(&self, name: &str) -> Option<PlanFile> {
+        if name == CELLS_FILE {
+            return Some(PlanFile {
+                name: name.to_string(),
                 content_type: "application/geo+json",
-                content: pretty(&json!({"type": "FeatureCollection", "features": [gj::route_feature(&u.mission, props)]})),
-            });
-            let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
-                .cells
-                .iter()
-                .filter(|c| u.cells.contains(&c.id))
-                .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
-                .collect();
-            out.push(PlanFile {
-                name: format!("{}.kml", u.id),
-                content_type: "application/vnd.google-earth.kml+xml",
-                content: export::write_kml(
-                    &format!("terraplan survey, UAV {}", u.id),
-                    &u.mission,
-                    &cell_rings,
-                ),
-            });
-            out.push(PlanFile {
-                name: format!("{}.fence.waypoints", u.id),
-                content_type: "text/plain; charset=utf-8",
-                content: export::write_fence(&self.fences),
+                content: pretty(&self.cells_geojson()),
             });
         }
-        let cells = gj::feature_collection(self.cells.iter().map(|c| {
+        let (u, suffix) = self.uavs.iter().find_map(|u| {
+            let rest = name.strip_prefix(u.id.as_str())?.strip_prefix('.')?;
+            UAV_FILE_SUFFIXES.contains(&rest).then_some((u, rest))
+        })?;
+        let (content_type, content) = match suffix {
+            "waypoints" => (
+                "text/plain; charset=utf-8",
+                export::write_waypoints(&u.mission),
+            ),
+            "plan" => (
+                "application/json",
+                pretty(&export::write_plan(&u.mission, &self.fences)),
+            ),
+            "route.geojson" => {
+                let mut props = Map::new();
+                props.insert("uav".into(), json!(u.id));
+                props.insert("altitude_frame".into(), json!(self.altitude_frame));
+                props.insert("length_m".into(), json!(u.stats.length_m));
+                props.insert("flight_time_s".into(), json!(u.stats.flight_time_s));
+                let route = json!({"type": "FeatureCollection", "features": [gj::route_feature(&u.mission, props)]});
+                ("application/geo+json", pretty(&route))
+            }
+            "kml" => {
+                let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
+                    .cells
+                    .iter()
+                    .filter(|c| u.cells.contains(&c.id))
+                    .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
+                    .collect();
+                let title = format!("terraplan survey, UAV {}", u.id);
+                (
+                    "application/vnd.google-earth.kml+xml",
+                    export::write_kml(&title, &u.mission, &cell_rings),
+                )
+            }
+            "fence.waypoints" => (
+                "text/plain; charset=utf-8",
+                export::write_fence(&self.fences),
+            ),
+            _ => return None,
+        };
+        Some(PlanFile {
+            name: name.to_string(),
+            content_type,
+            content,
+        })
+    }
+
+    /// The cells as a GeoJSON FeatureCollection (WGS84).
+    pub fn cells_geojson(&self) -> Value {
+        gj::feature_collection(self.cells.iter().map(|c| {
             let mut props = Map::new();
             props.insert("id".into(), json!(c.id));
             props.insert("area_m2".into(), json!(c.area_m2));
             props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
             props.insert("lanes".into(), json!(c.lanes));
             (c.polygon.clone(), props)
-        }));
-        out.push(PlanFile {
-            name: "cells.geojson".into(),
-            content_type: "application/geo+json",
-            content: pretty(&cells),
-        });
-        out
+        }))
     }
 }
+
+/// Suffixes of each UAV's files, after `<uav id>.`.
+const UAV_FILE_SUFFIXES: [&str; 5] = [
+    "waypoints",
+    "plan",
+    "route.geojson",
+    "kml",
+    "fence.waypoints",
+];
+/// Name of the cells file.
+const CELLS_FILE: &str = "cells.geojson";
 
 /// The exterior ring of a GeoJSON Polygon geometry as [lon, lat] pairs.
 fn geojson_exterior(polygon: &Value) -> Vec<[f64; 2]> {
@@ -1094,6 +1138,53 @@ mod tests {
         assert!(e[0].pointer.starts_with("/camera"), "{e:?}");
         let p = SurveyParams::from_json(&json!({"slice_angle_deg": 30}), "").unwrap();
         assert_eq!(p.slice_angle_deg, SliceAngle::Degrees(30.0));
+    }
+
+    #[test]
+    fn plans_a_square_and_renders_each_file_alone() {
+        let doc = json!({
+            "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
+            "no_fly_zones": [{"type": "Polygon", "coordinates": [[[5.001, 52.001], [5.002, 52.001], [5.002, 52.002], [5.001, 52.002]]]}],
+            "slice_angle_deg": 0,
+            "uavs": [{"id": "a-1", "start": [4.999, 51.999]}],
+        });
+        let plan = plan_survey(
+            &SurveyRequest::from_document(&doc).unwrap(),
+            &Limits::default(),
+        )
+        .unwrap();
+        // An NFZ inside a square sliced north-south: left, below, above, right.
+        assert_eq!(plan.stats.cell_count, 4);
+        assert!(
+            plan.stats.coverage_ratio >= 0.995,
+            "{}",
+            plan.stats.coverage_ratio
+        );
+        let names = plan.file_names();
+        assert_eq!(
+            names,
+            [
+                "a-1.waypoints",
+                "a-1.plan",
+                "a-1.route.geojson",
+                "a-1.kml",
+                "a-1.fence.waypoints",
+                "cells.geojson"
+            ]
+        );
+        let all = plan.files();
+        assert_eq!(all.len(), names.len());
+        for f in &all {
+            assert_eq!(plan.file(&f.name).as_ref(), Some(f));
+        }
+        assert!(plan.file("a-1.exe").is_none());
+        assert!(plan.file("b.waypoints").is_none());
+        assert!(
+            plan.file("a-1.waypoints")
+                .unwrap()
+                .content
+                .starts_with("QGC WPL 110\n")
+        );
     }
 
     #[test]

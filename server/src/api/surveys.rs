@@ -226,13 +226,7 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
             }
         })
         .collect();
-    let cells_file = plan.files().into_iter().find(|f| f.name == "cells.geojson");
-    let cells = match cells_file {
-        Some(f) => {
-            serde_json::from_str(&f.content).map_err(|e| ApiError::Internal(e.to_string()))?
-        }
-        None => Value::Null,
-    };
+    let cells = plan.cells_geojson();
     Ok(SurveyResponse {
         id: row.id.clone(),
         name: row.name.clone(),
@@ -443,9 +437,7 @@ async fn download(
         .ok_or_else(|| not_found(id))?;
     let plan = parse_plan(&row.plan)?;
     let file = plan
-        .files()
-        .into_iter()
-        .find(|f| f.name == file_name)
+        .file(file_name)
         .ok_or_else(|| ApiError::NotFound(missing()))?;
     let disposition = format!("attachment; filename=\"{download_name}\"");
     let mut res = file.content.into_response();
