@@ -191,21 +191,16 @@ pub(crate) struct Region {
 
 impl Region {
     pub(crate) fn from_polygon(polygon: &Polygon<f64>) -> Self {
-        let (mut edges, mut rings) = (Vec::new(), Vec::new());
-        push_ring(&mut edges, &mut rings, polygon.exterior());
-        for ring in polygon.interiors() {
-            push_ring(&mut edges, &mut rings, ring);
-        }
-        Region {
-            edges,
-            rings,
-            index: None,
-        }
+        Self::from_polygons(std::iter::once(polygon))
     }
 
     pub(crate) fn from_multi_polygon(mp: &MultiPolygon<f64>) -> Self {
+        Self::from_polygons(mp)
+    }
+
+    fn from_polygons<'a>(polygons: impl IntoIterator<Item = &'a Polygon<f64>>) -> Self {
         let (mut edges, mut rings) = (Vec::new(), Vec::new());
-        for polygon in mp {
+        for polygon in polygons {
             push_ring(&mut edges, &mut rings, polygon.exterior());
             for ring in polygon.interiors() {
                 push_ring(&mut edges, &mut rings, ring);

@@ -50,29 +50,16 @@ pub fn line_geometry(coords: &[Coord<f64>]) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::export::mission::{AltitudeFrame, GeoPoint, MissionItem};
+    use crate::export::mission::{GeoPoint, sample_mission};
     use geo_types::polygon;
 
     #[test]
     fn route_is_3d_and_closed_at_home() {
-        let m = Mission {
-            home: GeoPoint {
-                lon: 1.0,
-                lat: 2.0,
-                alt: 0.0,
-            },
-            frame: AltitudeFrame::Relative,
-            cruise_speed_m_s: 5.0,
-            items: vec![
-                MissionItem::Takeoff { alt: 30.0 },
-                MissionItem::Waypoint(GeoPoint {
-                    lon: 1.1,
-                    lat: 2.1,
-                    alt: 30.0,
-                }),
-                MissionItem::ReturnToLaunch,
-            ],
-        };
+        let m = sample_mission(GeoPoint {
+            lon: 1.1,
+            lat: 2.1,
+            alt: 30.0,
+        });
         let f = route_feature(&m, Map::new());
         let c = f["geometry"]["coordinates"].as_array().unwrap();
         assert_eq!(c.len(), 3);

@@ -73,28 +73,15 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::export::mission::{GeoPoint, MissionItem};
+    use crate::export::mission::{GeoPoint, sample_mission};
 
     #[test]
     fn route_and_cells_in_order() {
-        let m = Mission {
-            home: GeoPoint {
-                lon: 1.0,
-                lat: 2.0,
-                alt: 0.0,
-            },
-            frame: AltitudeFrame::Relative,
-            cruise_speed_m_s: 5.0,
-            items: vec![
-                MissionItem::Takeoff { alt: 30.0 },
-                MissionItem::Waypoint(GeoPoint {
-                    lon: 1.5,
-                    lat: 2.5,
-                    alt: 30.0,
-                }),
-                MissionItem::ReturnToLaunch,
-            ],
-        };
+        let m = sample_mission(GeoPoint {
+            lon: 1.5,
+            lat: 2.5,
+            alt: 30.0,
+        });
         let cells = vec![(
             "cell <0>".to_string(),
             vec![[1.0, 2.0], [1.1, 2.0], [1.1, 2.1], [1.0, 2.0]],

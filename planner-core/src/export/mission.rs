@@ -99,3 +99,22 @@ pub struct FencePolygon {
     pub inclusion: bool,
     pub vertices: Vec<[f64; 2]>,
 }
+
+/// A one-waypoint mission from (1°, 2°) for the format writers' tests.
+#[cfg(test)]
+pub(crate) fn sample_mission(waypoint: GeoPoint) -> Mission {
+    Mission {
+        home: GeoPoint {
+            lon: 1.0,
+            lat: 2.0,
+            alt: 0.0,
+        },
+        frame: AltitudeFrame::Relative,
+        cruise_speed_m_s: 5.0,
+        items: vec![
+            MissionItem::Takeoff { alt: waypoint.alt },
+            MissionItem::Waypoint(waypoint),
+            MissionItem::ReturnToLaunch,
+        ],
+    }
+}
