@@ -634,19 +634,18 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
     };
     let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
     let path = tour.path();
-    let path_len: f64 = path.windows(2).map(|w| dist(w[0], w[1])).sum();
-    let survey_len: f64 = tour
+    let path_len = tour.length_m();
+    let lane_lengths: Vec<f64> = tour
         .visits
         .iter()
         .flat_map(|v| &v.lanes)
         .map(|l| dist(l.start, l.end))
-        .sum();
+        .collect();
+    let survey_len: f64 = lane_lengths.iter().sum();
     let turns = count_turns(&path);
-    let photos: usize = tour
-        .visits
+    let photos: usize = lane_lengths
         .iter()
-        .flat_map(|v| &v.lanes)
-        .map(|l| coverage::photo_count(dist(l.start, l.end), geometry.trigger_distance_m))
+        .map(|&len| coverage::photo_count(len, geometry.trigger_distance_m))
         .sum();
     // Flat survey: 3D adds the climb after take-off and the descent home.
     let length_3d = path_len + 2.0 * altitude;
