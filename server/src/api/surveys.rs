@@ -201,8 +201,9 @@ fn parse_plan(row_plan: &str) -> Result<SurveyPlan, ApiError> {
         .map_err(|e| ApiError::Internal(format!("stored plan unreadable: {e}")))
 }
 
-fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
-    let plan = parse_plan(&row.plan)?;
+/// The API view of a stored survey; `row.plan` is `plan` serialized, so a
+/// freshly planned survey is answered without parsing it back.
+fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
     let base = survey_url(&row.id);
     let uavs = plan
         .uavs
@@ -227,7 +228,7 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
         })
         .collect();
     let cells = plan.cells_geojson();
-    Ok(SurveyResponse {
+    SurveyResponse {
         id: row.id.clone(),
         name: row.name.clone(),
         created_at: rfc3339(row.created_at),
@@ -241,7 +242,7 @@ fn response(row: &SurveyRow) -> Result<SurveyResponse, ApiError> {
         files: SurveyFiles {
             cells: format!("{base}/cells.geojson"),
         },
-    })
+    }
 }
 
 /// Take `name` out of the request document, checking it.
@@ -306,7 +307,7 @@ pub async fn create_survey(
         plan: serde_json::to_string(&plan).map_err(|e| ApiError::Internal(e.to_string()))?,
     };
     state.db.insert_survey(&row).await?;
-    let body = response(&row)?;
+    let body = response(&row, plan);
     let mut headers = HeaderMap::new();
     if let Ok(v) = HeaderValue::from_str(&survey_url(&row.id)) {
         headers.insert(header::LOCATION, v);
@@ -343,7 +344,8 @@ pub async fn get_survey(
         .get_survey(&id)
         .await?
         .ok_or_else(|| not_found(&id))?;
-    Ok(Json(response(&row)?))
+    let plan = parse_plan(&row.plan)?;
+    Ok(Json(response(&row, plan)))
 }
 
 /// Stored surveys, newest first, a page at a time.
