@@ -12,3 +12,4 @@ pub mod export;
 pub mod flock;
 pub mod geo;
 pub mod survey;
+pub mod terrain;

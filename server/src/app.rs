@@ -1,7 +1,7 @@
 //! The application: shared state, the router with its middleware, and the
 //! OpenAPI document generated from the handlers.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use axum::Router;
@@ -11,6 +11,7 @@ use axum::http::{HeaderName, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use planner_core::geo::Limits;
+use planner_core::terrain::{Dem, DemLimits, read_dem};
 use tokio::sync::Semaphore;
 use tower_http::LatencyUnit;
 use tower_http::catch_panic::CatchPanicLayer;
@@ -19,11 +20,12 @@ use tower_http::cors::{AllowOrigin, Any, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::{DefaultOnResponse, TraceLayer};
 use utoipa::OpenApi;
-use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::api::{health, surveys};
+use crate::api::{dems, health, surveys};
+use crate::config::ServeConfig;
 use crate::db::Db;
 use crate::error::ApiError;
 
@@ -37,6 +39,121 @@ pub struct AppState {
     /// Bounds the plans computed at once, so a burst of heavy requests
     /// queues instead of exhausting the blocking pool and memory.
     pub planner: Arc<Semaphore>,
+    /// DEM limits and the cache of parsed DEMs.
+    pub dems: Arc<DemStore>,
+}
+
+/// DEM upload limits and the parsed DEMs kept ready for sampling.
+pub struct DemStore {
+    /// Pixel limits checked from a raster's header at upload.
+    pub limits: DemLimits,
+    /// Largest DEM file accepted, bytes.
+    pub max_upload_bytes: usize,
+    pub cache: DemCache,
+}
+
+impl DemStore {
+    pub fn new(limits: DemLimits, max_upload_bytes: usize, cache_bytes: usize) -> DemStore {
+        DemStore {
+            limits,
+            max_upload_bytes,
+            cache: DemCache::new(DEM_CACHE_ENTRIES, cache_bytes),
+        }
+    }
+
+    pub fn from_config(config: &ServeConfig) -> DemStore {
+        let cache_bytes = config.dem_cache_mb.saturating_mul(1024 * 1024);
+        DemStore::new(
+            config.dem_limits(),
+            config.max_dem_bytes(),
+            usize::try_from(cache_bytes).unwrap_or(usize::MAX),
+        )
+    }
+}
+
+/// Parsed DEMs kept at once, at most.
+const DEM_CACHE_ENTRIES: usize = 4;
+
+/// A small LRU of parsed DEMs, bounded by count and by the memory of
+/// their heights.
+pub struct DemCache {
+    inner: Mutex<CacheInner>,
+    max_entries: usize,
+    max_bytes: usize,
+}
+
+struct CacheInner {
+    /// Most recently used first.
+    entries: Vec<(String, Arc<Dem>)>,
+    /// Bumped by every eviction, so a load that raced a delete does not
+    /// put the deleted DEM back.
+    epoch: u64,
+}
+
+fn dem_bytes(dem: &Dem) -> usize {
+    dem.values.len() * std::mem::size_of::<f64>()
+}
+
+impl DemCache {
+    pub fn new(max_entries: usize, max_bytes: usize) -> DemCache {
+        DemCache {
+            inner: Mutex::new(CacheInner {
+                entries: Vec::new(),
+                epoch: 0,
+            }),
+            max_entries,
+            max_bytes,
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, CacheInner> {
+        // The lock guards no invariant a panic could break half-way.
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub fn get(&self, id: &str) -> Option<Arc<Dem>> {
+        let mut inner = self.lock();
+        let i = inner.entries.iter().position(|(k, _)| k == id)?;
+        let entry = inner.entries.remove(i);
+        let dem = entry.1.clone();
+        inner.entries.insert(0, entry);
+        Some(dem)
+    }
+
+    /// The current eviction count, to pass to [`DemCache::insert`].
+    pub fn epoch(&self) -> u64 {
+        self.lock().epoch
+    }
+
+    /// Keep `dem` as the most recently used, unless something was evicted
+    /// since `epoch` (when given) or it alone is over the memory budget.
+    pub fn insert(&self, id: &str, dem: Arc<Dem>, epoch: Option<u64>) {
+        let size = dem_bytes(&dem);
+        let mut inner = self.lock();
+        if epoch.is_some_and(|e| e != inner.epoch) || size > self.max_bytes || self.max_entries == 0
+        {
+            return;
+        }
+        inner.entries.retain(|(k, _)| k != id);
+        inner.entries.insert(0, (id.to_string(), dem));
+        let mut total = 0usize;
+        let mut keep = 0;
+        for (_, d) in &inner.entries {
+            let next = total.saturating_add(dem_bytes(d));
+            if keep == self.max_entries || next > self.max_bytes {
+                break;
+            }
+            total = next;
+            keep += 1;
+        }
+        inner.entries.truncate(keep);
+    }
+
+    pub fn evict(&self, id: &str) {
+        let mut inner = self.lock();
+        inner.entries.retain(|(k, _)| k != id);
+        inner.epoch += 1;
+    }
 }
 
 impl AppState {
@@ -60,6 +177,37 @@ impl AppState {
         .await
         .map_err(|e| ApiError::Internal(format!("planner task failed: {e}")))
     }
+
+    /// A stored DEM, parsed (from the cache when it is there); 404 when
+    /// there is no DEM `id`.
+    pub async fn load_dem(&self, id: &str) -> Result<Arc<Dem>, ApiError> {
+        if let Some(dem) = self.dems.cache.get(id) {
+            return Ok(dem);
+        }
+        let epoch = self.dems.cache.epoch();
+        let row = self
+            .db
+            .get_dem_data(id)
+            .await?
+            .ok_or_else(|| dems::not_found(id))?;
+        let crs = row
+            .crs_override
+            .map(u32::try_from)
+            .transpose()
+            .map_err(|e| ApiError::Internal(format!("stored CRS of DEM {id}: {e}")))?;
+        // It was read once at upload: the limits of the day need not hold again.
+        let limits = DemLimits {
+            max_pixels: u64::MAX,
+            max_side: u32::MAX,
+        };
+        let dem = self
+            .run_planner(move || read_dem(&row.data, row.file_name.as_deref(), crs, &limits))
+            .await?
+            .map_err(|e| ApiError::Internal(format!("stored DEM {id} does not read again: {e}")))?;
+        let dem = Arc::new(dem);
+        self.dems.cache.insert(id, dem.clone(), Some(epoch));
+        Ok(dem)
+    }
 }
 
 #[derive(OpenApi)]
@@ -72,6 +220,7 @@ impl AppState {
     ),
     tags(
         (name = "surveys", description = "Photo-survey planning: decomposition, lawnmower paths, missions"),
+        (name = "dems", description = "Digital elevation models: upload (GeoTIFF, ESRI ASCII grid, SRTM .hgt), metadata, hillshade preview, heights at points"),
         (name = "service", description = "Health"),
     ),
     components(schemas(crate::error::Problem, crate::error::IssueSchema))
@@ -80,12 +229,20 @@ struct ApiDoc;
 
 /// The OpenAPI document and the router it describes.
 pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -> Router {
+    let max_dem_bytes = state.dems.max_upload_bytes;
     let (api, openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
         .routes(routes!(health::healthz))
         .routes(routes!(surveys::create_survey, surveys::list_surveys))
         .routes(routes!(surveys::get_survey, surveys::delete_survey))
         .routes(routes!(surveys::uav_file))
         .routes(routes!(surveys::cells_file))
+        // DEM files have their own, larger, body limit.
+        .routes(
+            routes!(dems::upload_dem, dems::list_dems).layer(DefaultBodyLimit::max(max_dem_bytes)),
+        )
+        .routes(routes!(dems::get_dem, dems::delete_dem))
+        .routes(routes!(dems::hillshade))
+        .routes(routes!(dems::elevation, dems::elevations))
         .split_for_parts();
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();
@@ -105,7 +262,12 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .with_state(state)
         .layer(DefaultBodyLimit::max(max_body_bytes))
         .layer(middleware::from_fn(move |req: Request, next: Next| {
-            reject_declared_oversize(req, next, max_body_bytes)
+            let limit = if is_dem_upload(&req) {
+                max_dem_bytes
+            } else {
+                max_body_bytes
+            };
+            reject_declared_oversize(req, next, limit)
         }))
         .layer(CompressionLayer::new())
         .layer(CatchPanicLayer::custom(panic_response))
@@ -148,6 +310,10 @@ fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
             .collect();
         layer.allow_origin(AllowOrigin::list(list))
     })
+}
+
+fn is_dem_upload(req: &Request) -> bool {
+    req.method() == Method::POST && req.uri().path() == "/api/v1/dems"
 }
 
 /// Refuse a body whose declared Content-Length is over the limit before

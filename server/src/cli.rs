@@ -1,5 +1,5 @@
 //! Command-line interface: `terraplan survey` runs the same planner as the
-//! service on files. Exit status: 0 success, 2 invalid input (the message
+//! service on files; `terraplan dem-info` reads a DEM as the service does. Exit status: 0 success, 2 invalid input (the message
 //! names the fault), 1 any other failure.
 
 use std::path::{Path, PathBuf};
@@ -8,6 +8,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use planner_core::geo::{Issue, Limits};
 use planner_core::survey::{NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey};
+use planner_core::terrain::{DemInfo, DemLimits, TerrainError, read_dem};
+use serde::Serialize;
 use serde_json::{Value, json};
 
 use crate::config::ServeConfig;
@@ -29,6 +31,33 @@ enum Command {
     Serve(ServeConfig),
     /// Plan a photo survey of an area and write the mission files.
     Survey(SurveyArgs),
+    /// Read a DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) and print its
+    /// metadata as JSON: size, resolution, CRS, bounds, height range.
+    DemInfo(DemInfoArgs),
+}
+
+#[derive(clap::Args)]
+struct DemInfoArgs {
+    /// The DEM file.
+    #[arg(value_name = "FILE")]
+    file: PathBuf,
+    /// Horizontal CRS of the raster (`EPSG:32633` or `32633`): needed when
+    /// the file does not say; overrides the file's.
+    #[arg(long, value_name = "EPSG:CODE")]
+    crs: Option<String>,
+    /// Most pixels (width × height) accepted.
+    #[arg(long, default_value_t = DemLimits::default().max_pixels)]
+    max_pixels: u64,
+}
+
+/// What `dem-info` prints: the file, then the raster's metadata (the
+/// fields `POST /api/v1/dems` answers with).
+#[derive(Serialize)]
+struct DemFileInfo<'a> {
+    file_name: Option<String>,
+    size_bytes: u64,
+    #[serde(flatten)]
+    info: &'a DemInfo,
 }
 
 #[derive(clap::Args)]
@@ -83,6 +112,7 @@ pub fn run() -> ExitCode {
     let result = match cli.command {
         Command::Serve(config) => serve(config),
         Command::Survey(args) => survey(&args),
+        Command::DemInfo(args) => dem_info(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -182,6 +212,46 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     for w in &plan.warnings {
         eprintln!("warning: {w}");
     }
+    Ok(())
+}
+
+fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
+    let path = args.file.display();
+    let crs = args
+        .crs
+        .as_deref()
+        .map(crate::api::dems::parse_epsg)
+        .transpose()
+        .map_err(|m| Failure::input(format!("--crs: {m}")))?;
+    let bytes = std::fs::read(&args.file)
+        .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
+    let file_name = args
+        .file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned());
+    let limits = DemLimits {
+        max_pixels: args.max_pixels,
+        ..DemLimits::default()
+    };
+    let describe = |e: TerrainError| {
+        Failure::input(match e {
+            TerrainError::UnknownCrs(why) => format!(
+                "{path}: the raster's coordinate reference system cannot be determined ({why}); \
+                 give it with --crs, e.g. --crs EPSG:32633"
+            ),
+            TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
+            other => format!("{path}: {other}"),
+        })
+    };
+    let dem = read_dem(&bytes, file_name.as_deref(), crs, &limits).map_err(describe)?;
+    let info = dem.info().map_err(describe)?;
+    let doc = DemFileInfo {
+        file_name,
+        size_bytes: bytes.len() as u64,
+        info: &info,
+    };
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
+    println!("{text}");
     Ok(())
 }
 

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use planner_core::geo::Limits;
+use planner_core::terrain::DemLimits;
 
 #[derive(clap::Args, Clone, Debug)]
 pub struct ServeConfig {
@@ -23,6 +24,17 @@ pub struct ServeConfig {
     /// Largest request body accepted, bytes.
     #[arg(long, env = "TERRAPLAN_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
+    /// Largest DEM file accepted by `POST /api/v1/dems`, MiB (its own
+    /// limit, apart from `--max-body-bytes`).
+    #[arg(long, env = "TERRAPLAN_MAX_DEM_MB", default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..=4096))]
+    pub max_dem_mb: u64,
+    /// Most pixels (width × height) a DEM may have.
+    #[arg(long, env = "TERRAPLAN_MAX_DEM_PIXELS", default_value_t = DemLimits::default().max_pixels, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_dem_pixels: u64,
+    /// Memory for parsed DEMs kept ready for sampling, MiB (at most
+    /// four are kept; the least recently used goes first).
+    #[arg(long, env = "TERRAPLAN_DEM_CACHE_MB", default_value_t = 1024)]
+    pub dem_cache_mb: u64,
     /// Largest ROI accepted, km².
     #[arg(long, env = "TERRAPLAN_MAX_ROI_AREA_KM2", default_value_t = Limits::default().max_roi_area_km2)]
     pub max_roi_area_km2: f64,
@@ -68,5 +80,17 @@ impl ServeConfig {
             max_no_fly_zones: self.max_no_fly_zones,
             max_lane_km: self.max_lane_km,
         }
+    }
+
+    pub fn dem_limits(&self) -> DemLimits {
+        DemLimits {
+            max_pixels: self.max_dem_pixels,
+            ..DemLimits::default()
+        }
+    }
+
+    /// `--max-dem-mb` in bytes.
+    pub fn max_dem_bytes(&self) -> usize {
+        usize::try_from(self.max_dem_mb.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX)
     }
 }

@@ -48,6 +48,27 @@ pub struct SurveySummaryRow {
     pub plan: String,
 }
 
+/// A stored DEM's metadata (everything but the file).
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct DemMetaRow {
+    pub id: String,
+    pub name: Option<String>,
+    pub created_at: i64,
+    pub file_name: Option<String>,
+    pub crs_override: Option<i64>,
+    /// `DemInfo` as JSON.
+    pub info: String,
+    pub size_bytes: i64,
+}
+
+/// What is needed to parse a stored DEM again.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct DemDataRow {
+    pub file_name: Option<String>,
+    pub crs_override: Option<i64>,
+    pub data: Vec<u8>,
+}
+
 impl Db {
     /// Connect (PostgreSQL when `database_url` is given, else SQLite in
     /// `data_dir`) and run the migrations.
@@ -128,6 +149,56 @@ impl Db {
     /// True when a survey was deleted.
     pub async fn delete_survey(&self, id: &str) -> Result<bool, sqlx::Error> {
         const SQL: &str = "DELETE FROM surveys WHERE id = $1";
+        on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|r| r.rows_affected() > 0))
+    }
+
+    pub async fn insert_dem(&self, meta: &DemMetaRow, data: &[u8]) -> Result<(), sqlx::Error> {
+        const SQL: &str = "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, size_bytes, data) \
+                           VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
+        on_pool!(self, pool => sqlx::query(SQL)
+            .bind(&meta.id)
+            .bind(&meta.name)
+            .bind(meta.created_at)
+            .bind(&meta.file_name)
+            .bind(meta.crs_override)
+            .bind(&meta.info)
+            .bind(meta.size_bytes)
+            .bind(data)
+            .execute(pool)
+            .await
+            .map(|_| ()))
+    }
+
+    pub async fn get_dem_meta(&self, id: &str) -> Result<Option<DemMetaRow>, sqlx::Error> {
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes \
+                           FROM dems WHERE id = $1";
+        on_pool!(self, pool => sqlx::query_as::<_, DemMetaRow>(SQL).bind(id).fetch_optional(pool).await)
+    }
+
+    pub async fn get_dem_data(&self, id: &str) -> Result<Option<DemDataRow>, sqlx::Error> {
+        const SQL: &str = "SELECT file_name, crs_override, data FROM dems WHERE id = $1";
+        on_pool!(self, pool => sqlx::query_as::<_, DemDataRow>(SQL).bind(id).fetch_optional(pool).await)
+    }
+
+    /// Newest first, without the files.
+    pub async fn list_dems(
+        &self,
+        limit: i64,
+        offset: i64,
+    ) -> Result<(Vec<DemMetaRow>, i64), sqlx::Error> {
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes \
+                           FROM dems ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
+        const COUNT: &str = "SELECT COUNT(*) FROM dems";
+        on_pool!(self, pool => {
+            let rows = sqlx::query_as::<_, DemMetaRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
+            let (total,): (i64,) = sqlx::query_as(COUNT).fetch_one(pool).await?;
+            Ok((rows, total))
+        })
+    }
+
+    /// True when a DEM was deleted.
+    pub async fn delete_dem(&self, id: &str) -> Result<bool, sqlx::Error> {
+        const SQL: &str = "DELETE FROM dems WHERE id = $1";
         on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|r| r.rows_affected() > 0))
     }
 

@@ -44,6 +44,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         db: db.clone(),
         limits: config.limits(),
         planner: Arc::new(Semaphore::new(config.planner_threads)),
+        dems: Arc::new(crate::app::DemStore::from_config(&config)),
     };
     let app = router(state, &config.cors_origins, config.max_body_bytes);
     let listener = TcpListener::bind((config.host.as_str(), config.port))

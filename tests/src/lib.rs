@@ -217,6 +217,53 @@ pub fn post(url: &str, content_type: &str, body: &[u8]) -> Reply {
     )
 }
 
+/// GET with extra request headers.
+pub fn get_with_headers(url: &str, headers: &[(&str, &str)]) -> Reply {
+    let mut req = agent().get(url);
+    for (k, v) in headers {
+        req = req.header(*k, *v);
+    }
+    reply(req.call())
+}
+
+/// One part of a `multipart/form-data` body.
+pub struct Part<'a> {
+    pub name: &'a str,
+    /// The part's `filename`, for a file.
+    pub file_name: Option<&'a str>,
+    pub content_type: Option<&'a str>,
+    pub data: &'a [u8],
+}
+
+/// A `multipart/form-data` body of `parts` and its Content-Type.
+pub fn multipart_body(parts: &[Part<'_>]) -> (String, Vec<u8>) {
+    let boundary = "terraplan-e2e-7d1f0c9a4b2e";
+    let mut body = Vec::new();
+    for p in parts {
+        body.extend_from_slice(format!("--{boundary}\r\n").as_bytes());
+        let mut disposition = format!("Content-Disposition: form-data; name=\"{}\"", p.name);
+        if let Some(f) = p.file_name {
+            disposition.push_str(&format!("; filename=\"{f}\""));
+        }
+        body.extend_from_slice(disposition.as_bytes());
+        body.extend_from_slice(b"\r\n");
+        if let Some(ct) = p.content_type {
+            body.extend_from_slice(format!("Content-Type: {ct}\r\n").as_bytes());
+        }
+        body.extend_from_slice(b"\r\n");
+        body.extend_from_slice(p.data);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
+}
+
+/// POST a `multipart/form-data` form.
+pub fn post_multipart(url: &str, parts: &[Part<'_>]) -> Reply {
+    let (content_type, body) = multipart_body(parts);
+    post(url, &content_type, &body)
+}
+
 pub fn post_json(url: &str, body: &serde_json::Value) -> Reply {
     post(url, "application/json", body.to_string().as_bytes())
 }

@@ -54,6 +54,30 @@ pub fn plan_cell_in(
     line_spacing_m: f64,
     slice_angle_deg: f64,
 ) -> Option<CellPlan> {
+    let mut best: Option<CellPlan> = None;
+    for plan in plan_cell_candidates_in(cell_index, cell, free, line_spacing_m, slice_angle_deg)? {
+        let better = match &best {
+            None => true,
+            Some(b) => plan.length_m() < b.length_m() * (1.0 - 1e-12),
+        };
+        if better {
+            best = Some(plan);
+        }
+    }
+    best
+}
+
+/// Every lane layout of `cell` with the fewest turns (one per candidate
+/// direction that reaches that count), for callers that break the tie by
+/// another length than the 2D one (e.g. the 3D length over terrain).
+/// `None` where [`plan_cell_in`] gives `None`.
+pub fn plan_cell_candidates_in(
+    cell_index: usize,
+    cell: &Polygon<f64>,
+    free: &FreeSpace,
+    line_spacing_m: f64,
+    slice_angle_deg: f64,
+) -> Option<Vec<CellPlan>> {
     if !is_positive(line_spacing_m) {
         return None;
     }
@@ -106,27 +130,20 @@ pub fn plan_cell_in(
     }
     let free_region = free.region();
     let router = LinkRouter::new(cell, free);
-    let mut best: Option<CellPlan> = None;
-    for layout in &finalists {
-        let lanes = layout.lanes(&ring, free_region);
-        if lanes.is_empty() {
-            continue;
-        }
-        let plan = CellPlan {
-            cell_index,
-            direction_deg: layout.frame.bearing,
-            links: router.links(&lanes),
-            lanes,
-        };
-        let better = match &best {
-            None => true,
-            Some(b) => (plan.turns(), plan.length_m()) < (b.turns(), b.length_m() * (1.0 - 1e-12)),
-        };
-        if better {
-            best = Some(plan);
-        }
-    }
-    best
+    let plans: Vec<CellPlan> = finalists
+        .iter()
+        .filter_map(|layout| {
+            let lanes = layout.lanes(&ring, free_region);
+            (!lanes.is_empty()).then(|| CellPlan {
+                cell_index,
+                direction_deg: layout.frame.bearing,
+                links: router.links(&lanes),
+                lanes,
+            })
+        })
+        .collect();
+    let fewest = plans.iter().map(CellPlan::turns).min()?;
+    Some(plans.into_iter().filter(|p| p.turns() == fewest).collect())
 }
 
 /// Exterior ring without repeated points or the closing point.

@@ -6,12 +6,18 @@ use serde_json::{Map, Value, json};
 use super::mission::Mission;
 
 /// The flown route as a Feature with a 3D LineString: home, every waypoint
-/// (altitude in the mission's frame), home again.
+/// (altitude in the mission's frame), home again (at its AMSL height in the
+/// `amsl` frame, else 0).
 pub fn route_feature(mission: &Mission, properties: Map<String, Value>) -> Value {
     let home = mission.home;
-    let mut coords: Vec<Value> = vec![json!([home.lon, home.lat, 0.0])];
+    let home_z = if mission.frame == super::mission::AltitudeFrame::Amsl {
+        home.alt
+    } else {
+        0.0
+    };
+    let mut coords: Vec<Value> = vec![json!([home.lon, home.lat, home_z])];
     coords.extend(mission.waypoints().map(|p| json!([p.lon, p.lat, p.alt])));
-    coords.push(json!([home.lon, home.lat, 0.0]));
+    coords.push(json!([home.lon, home.lat, home_z]));
     json!({
         "type": "Feature",
         "properties": properties,

@@ -13,13 +13,15 @@ fn xml(s: &str) -> String {
 }
 
 /// A KML document with the route of `mission` as a 3D LineString and each
-/// cell ring (lon/lat, closed) as a Polygon. Relative and terrain-following
-/// altitudes are written `relativeToGround` (exact for terrain, and for
-/// relative over flat ground); AMSL altitudes `absolute`.
+/// cell ring (lon/lat, closed) as a Polygon. Terrain-frame altitudes are
+/// written `relativeToGround`; AMSL altitudes, and relative ones planned
+/// over a DEM (home's height added), `absolute`; relative altitudes of a
+/// flat survey `relativeToGround` (exact over flat ground).
 pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)]) -> String {
-    let mode = match mission.frame {
-        AltitudeFrame::Amsl => "absolute",
-        AltitudeFrame::Relative | AltitudeFrame::Terrain => "relativeToGround",
+    let (mode, add) = match mission.frame {
+        AltitudeFrame::Amsl => ("absolute", 0.0),
+        AltitudeFrame::Relative if mission.over_terrain => ("absolute", mission.home.alt),
+        AltitudeFrame::Relative | AltitudeFrame::Terrain => ("relativeToGround", 0.0),
     };
     let mut out = String::new();
     let _ = writeln!(out, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
@@ -42,11 +44,12 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
         "<LineString>\n<altitudeMode>{mode}</altitudeMode>\n<coordinates>"
     );
     let home = mission.home;
-    let _ = writeln!(out, "{:.8},{:.8},0", home.lon, home.lat);
+    let home_z = if mode == "absolute" { home.alt } else { 0.0 };
+    let _ = writeln!(out, "{:.8},{:.8},{:.3}", home.lon, home.lat, home_z);
     for w in mission.waypoints() {
-        let _ = writeln!(out, "{:.8},{:.8},{:.3}", w.lon, w.lat, w.alt);
+        let _ = writeln!(out, "{:.8},{:.8},{:.3}", w.lon, w.lat, w.alt + add);
     }
-    let _ = writeln!(out, "{:.8},{:.8},0", home.lon, home.lat);
+    let _ = writeln!(out, "{:.8},{:.8},{:.3}", home.lon, home.lat, home_z);
     let _ = writeln!(out, "</coordinates>\n</LineString>\n</Placemark>");
     for (cell_name, ring) in cells {
         let _ = writeln!(

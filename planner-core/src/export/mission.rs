@@ -78,6 +78,11 @@ pub struct Mission {
     pub frame: AltitudeFrame,
     pub cruise_speed_m_s: f64,
     pub items: Vec<MissionItem>,
+    /// Planned over a DEM: `home.alt` is the DEM height at home and the
+    /// altitudes follow the terrain (so a relative altitude is not a
+    /// height above the ground under the waypoint).
+    #[serde(default)]
+    pub over_terrain: bool,
 }
 
 impl Mission {
@@ -111,6 +116,7 @@ pub(crate) fn sample_mission(waypoint: GeoPoint) -> Mission {
         },
         frame: AltitudeFrame::Relative,
         cruise_speed_m_s: 5.0,
+        over_terrain: false,
         items: vec![
             MissionItem::Takeoff { alt: waypoint.alt },
             MissionItem::Waypoint(waypoint),

@@ -141,6 +141,7 @@ mod tests {
             },
             frame: AltitudeFrame::Terrain,
             cruise_speed_m_s: 12.0,
+            over_terrain: false,
             items: vec![
                 MissionItem::Takeoff { alt: 50.0 },
                 MissionItem::Waypoint(GeoPoint {

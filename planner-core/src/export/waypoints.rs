@@ -135,6 +135,7 @@ mod tests {
             home,
             frame: AltitudeFrame::Relative,
             cruise_speed_m_s: 8.0,
+            over_terrain: false,
             items: vec![
                 MissionItem::Takeoff { alt: 60.0 },
                 MissionItem::ChangeSpeed { speed_m_s: 8.0 },

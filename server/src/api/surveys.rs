@@ -8,7 +8,8 @@ use axum::response::{IntoResponse, Response};
 use planner_core::export::{AltitudeFrame, FencePolygon, geojson as gj};
 use planner_core::geo::Issue;
 use planner_core::survey::{
-    SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, plan_survey,
+    DEM_POINTER, SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, UavTerrain,
+    plan_survey_over,
 };
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -112,6 +113,10 @@ pub struct UavResponse {
     /// GeoJSON LineString of [lon, lat, alt] (altitude in the survey's frame).
     #[schema(value_type = Object)]
     route: Value,
+    /// The flight over the DEM (legs in 3D, altitude profile, heights
+    /// above the terrain), for surveys planned with `dem_id`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    terrain: Option<UavTerrain>,
     files: UavFiles,
 }
 
@@ -217,6 +222,7 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                 cells: u.cells.clone(),
                 stats: u.stats.clone(),
                 route,
+                terrain: u.terrain.clone(),
                 files: UavFiles {
                     waypoints: f("mission.waypoints"),
                     plan: f("mission.plan"),
@@ -289,12 +295,23 @@ pub async fn create_survey(
 ) -> Result<Response, ApiError> {
     let name = take_name(&mut doc)?;
     let req = SurveyRequest::from_document(&doc)?;
+    let dem = match &req.params.dem_id {
+        None => None,
+        Some(id) => Some(state.load_dem(id).await.map_err(|e| match e {
+            // In a survey request an unknown DEM is a fault of the request.
+            ApiError::NotFound(_) => ApiError::Validation(vec![Issue::new(
+                DEM_POINTER,
+                &format!("no DEM with id {id:?}: upload it with POST /api/v1/dems first"),
+            )]),
+            other => other,
+        })?),
+    };
     let limits = state.limits.clone();
     let started = std::time::Instant::now();
     let plan = state
         .run_planner(move || {
             let t = std::time::Instant::now();
-            plan_survey(&req, &limits).map(|p| (p, t.elapsed()))
+            plan_survey_over(&req, &limits, dem.as_deref()).map(|p| (p, t.elapsed()))
         })
         .await?;
     let (plan, planning) = plan?;

@@ -16,6 +16,12 @@ use crate::flock::{ObstacleMap, plan_tour};
 use crate::geo::{
     GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area,
 };
+use crate::terrain::{Dem, TerrainModel};
+
+mod terrain_flight;
+
+pub use terrain_flight::{FlightLeg, LegKind, ProfilePoint, UavTerrain};
+use terrain_flight::{FlightRules, cell_length_3d, fly_tour, lanes_known_fraction};
 
 /// Free space smaller than this (m²) is treated as nothing left to survey.
 const MIN_FREE_AREA_M2: f64 = 1.0;
@@ -146,6 +152,27 @@ pub struct SurveyParams {
     /// Margin of the inclusion geofence around the flown area, m, in [0, 1000]; default 30.
     #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1000))]
     pub fence_margin_m: f64,
+    /// A stored DEM (`POST /api/v1/dems`) to follow the terrain over;
+    /// without one the survey is flown flat at `altitude_m` above home.
+    pub dem_id: Option<String>,
+    /// Allowed deviation from `altitude_m` above the (dilated) terrain along
+    /// lanes, m, in [0.5, 100], smaller than the altitude; default 5.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.5, maximum = 100))]
+    pub agl_tolerance_m: f64,
+    /// Least height above the dilated terrain on transits, m, in [1, 2000];
+    /// default `altitude_m`.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 2000))]
+    pub transit_clearance_m: Option<f64>,
+    /// Steepest climb allowed, m/s, in (0, 50]; default unlimited.
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 50))]
+    pub max_climb_rate_m_s: Option<f64>,
+    /// Steepest descent allowed, m/s, in (0, 50]; default unlimited.
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 50))]
+    pub max_descent_rate_m_s: Option<f64>,
+    /// Plan even if the DEM has no heights under part of the area (flown at
+    /// the highest height nearby there); default false: a 422 says how much
+    /// is missing.
+    pub allow_partial_dem: bool,
 }
 
 impl Default for SurveyParams {
@@ -165,6 +192,12 @@ impl Default for SurveyParams {
             altitude_frame: AltitudeFrame::Relative,
             nfz_clearance_m: 2.0,
             fence_margin_m: 30.0,
+            dem_id: None,
+            agl_tolerance_m: 5.0,
+            transit_clearance_m: None,
+            max_climb_rate_m_s: None,
+            max_descent_rate_m_s: None,
+            allow_partial_dem: false,
         }
     }
 }
@@ -343,12 +376,27 @@ impl SurveyParams {
                 ));
             }
         }
-        if self.altitude_frame == AltitudeFrame::Amsl {
-            issues.push(Issue::new(
-                &p("altitude_frame"),
-                "altitude_frame \"amsl\" needs terrain heights from a DEM, which this request has \
-                 not got: use \"relative\" or \"terrain\"",
-            ));
+        if let Some(id) = &self.dem_id
+            && (id.is_empty() || id.len() > 64)
+        {
+            issues.push(Issue::new(&p("dem_id"), "a DEM id has 1 to 64 characters"));
+        }
+        check_range(
+            &mut issues,
+            &p("agl_tolerance_m"),
+            self.agl_tolerance_m,
+            0.5,
+            100.0,
+            false,
+        );
+        if let Some(c) = self.transit_clearance_m {
+            check_range(&mut issues, &p("transit_clearance_m"), c, 1.0, 2000.0, false);
+        }
+        if let Some(r) = self.max_climb_rate_m_s {
+            check_range(&mut issues, &p("max_climb_rate_m_s"), r, 0.0, 50.0, true);
+        }
+        if let Some(r) = self.max_descent_rate_m_s {
+            check_range(&mut issues, &p("max_descent_rate_m_s"), r, 0.0, 50.0, true);
         }
         if issues.is_empty() {
             Ok(())
@@ -491,6 +539,22 @@ pub struct SurveyStats {
     pub turns: usize,
     pub flight_time_s: f64,
     pub coverage_ratio: f64,
+    /// Terrain following, when the survey is flown over a DEM.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terrain: Option<SurveyTerrainStats>,
+}
+
+/// How a survey follows the terrain.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurveyTerrainStats {
+    /// Share of the survey lanes with DEM heights under them, [0, 1].
+    pub dem_known_fraction: f64,
+    /// Radius of the grey-scale dilation flown over, m (at least half the
+    /// footprint).
+    pub dilation_radius_m: f64,
+    pub agl_tolerance_m: f64,
+    pub transit_clearance_m: f64,
 }
 
 /// Statistics of one UAV's mission.
@@ -525,6 +589,9 @@ pub struct UavPlan {
     pub cells: Vec<usize>,
     pub stats: UavStats,
     pub mission: Mission,
+    /// The flight over the DEM, when there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terrain: Option<UavTerrain>,
 }
 
 /// A planned survey: what `plan.json` holds and the files are made from.
@@ -548,10 +615,36 @@ pub struct PlanFile {
     pub content: String,
 }
 
-/// Plan a survey end to end.
+/// Plan a survey end to end, flat (no DEM).
 pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, PlanError> {
+    plan_survey_over(req, limits, None)
+}
+
+/// JSON pointer of the DEM reference in a request document.
+pub const DEM_POINTER: &str = "/dem_id";
+
+/// Plan a survey end to end, following the terrain of `dem` when given
+/// (the DEM `params.dem_id` names, resolved by the caller).
+pub fn plan_survey_over(
+    req: &SurveyRequest,
+    limits: &Limits,
+    dem: Option<&Dem>,
+) -> Result<SurveyPlan, PlanError> {
     let params = &req.params;
     params.validate("").map_err(PlanError::Invalid)?;
+    if dem.is_none() && params.dem_id.is_some() {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            DEM_POINTER,
+            "this DEM id names a DEM stored in the service; outside it give the DEM file itself",
+        )]));
+    }
+    if dem.is_none() && params.altitude_frame == AltitudeFrame::Amsl {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/altitude_frame",
+            "altitude_frame \"amsl\" needs terrain heights from a DEM, which this request has \
+             not got: give dem_id, or use \"relative\" or \"terrain\"",
+        )]));
+    }
     let area = prepare_area(&req.roi, &req.no_fly, ROI_POINTER, NO_FLY_POINTER, limits)?;
     let proj = &area.projection;
 
@@ -596,10 +689,27 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             ),
         )]));
     }
+    let rules = FlightRules {
+        agl_m: altitude,
+        tolerance_m: params.agl_tolerance_m,
+        transit_clearance_m: params.transit_clearance_m.unwrap_or(altitude),
+        max_climb_per_m: params.max_climb_rate_m_s.map(|r| r / params.speed_m_s),
+        max_descent_per_m: params.max_descent_rate_m_s.map(|r| r / params.speed_m_s),
+    };
+    if dem.is_some() && rules.tolerance_m >= altitude {
+        return Err(PlanError::Invalid(vec![Issue::new(
+            "/agl_tolerance_m",
+            &format!(
+                "{} m is not smaller than the flight height above ground ({altitude:.1} m): the \
+                 UAV could touch the terrain",
+                rules.tolerance_m
+            ),
+        )]));
+    }
     let Decomposition {
         slice_angle_deg: slice_angle,
         cells,
-        plans,
+        mut plans,
         ..
     } = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
 
@@ -623,16 +733,84 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             "the UAV's start position is inside a no-fly zone",
         )]));
     }
+    let mut warnings = Vec::new();
+    let terrain = match dem {
+        None => None,
+        Some(dem) => {
+            let t = prepare_terrain(dem, &area, start_utm, &geometry, &plans, params, &free)?;
+            if t.known_fraction < 1.0 {
+                warnings.push(format!(
+                    "the DEM has no heights under {:.1} % of the survey area: flown there at the \
+                     highest height nearby",
+                    (1.0 - t.known_fraction) * 100.0
+                ));
+            }
+            // Among the lane directions with the fewest turns, fly the one
+            // with the shortest 3D length over the terrain.
+            plans = plans
+                .into_iter()
+                .map(|p| {
+                    let candidates = coverage::plan_cell_candidates_in(
+                        p.cell_index,
+                        &cells[p.cell_index],
+                        &t.free_space,
+                        geometry.line_spacing_m,
+                        slice_angle,
+                    )
+                    .unwrap_or_default();
+                    if candidates.len() < 2 {
+                        return p;
+                    }
+                    candidates
+                        .into_iter()
+                        .map(|c| (cell_length_3d(&t.model, &c, &rules), c))
+                        .min_by(|a, b| a.0.total_cmp(&b.0))
+                        .map_or(p, |(_, c)| c)
+                })
+                .collect();
+            let home_pointer = if params.uavs.is_empty() { "/uavs" } else { "/uavs/0/start" };
+            let home_amsl = t.model.terrain(start_utm).ok_or_else(|| {
+                PlanError::Invalid(vec![Issue::new(
+                    home_pointer,
+                    &format!(
+                        "the DEM has no height under the UAV's start ({:.6}, {:.6}): relative \
+                         altitudes are measured from there; start inside the DEM",
+                        uav.start[0], uav.start[1]
+                    ),
+                )])
+            })?;
+            Some((t, home_amsl))
+        }
+    };
     let tour = plan_tour(start_utm, &plans, &cells, &free, &obstacles)
         .map_err(|e| PlanError::Internal(e.to_string()))?;
 
-    let mut warnings = Vec::new();
-    let home = GeoPoint {
-        lon: uav.start[0],
-        lat: uav.start[1],
-        alt: 0.0,
+    let (mission, length_3d, uav_terrain) = match &terrain {
+        None => {
+            let home = GeoPoint {
+                lon: uav.start[0],
+                lat: uav.start[1],
+                alt: 0.0,
+            };
+            let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
+            // Flat survey: 3D adds the climb after take-off and the descent home.
+            (mission, tour.length_m() + 2.0 * altitude, None)
+        }
+        Some((t, home_amsl)) => {
+            let flight = fly_tour(
+                &tour,
+                &t.model,
+                &rules,
+                uav.start,
+                *home_amsl,
+                params.altitude_frame,
+                params.speed_m_s,
+                &geometry,
+                proj,
+            )?;
+            (flight.mission, flight.length_3d_m, Some(flight.terrain))
+        }
     };
-    let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
     let path = tour.path();
     let path_len = tour.length_m();
     let lane_lengths: Vec<f64> = tour
@@ -647,8 +825,6 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
         .iter()
         .map(|&len| coverage::photo_count(len, geometry.trigger_distance_m))
         .sum();
-    // Flat survey: 3D adds the climb after take-off and the descent home.
-    let length_3d = path_len + 2.0 * altitude;
     let flight_time = length_3d / params.speed_m_s + turns as f64 * params.turn_penalty_s;
     let uav_stats = UavStats {
         length_m: path_len,
@@ -704,6 +880,12 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
         turns,
         flight_time_s: flight_time,
         coverage_ratio,
+        terrain: terrain.as_ref().map(|(t, _)| SurveyTerrainStats {
+            dem_known_fraction: t.known_fraction,
+            dilation_radius_m: t.model.dilation_radius_m(),
+            agl_tolerance_m: rules.tolerance_m,
+            transit_clearance_m: rules.transit_clearance_m,
+        }),
     };
     Ok(SurveyPlan {
         utm_epsg: proj.epsg(),
@@ -716,9 +898,72 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
             cells: tour.visits.iter().map(|v| v.cell_index).collect(),
             stats: uav_stats,
             mission,
+            terrain: uav_terrain,
         }],
         fences,
         warnings,
+    })
+}
+
+/// The DEM prepared for one survey.
+struct SurveyTerrain {
+    model: TerrainModel,
+    free_space: coverage::FreeSpace,
+    /// Share of the lanes with DEM heights under them.
+    known_fraction: f64,
+}
+
+/// Crop and dilate the DEM around the survey (ROI, no-fly zones — transits
+/// go round them — and the start), and check that it has heights under the
+/// lanes of `plans`.
+fn prepare_terrain(
+    dem: &Dem,
+    area: &SurveyArea,
+    start_utm: Coord<f64>,
+    geometry: &SurveyGeometry,
+    plans: &[CellPlan],
+    params: &SurveyParams,
+    free: &MultiPolygon<f64>,
+) -> Result<SurveyTerrain, PlanError> {
+    use geo::BoundingRect;
+    let mut pts: Vec<Coord<f64>> = area
+        .roi
+        .0
+        .iter()
+        .flat_map(|p| p.exterior().0.iter().copied())
+        .collect();
+    pts.extend(area.no_fly.iter().flat_map(|p| p.exterior().0.iter().copied()));
+    pts.push(start_utm);
+    let extent = geo_types::LineString(pts)
+        .bounding_rect()
+        .ok_or_else(|| PlanError::Internal("empty survey extent".into()))?;
+    // Everything under the footprint must be cleared: dilate by half of it.
+    let radius = geometry.footprint_side_m.max(geometry.footprint_front_m) / 2.0;
+    let model = TerrainModel::new(dem, area.projection.epsg(), extent, radius)
+        .map_err(|e| PlanError::Invalid(vec![Issue::new(DEM_POINTER, &e.to_string())]))?;
+    let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
+    let known_fraction = lanes_known_fraction(&model, &lanes);
+    if model.is_empty() || (known_fraction < 1.0 && !params.allow_partial_dem) {
+        let missing = 1.0 - known_fraction;
+        let msg = if model.is_empty() || known_fraction == 0.0 {
+            "the DEM has no heights anywhere under the region of interest: it covers another area"
+                .to_string()
+        } else {
+            format!(
+                "the DEM has no heights under {:.1} % of the survey area (about {:.2} ha of {:.2} \
+                 ha): give a DEM that covers the whole region of interest, or set \
+                 allow_partial_dem: true to fly those parts at the highest height nearby",
+                missing * 100.0,
+                missing * free.unsigned_area() / 1e4,
+                free.unsigned_area() / 1e4
+            )
+        };
+        return Err(PlanError::Invalid(vec![Issue::new(DEM_POINTER, &msg)]));
+    }
+    Ok(SurveyTerrain {
+        model,
+        free_space: coverage::FreeSpace::new(free),
+        known_fraction,
     })
 }
 
@@ -928,6 +1173,7 @@ fn build_mission(
         frame: params.altitude_frame,
         cruise_speed_m_s: params.speed_m_s,
         items,
+        over_terrain: false,
     })
 }
 
