@@ -356,3 +356,66 @@ fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
     *res.status_mut() = StatusCode::INTERNAL_SERVER_ERROR;
     res
 }
+
+#[cfg(test)]
+mod tests {
+    use planner_core::terrain::{Crs, DemFormat, GeoTransform};
+
+    use super::*;
+
+    fn dem(pixels: usize) -> Arc<Dem> {
+        Arc::new(Dem {
+            width: pixels,
+            height: 1,
+            values: vec![1.0; pixels],
+            nodata: None,
+            transform: GeoTransform {
+                origin_x: 0.0,
+                pixel_width: 1.0,
+                row_rotation: 0.0,
+                origin_y: 0.0,
+                col_rotation: 0.0,
+                pixel_height: -1.0,
+            },
+            crs: Crs {
+                epsg: 32633,
+                name: "WGS 84 / UTM zone 33N".into(),
+                geographic: false,
+            },
+            format: DemFormat::Asc,
+        })
+    }
+
+    #[test]
+    fn dem_cache_is_lru_by_count_and_bytes() {
+        let cache = DemCache::new(2, 8 * 100);
+        cache.insert("a", dem(10), None);
+        cache.insert("b", dem(10), None);
+        assert!(cache.get("a").is_some()); // a is now the most recent
+        cache.insert("c", dem(10), None);
+        assert!(cache.get("b").is_none(), "least recently used goes first");
+        assert!(cache.get("a").is_some() && cache.get("c").is_some());
+        // Bytes: 90 + 10 pixels fit, 91 + 10 do not.
+        cache.insert("big", dem(90), None);
+        assert!(cache.get("big").is_some() && cache.get("c").is_some());
+        cache.insert("bigger", dem(91), None);
+        assert!(cache.get("bigger").is_some());
+        assert!(cache.get("big").is_none());
+        // Alone over the budget: not kept.
+        cache.insert("huge", dem(101), None);
+        assert!(cache.get("huge").is_none());
+    }
+
+    #[test]
+    fn eviction_beats_a_racing_load() {
+        let cache = DemCache::new(4, usize::MAX);
+        let epoch = cache.epoch();
+        cache.evict("a"); // deleted while being loaded
+        cache.insert("a", dem(1), Some(epoch));
+        assert!(cache.get("a").is_none());
+        cache.insert("a", dem(1), Some(cache.epoch()));
+        assert!(cache.get("a").is_some());
+        cache.evict("a");
+        assert!(cache.get("a").is_none());
+    }
+}

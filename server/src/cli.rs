@@ -7,8 +7,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use planner_core::geo::{Issue, Limits};
-use planner_core::survey::{NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey};
-use planner_core::terrain::{DemInfo, DemLimits, TerrainError, read_dem};
+use planner_core::survey::{
+    DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey_over,
+};
+use planner_core::terrain::{Dem, DemInfo, DemLimits, TerrainError, read_dem};
 use serde::Serialize;
 use serde_json::{Value, json};
 
@@ -77,6 +79,13 @@ struct SurveyArgs {
     /// Largest ROI accepted, km².
     #[arg(long, default_value_t = Limits::default().max_roi_area_km2)]
     max_roi_area_km2: f64,
+    /// A DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) to follow the terrain
+    /// over (the params' `agl_tolerance_m`, `transit_clearance_m`, … apply).
+    #[arg(long, value_name = "FILE")]
+    dem: Option<PathBuf>,
+    /// Horizontal CRS of the DEM (`EPSG:32633`), when the file does not say.
+    #[arg(long, value_name = "EPSG:CODE", requires = "dem")]
+    dem_crs: Option<String>,
 }
 
 /// A failure with its exit status.
@@ -168,6 +177,16 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         .map(|p| read_json(p, "no-fly"))
         .collect::<Result<Vec<_>, _>>()?;
     obj.insert("no_fly_zones".into(), Value::Array(zones));
+    if obj.contains_key("dem_id") {
+        return Err(Failure::input(
+            "the params file may not contain \"dem_id\" (a DEM stored in the service): give the \
+             DEM file with --dem",
+        ));
+    }
+    let dem = match &args.dem {
+        None => None,
+        Some(path) => Some(read_dem_file(path, args.dem_crs.as_deref(), DemLimits::default())?.0),
+    };
 
     let limits = Limits {
         max_roi_area_km2: args.max_roi_area_km2,
@@ -175,7 +194,8 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
     let req = SurveyRequest::from_document(&doc).map_err(|e| plan_failure(e, &describe))?;
-    let plan = plan_survey(&req, &limits).map_err(|e| plan_failure(e, &describe))?;
+    let plan =
+        plan_survey_over(&req, &limits, dem.as_ref()).map_err(|e| plan_failure(e, &describe))?;
 
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
@@ -216,23 +236,38 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
 }
 
 fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
-    let path = args.file.display();
-    let crs = args
-        .crs
-        .as_deref()
-        .map(crate::api::dems::parse_epsg)
-        .transpose()
-        .map_err(|m| Failure::input(format!("--crs: {m}")))?;
-    let bytes = std::fs::read(&args.file)
-        .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
-    let file_name = args
-        .file
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned());
     let limits = DemLimits {
         max_pixels: args.max_pixels,
         ..DemLimits::default()
     };
+    let (dem, file_name, size_bytes) = read_dem_file(&args.file, args.crs.as_deref(), limits)?;
+    let info = dem
+        .info()
+        .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let doc = DemFileInfo {
+        file_name,
+        size_bytes,
+        info: &info,
+    };
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
+    println!("{text}");
+    Ok(())
+}
+
+/// Read a DEM file as the service reads an upload: (DEM, file name, size).
+fn read_dem_file(
+    file: &Path,
+    crs: Option<&str>,
+    limits: DemLimits,
+) -> Result<(Dem, Option<String>, u64), Failure> {
+    let path = file.display();
+    let crs = crs
+        .map(crate::api::dems::parse_epsg)
+        .transpose()
+        .map_err(|m| Failure::input(format!("--crs: {m}")))?;
+    let bytes = std::fs::read(file)
+        .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
+    let file_name = file.file_name().map(|n| n.to_string_lossy().into_owned());
     let describe = |e: TerrainError| {
         Failure::input(match e {
             TerrainError::UnknownCrs(why) => format!(
@@ -244,15 +279,7 @@ fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
         })
     };
     let dem = read_dem(&bytes, file_name.as_deref(), crs, &limits).map_err(describe)?;
-    let info = dem.info().map_err(describe)?;
-    let doc = DemFileInfo {
-        file_name,
-        size_bytes: bytes.len() as u64,
-        info: &info,
-    };
-    let text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
-    println!("{text}");
-    Ok(())
+    Ok((dem, file_name, bytes.len() as u64))
 }
 
 fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure {
@@ -281,6 +308,11 @@ fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
                 return format!("{}#{tail}", p.display());
             }
             return "no-fly zones".to_string();
+        }
+        if ptr == DEM_POINTER
+            && let Some(dem) = &args.dem
+        {
+            return format!("DEM {}", dem.display());
         }
         let file = args
             .params

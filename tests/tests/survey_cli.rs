@@ -292,3 +292,72 @@ fn bad_input_names_its_fault() {
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o.stderr).contains("not valid JSON"));
 }
+
+/// `terraplan survey --dem`: the same terrain following as the service,
+/// checked against GDAL; a DEM that misses the ROI is an input error naming
+/// the DEM file.
+#[test]
+fn survey_over_a_dem_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = shared_data("dems/opengeos_data__elevation_dsm.tif");
+    let info = terraplan(&["dem-info", dem.to_str().unwrap()]);
+    assert!(info.status.success(), "{}", text(&info.stderr));
+    let info: Value = serde_json::from_slice(&info.stdout).unwrap();
+    let b: Vec<f64> = serde_json::from_value(info["bounds_wgs84"].clone()).unwrap();
+    let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
+    let (hx, hy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
+    let roi = write(
+        dir.path(),
+        "roi.json",
+        &rect(cx - hx, cy - hy, cx + hx, cy + hy),
+    );
+    let params = write(
+        dir.path(),
+        "params.json",
+        &json!({"altitude_m": 35, "agl_tolerance_m": 4, "altitude_frame": "terrain",
+                "uavs": [{"id": "t1", "start": [cx - hx, cy - hy]}]}),
+    );
+    let out = dir.path().join("out");
+    let o = terraplan(&[
+        "survey",
+        "--roi",
+        roi.to_str().unwrap(),
+        "--params",
+        params.to_str().unwrap(),
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let check = std::process::Command::new("/usr/bin/python3")
+        .arg(workspace().join("tests/validators/check_terrain.py"))
+        .arg(&dem)
+        .arg(out.join("plan.json"))
+        .arg("t1")
+        .arg(out.join("t1.waypoints"))
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "{}{}",
+        text(&check.stdout),
+        text(&check.stderr)
+    );
+    let wp = validator("load_waypoints.py", &[&out.join("t1.waypoints")]);
+    assert!(wp.status.success(), "{}", text(&wp.stderr));
+
+    let far = write(dir.path(), "far.json", &rect(10.0, 50.0, 10.001, 50.001));
+    let o = terraplan(&[
+        "survey",
+        "--roi",
+        far.to_str().unwrap(),
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(err.contains("DEM ") && err.contains("no heights"), "{err}");
+}

@@ -64,13 +64,21 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
     let survey_path = dir.path().join("survey.json");
     std::fs::write(&survey_path, survey.to_string()).unwrap();
     let uav = &survey["uavs"][0];
-    let wp = get(uav["files"]["waypoints"].as_str().map(|u| server.url(u)).unwrap().as_str());
+    let wp = get(uav["files"]["waypoints"]
+        .as_str()
+        .map(|u| server.url(u))
+        .unwrap()
+        .as_str());
     assert_eq!(wp.status, 200);
     let wp_path = dir.path().join("uav.waypoints");
     std::fs::write(&wp_path, &wp.body).unwrap();
 
     let loaded = validator("load_waypoints.py", &[&wp_path]);
-    assert!(loaded.status.success(), "pymavlink: {}", text(&loaded.stderr));
+    assert!(
+        loaded.status.success(),
+        "pymavlink: {}",
+        text(&loaded.stderr)
+    );
     let loaded: Value = serde_json::from_slice(&loaded.stdout).unwrap();
     let lines = text(&wp.body).lines().count() - 1;
     assert_eq!(loaded["count"].as_u64().unwrap() as usize, lines);
@@ -175,7 +183,11 @@ fn terrain_following_is_safe_over_every_real_dem() {
         assert!(t["legs"].as_array().unwrap().len() >= 3);
         assert!(t["profile"].as_array().unwrap().len() >= 10);
         assert!(summary["samples"].as_u64().unwrap() > 100);
-        assert_eq!(summary["unknown"], 0, "{}: samples without DEM data", case.file);
+        assert_eq!(
+            summary["unknown"], 0,
+            "{}: samples without DEM data",
+            case.file
+        );
         report.push(format!(
             "{}: lane min AGL {:.2} m (≥ {}), transit min clearance {:.2} m, lane length within ±tol {:.1} %, {} legs",
             case.file,
@@ -206,11 +218,16 @@ fn dem_coverage_is_checked_unless_partial_is_allowed() {
     let p = r.json();
     assert_eq!(p["errors"][0]["pointer"], "/dem_id");
     let msg = p["errors"][0]["message"].as_str().unwrap();
-    assert!(msg.contains("% of the survey area") && msg.contains("allow_partial_dem"), "{msg}");
+    assert!(
+        msg.contains("% of the survey area") && msg.contains("allow_partial_dem"),
+        "{msg}"
+    );
 
     body["allow_partial_dem"] = json!(true);
     let (survey, _) = plan_and_check(&server, &path, id, body);
-    let known = survey["stats"]["terrain"]["dem_known_fraction"].as_f64().unwrap();
+    let known = survey["stats"]["terrain"]["dem_known_fraction"]
+        .as_f64()
+        .unwrap();
     assert!(known > 0.9 && known < 1.0, "{known}");
     assert!(
         survey["warnings"]
@@ -255,13 +272,23 @@ fn geographic_and_projected_copies_of_a_dem_give_the_same_lanes() {
     let src = shared_data("dems/demcompare__srtm_ref.tif");
     let warped: PathBuf = data.path().join("srtm_utm.tif");
     let info = upload(&server, &src, "");
-    let lon = (info["bounds_wgs84"][0].as_f64().unwrap() + info["bounds_wgs84"][2].as_f64().unwrap())
+    let lon = (info["bounds_wgs84"][0].as_f64().unwrap()
+        + info["bounds_wgs84"][2].as_f64().unwrap())
         / 2.0;
     let zone = ((lon + 180.0) / 6.0).floor() as u32 + 1;
     // Fine cells and bilinear resampling keep the warped surface on the
     // original's bilinear surface.
     let out = Command::new("gdalwarp")
-        .args(["-q", "-t_srs", &format!("EPSG:{}", 32600 + zone), "-r", "bilinear", "-tr", "15", "15"])
+        .args([
+            "-q",
+            "-t_srs",
+            &format!("EPSG:{}", 32600 + zone),
+            "-r",
+            "bilinear",
+            "-tr",
+            "15",
+            "15",
+        ])
         .arg(&src)
         .arg(&warped)
         .output()

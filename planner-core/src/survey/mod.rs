@@ -390,7 +390,14 @@ impl SurveyParams {
             false,
         );
         if let Some(c) = self.transit_clearance_m {
-            check_range(&mut issues, &p("transit_clearance_m"), c, 1.0, 2000.0, false);
+            check_range(
+                &mut issues,
+                &p("transit_clearance_m"),
+                c,
+                1.0,
+                2000.0,
+                false,
+            );
         }
         if let Some(r) = self.max_climb_rate_m_s {
             check_range(&mut issues, &p("max_climb_rate_m_s"), r, 0.0, 50.0, true);
@@ -768,7 +775,11 @@ pub fn plan_survey_over(
                         .map_or(p, |(_, c)| c)
                 })
                 .collect();
-            let home_pointer = if params.uavs.is_empty() { "/uavs" } else { "/uavs/0/start" };
+            let home_pointer = if params.uavs.is_empty() {
+                "/uavs"
+            } else {
+                "/uavs/0/start"
+            };
             let home_amsl = t.model.terrain(start_utm).ok_or_else(|| {
                 PlanError::Invalid(vec![Issue::new(
                     home_pointer,
@@ -932,7 +943,11 @@ fn prepare_terrain(
         .iter()
         .flat_map(|p| p.exterior().0.iter().copied())
         .collect();
-    pts.extend(area.no_fly.iter().flat_map(|p| p.exterior().0.iter().copied()));
+    pts.extend(
+        area.no_fly
+            .iter()
+            .flat_map(|p| p.exterior().0.iter().copied()),
+    );
     pts.push(start_utm);
     let extent = geo_types::LineString(pts)
         .bounding_rect()
@@ -1429,6 +1444,113 @@ mod tests {
                 .unwrap()
                 .content
                 .starts_with("QGC WPL 110\n")
+        );
+    }
+
+    /// A geographic DEM (EPSG:4326, 0.0001° cells) rising 0.02 m per metre
+    /// eastwards, over the square of `plans_a_square…`.
+    fn slope_dem() -> crate::terrain::Dem {
+        use crate::terrain::{Crs, Dem, DemFormat, GeoTransform};
+        let (w, h) = (80usize, 70usize);
+        let t = GeoTransform {
+            origin_x: 4.997,
+            pixel_width: 1e-4,
+            row_rotation: 0.0,
+            origin_y: 52.005,
+            col_rotation: 0.0,
+            pixel_height: -1e-4,
+        };
+        let m_per_deg_lon = 111_320.0 * 52.0f64.to_radians().cos();
+        let mut values = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                let (lon, _) = t.apply(c as f64 + 0.5, r as f64 + 0.5);
+                values.push(100.0 + (lon - 4.997) * m_per_deg_lon * 0.02);
+            }
+        }
+        Dem {
+            width: w,
+            height: h,
+            values,
+            nodata: None,
+            transform: t,
+            crs: Crs {
+                epsg: 4326,
+                name: "WGS 84".into(),
+                geographic: true,
+            },
+            format: DemFormat::GeoTiff,
+        }
+    }
+
+    #[test]
+    fn follows_terrain_in_every_altitude_frame() {
+        let dem = slope_dem();
+        let start = [4.999, 51.999];
+        let home_amsl = dem.sample(start[0], start[1]).unwrap();
+        for frame in ["relative", "amsl", "terrain"] {
+            let doc = json!({
+                "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
+                "slice_angle_deg": 0,
+                "altitude_m": 50,
+                "agl_tolerance_m": 2,
+                "transit_clearance_m": 60,
+                "altitude_frame": frame,
+                "dem_id": "x",
+                "uavs": [{"id": "a", "start": start}],
+            });
+            let req = SurveyRequest::from_document(&doc).unwrap();
+            let plan = plan_survey_over(&req, &Limits::default(), Some(&dem)).unwrap();
+            let uav = &plan.uavs[0];
+            let t = uav.terrain.as_ref().unwrap();
+            assert!((uav.mission.home.alt - home_amsl).abs() < 1e-9);
+            assert!((t.home_amsl_m - home_amsl).abs() < 1e-9);
+            assert!(
+                t.min_lane_agl_m.unwrap() >= 48.0 - 1e-6,
+                "{:?}",
+                t.min_lane_agl_m
+            );
+            assert!(t.min_transit_clearance_m.unwrap() >= 60.0 - 1e-6);
+            let stats = plan.stats.terrain.as_ref().unwrap();
+            assert_eq!(stats.dem_known_fraction, 1.0);
+            // Every mission waypoint, back in the DEM's datum, is a leg point.
+            let leg_z: Vec<f64> = t
+                .legs
+                .iter()
+                .flat_map(|l| l.points.iter().map(|p| p[2]))
+                .collect();
+            for p in uav.mission.waypoints() {
+                let ground = dem.sample(p.lon, p.lat).unwrap();
+                let z = match frame {
+                    "relative" => p.alt + home_amsl,
+                    "amsl" => p.alt,
+                    _ => p.alt + ground,
+                };
+                assert!(leg_z.iter().any(|lz| (lz - z).abs() < 1e-6), "{frame}: {z}");
+                assert!(
+                    z - ground >= 48.0 - 1e-6,
+                    "{frame}: {} above ground",
+                    z - ground
+                );
+            }
+            // The slope makes the 3D length longer than the 2D one.
+            assert!(uav.stats.length_3d_m > uav.stats.length_m);
+            let wpl = plan.file("a.waypoints").unwrap().content;
+            let want = match frame {
+                "relative" => "\t3\t16\t",
+                "amsl" => "\t0\t16\t",
+                _ => "\t10\t16\t",
+            };
+            assert!(wpl.lines().skip(2).any(|l| l.contains(want)), "{frame}");
+        }
+        // Without the DEM, a dem_id cannot be planned.
+        let doc = json!({
+            "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
+            "dem_id": "x",
+        });
+        let req = SurveyRequest::from_document(&doc).unwrap();
+        assert!(
+            matches!(plan_survey(&req, &Limits::default()), Err(PlanError::Invalid(i)) if i[0].pointer == DEM_POINTER)
         );
     }
 

@@ -180,7 +180,10 @@ pub(super) fn fly_tour(
         })
     };
 
-    let all: Vec<Point3> = legs.iter().flat_map(|(_, pts)| pts.iter().copied()).collect();
+    let all: Vec<Point3> = legs
+        .iter()
+        .flat_map(|(_, pts)| pts.iter().copied())
+        .collect();
     let (Some(first), Some(last)) = (all.first().copied(), all.last().copied()) else {
         return Err(GeoError::Projection("the tour has no waypoints".into()));
     };
@@ -351,7 +354,11 @@ fn measure(
                 pts[0].z
             } else {
                 let (s0, s1) = (wp_s[seg], wp_s[seg + 1]);
-                let t = if s1 > s0 { ((s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 1.0 };
+                let t = if s1 > s0 {
+                    ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
                 pts[seg].z + (pts[seg + 1].z - pts[seg].z) * t
             };
             let terrain = model.terrain(p);
@@ -398,7 +405,11 @@ fn measure(
         Figures {
             min_lane_agl: min_lane,
             min_transit_clearance: min_transit,
-            lane_within_fraction: if lane_len > 0.0 { lane_within / lane_len } else { 1.0 },
+            lane_within_fraction: if lane_len > 0.0 {
+                lane_within / lane_len
+            } else {
+                1.0
+            },
         },
         profile,
     )

@@ -112,7 +112,9 @@ impl TerrainModel {
         let res = dem.resolution_m();
         let cell = res[0].min(res[1]);
         if !(cell.is_finite() && cell > 0.0) {
-            return Err(TerrainError::Invalid("the DEM's cell size is not positive".into()));
+            return Err(TerrainError::Invalid(
+                "the DEM's cell size is not positive".into(),
+            ));
         }
         let radius = dilation_radius_m.max(0.0);
         let margin = radius + 3.0 * res[0].max(res[1]);
@@ -196,7 +198,10 @@ impl TerrainModel {
 
     /// [`TerrainModel::densify`], plus the index of each of `path`'s
     /// vertices among the samples.
-    fn densify_marking_vertices(&self, path: &[Coord<f64>]) -> (Vec<(f64, Coord<f64>)>, Vec<usize>) {
+    fn densify_marking_vertices(
+        &self,
+        path: &[Coord<f64>],
+    ) -> (Vec<(f64, Coord<f64>)>, Vec<usize>) {
         let total: f64 = path.windows(2).map(|w| dist(w[0], w[1])).sum();
         let step = self.step_m.max(total / MAX_SAMPLES_PER_PATH);
         let mut out = Vec::new();
@@ -232,7 +237,11 @@ impl TerrainModel {
 
     /// [`TerrainModel::follow`], plus for each vertex of `path` its index
     /// among the returned waypoints.
-    pub fn follow_marked(&self, path: &[Coord<f64>], rule: &HeightRule) -> (Vec<Point3>, Vec<usize>) {
+    pub fn follow_marked(
+        &self,
+        path: &[Coord<f64>],
+        rule: &HeightRule,
+    ) -> (Vec<Point3>, Vec<usize>) {
         if path.is_empty() {
             return (Vec::new(), Vec::new());
         }
@@ -275,7 +284,10 @@ impl TerrainModel {
         if points.is_empty() {
             return 1.0;
         }
-        let known = points.iter().filter(|&&p| self.terrain(p).is_some()).count();
+        let known = points
+            .iter()
+            .filter(|&&p| self.terrain(p).is_some())
+            .count();
         known as f64 / points.len() as f64
     }
 }
@@ -368,7 +380,13 @@ impl BlockGrid {
     /// The maximum of `raw`'s bilinear surface over each block (`NaN` where
     /// the block has no DEM data): DEM cell centres inside the block, and
     /// the block edges sampled every half `cell_m` (at most 64 per edge).
-    fn maxima(&self, raw: &Dem, to_dem: Option<&Proj>, from_dem: Option<&Proj>, cell_m: f64) -> Dem {
+    fn maxima(
+        &self,
+        raw: &Dem,
+        to_dem: Option<&Proj>,
+        from_dem: Option<&Proj>,
+        cell_m: f64,
+    ) -> Dem {
         let (nx, ny, g) = (self.nx, self.ny, self.g);
         let mut v = vec![f64::NAN; nx * ny];
         let mut raise = |i: usize, j: usize, h: f64| {
@@ -481,7 +499,12 @@ fn pixel_window(
     margin_m: f64,
 ) -> Result<Option<(usize, usize, usize, usize)>, TerrainError> {
     let (min, max) = (extent.min(), extent.max());
-    let (x0, y0, x1, y1) = (min.x - margin_m, min.y - margin_m, max.x + margin_m, max.y + margin_m);
+    let (x0, y0, x1, y1) = (
+        min.x - margin_m,
+        min.y - margin_m,
+        max.x + margin_m,
+        max.y + margin_m,
+    );
     // The box's outline, densified: a projected box is curved in a
     // geographic DEM's coordinates.
     const N: usize = 32;
@@ -496,12 +519,14 @@ fn pixel_window(
         for p in [(x, y0), (x, y1), (x0, y), (x1, y)] {
             let q = match to_dem {
                 None => p,
-                Some(tr) => tr
-                    .convert(p)
-                    .map_err(|e| TerrainError::Crs(format!("transformation to the DEM's CRS: {e}")))?,
+                Some(tr) => tr.convert(p).map_err(|e| {
+                    TerrainError::Crs(format!("transformation to the DEM's CRS: {e}"))
+                })?,
             };
             let Some((c, r)) = dem.transform.invert(q.0, q.1) else {
-                return Err(TerrainError::Invalid("the DEM's geotransform is singular".into()));
+                return Err(TerrainError::Invalid(
+                    "the DEM's geotransform is singular".into(),
+                ));
             };
             cmin = cmin.min(c);
             cmax = cmax.max(c);
@@ -612,8 +637,14 @@ mod tests {
     fn flat_terrain_needs_only_the_ends() {
         let d = dem(200, 50, |_, _| 120.0);
         let m = TerrainModel::new(&d, 32631, extent(&d), 5.0).unwrap();
-        let a = Coord { x: 500_010.0, y: 5_000_025.0 };
-        let b = Coord { x: 500_190.0, y: 5_000_025.0 };
+        let a = Coord {
+            x: 500_010.0,
+            y: 5_000_025.0,
+        };
+        let b = Coord {
+            x: 500_190.0,
+            y: 5_000_025.0,
+        };
         let wps = m.follow(&[a, b], &rule(60.0, 5.0));
         assert_eq!(wps.len(), 2);
         assert!((wps[0].z - 180.0).abs() < 1e-9 && (wps[1].z - 180.0).abs() < 1e-9);
@@ -628,8 +659,14 @@ mod tests {
         };
         let d = dem(200, 50, hill);
         let m = TerrainModel::new(&d, 32631, extent(&d), 4.0).unwrap();
-        let a = Coord { x: 500_005.0, y: 5_000_025.0 };
-        let b = Coord { x: 500_195.0, y: 5_000_025.0 };
+        let a = Coord {
+            x: 500_005.0,
+            y: 5_000_025.0,
+        };
+        let b = Coord {
+            x: 500_195.0,
+            y: 5_000_025.0,
+        };
         let (agl, tol) = (50.0, 3.0);
         let wps = m.follow(&[a, b], &rule(agl, tol));
         assert!(wps.len() > 4, "{} waypoints", wps.len());
@@ -642,8 +679,16 @@ mod tests {
             let z = z_at(&wps, |c| c.x - a.x, s);
             let safe = m.safe_terrain(p).unwrap();
             let raw = m.terrain(p).unwrap();
-            assert!(z - safe >= agl - tol - 1e-6, "at {s}: {} above the safe surface", z - safe);
-            assert!(z - safe <= agl + tol + 1e-6, "at {s}: {} above the safe surface", z - safe);
+            assert!(
+                z - safe >= agl - tol - 1e-6,
+                "at {s}: {} above the safe surface",
+                z - safe
+            );
+            assert!(
+                z - safe <= agl + tol + 1e-6,
+                "at {s}: {} above the safe surface",
+                z - safe
+            );
             assert!(raw <= safe + 1e-9, "raw above dilated at {s}");
             s += 0.1;
         }
@@ -654,8 +699,14 @@ mod tests {
         // A 30 m cliff: with a 0.2 m/m climb limit the climb starts early.
         let d = dem(300, 20, |x, _| if x < 500_150.0 { 100.0 } else { 130.0 });
         let m = TerrainModel::new(&d, 32631, extent(&d), 2.0).unwrap();
-        let a = Coord { x: 500_005.0, y: 5_000_010.0 };
-        let b = Coord { x: 500_295.0, y: 5_000_010.0 };
+        let a = Coord {
+            x: 500_005.0,
+            y: 5_000_010.0,
+        };
+        let b = Coord {
+            x: 500_295.0,
+            y: 5_000_010.0,
+        };
         let r = HeightRule {
             offset_m: 40.0,
             band_m: 2.0,
@@ -667,11 +718,15 @@ mod tests {
             let ds = dist(w[0].xy(), w[1].xy());
             if ds > 1e-9 {
                 let slope = (w[1].z - w[0].z) / ds;
-                assert!(slope <= 0.2 + 1e-9 && slope >= -0.1 - 1e-9, "slope {slope}");
+                assert!((-0.1 - 1e-9..=0.2 + 1e-9).contains(&slope), "slope {slope}");
             }
         }
         for &(s, p) in &m.densify(&[a, b]) {
-            let z = z_at(&wps[..wps.iter().position(|w| w.xy() == b).unwrap() + 1], |c| c.x - a.x, s);
+            let z = z_at(
+                &wps[..wps.iter().position(|w| w.xy() == b).unwrap() + 1],
+                |c| c.x - a.x,
+                s,
+            );
             assert!(z >= m.safe_terrain(p).unwrap() + 40.0 - 2.0 - 1e-6);
         }
     }
@@ -685,13 +740,34 @@ mod tests {
             }
         }
         let m = TerrainModel::new(&d, 32631, extent(&d), 1.0).unwrap();
-        let p = Coord { x: 500_050.0, y: 5_000_005.0 };
+        let p = Coord {
+            x: 500_050.0,
+            y: 5_000_005.0,
+        };
         assert!(m.terrain(p).is_none());
-        let wps = m.follow(&[p, Coord { x: 500_051.0, y: 5_000_005.0 }], &rule(10.0, 1.0));
-        let highest = m.dilated.values.iter().copied().filter(|v| !v.is_nan()).fold(f64::MIN, f64::max);
+        let wps = m.follow(
+            &[
+                p,
+                Coord {
+                    x: 500_051.0,
+                    y: 5_000_005.0,
+                },
+            ],
+            &rule(10.0, 1.0),
+        );
+        let highest = m
+            .dilated
+            .values
+            .iter()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .fold(f64::MIN, f64::max);
         assert!((wps[0].z - (highest + 10.0)).abs() < 1e-9);
         let grid: Vec<Coord<f64>> = (0..100)
-            .map(|c| Coord { x: 500_000.5 + c as f64, y: 5_000_005.0 })
+            .map(|c| Coord {
+                x: 500_000.5 + c as f64,
+                y: 5_000_005.0,
+            })
             .collect();
         assert!((m.known_fraction(&grid) - 0.8).abs() < 1e-9);
     }
@@ -699,9 +775,24 @@ mod tests {
     #[test]
     fn extent_outside_the_dem_gives_an_empty_model() {
         let d = dem(10, 10, |_, _| 5.0);
-        let far = Rect::new(Coord { x: 600_000.0, y: 5_100_000.0 }, Coord { x: 600_100.0, y: 5_100_100.0 });
+        let far = Rect::new(
+            Coord {
+                x: 600_000.0,
+                y: 5_100_000.0,
+            },
+            Coord {
+                x: 600_100.0,
+                y: 5_100_100.0,
+            },
+        );
         let m = TerrainModel::new(&d, 32631, far, 1.0).unwrap();
         assert!(m.is_empty());
-        assert!(m.terrain(Coord { x: 600_050.0, y: 5_100_050.0 }).is_none());
+        assert!(
+            m.terrain(Coord {
+                x: 600_050.0,
+                y: 5_100_050.0
+            })
+            .is_none()
+        );
     }
 }

@@ -150,7 +150,11 @@ pub enum TerrainError {
     Unsupported(String),
     /// The header declares more pixels than the limits allow.
     #[error("the raster is {width}×{height} pixels, over the limit of {limit}")]
-    TooLarge { width: u64, height: u64, limit: String },
+    TooLarge {
+        width: u64,
+        height: u64,
+        limit: String,
+    },
     /// The CRS cannot be determined and none was given.
     #[error(
         "the raster's coordinate reference system cannot be determined ({0}); give one, e.g. crs=EPSG:32633"
