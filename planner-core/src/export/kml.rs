@@ -104,10 +104,24 @@ mod tests {
         assert_eq!(
             lines,
             [
-                "1.00000000,2.00000000,0",
+                "1.00000000,2.00000000,0.000",
                 "1.50000000,2.50000000,30.000",
-                "1.00000000,2.00000000,0"
+                "1.00000000,2.00000000,0.000"
             ]
         );
+    }
+
+    #[test]
+    fn relative_altitudes_over_a_dem_are_written_absolute() {
+        let mut m = sample_mission(GeoPoint {
+            lon: 1.5,
+            lat: 2.5,
+            alt: 30.0,
+        });
+        m.home.alt = 412.5;
+        m.over_terrain = true;
+        let k = write_kml("t", &m, &[]);
+        assert!(k.contains("<altitudeMode>absolute</altitudeMode>"));
+        assert!(k.contains("1.00000000,2.00000000,412.500\n1.50000000,2.50000000,442.500\n"));
     }
 }

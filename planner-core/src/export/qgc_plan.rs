@@ -4,7 +4,7 @@
 
 use serde_json::{Value, json};
 
-use super::mission::{FencePolygon, Mission, MissionItem, cmd, frame};
+use super::mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem, cmd, frame};
 
 /// QGC's `firmwareType` for ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
 const FIRMWARE_ARDUPILOT: u8 = 3;
@@ -14,6 +14,12 @@ const VEHICLE_MULTIROTOR: u8 = 2;
 /// The mission and fences as a QGroundControl plan document.
 pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
     let f = mission.frame.mav_frame();
+    // QGC's AltMode: 1 relative, 2 absolute (AMSL), 4 terrain frame.
+    let altitude_mode = match mission.frame {
+        AltitudeFrame::Relative => 1,
+        AltitudeFrame::Amsl => 2,
+        AltitudeFrame::Terrain => 4,
+    };
     let home = mission.home;
     let items: Vec<Value> = mission
         .items
@@ -87,14 +93,24 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
                     ],
                 ),
             };
-            json!({
+            let mut out = json!({
                 "autoContinue": true,
                 "command": command,
                 "doJumpId": i + 1,
                 "frame": fr,
                 "params": params,
                 "type": "SimpleItem",
-            })
+            });
+            // QGC's own altitude fields on positional items, so its editor
+            // shows the same altitude mode as the frame.
+            if let MissionItem::Takeoff { alt } | MissionItem::Waypoint(GeoPoint { alt, .. }) =
+                *item
+            {
+                out["Altitude"] = alt.into();
+                out["AltitudeMode"] = altitude_mode.into();
+                out["AMSLAltAboveTerrain"] = Value::Null;
+            }
+            out
         })
         .collect();
     let polygons: Vec<Value> = fences
@@ -118,7 +134,7 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
             "hoverSpeed": mission.cruise_speed_m_s,
             "firmwareType": FIRMWARE_ARDUPILOT,
             "vehicleType": VEHICLE_MULTIROTOR,
-            "globalPlanAltitudeMode": 1,
+            "globalPlanAltitudeMode": altitude_mode,
             "items": items,
             "plannedHomePosition": [home.lat, home.lon, home.alt],
             "version": 2,
@@ -165,6 +181,9 @@ mod tests {
         assert_eq!(items.len(), 3);
         assert_eq!(items[1]["command"], 16);
         assert_eq!(items[1]["frame"], 10);
+        assert_eq!(items[1]["AltitudeMode"], 4);
+        assert_eq!(items[1]["Altitude"], items[1]["params"][6]);
+        assert_eq!(plan["mission"]["globalPlanAltitudeMode"], 4);
         assert_eq!(items[1]["params"][4], 47.41);
         assert_eq!(items[1]["params"][5], 8.51);
         assert_eq!(items[2]["doJumpId"], 3);
