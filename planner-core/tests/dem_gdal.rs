@@ -23,19 +23,13 @@ use std::process::{Command, Stdio};
 use planner_core::terrain::{Dem, DemLimits, TerrainError, read_dem};
 use serde_json::Value;
 
+mod support;
+use support::data_dir;
+
 /// CRS given for rasters that carry none GDAL can name.
 const FALLBACK_CRS: u32 = 32613;
 /// Random pixels compared per raster (plus the four corners).
 const POINTS: usize = 1200;
-
-fn data_dir() -> PathBuf {
-    if let Ok(dir) = std::env::var("TERRAPLAN_SHARED_DATA") {
-        let dir = PathBuf::from(dir);
-        let dems = dir.join("dems");
-        return if dems.is_dir() { dems } else { dir };
-    }
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/dems")
-}
 
 fn python() -> String {
     std::env::var("TERRAPLAN_GDAL_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into())
@@ -162,12 +156,9 @@ fn gdal_epsg(info: &Value) -> Option<u32> {
     }
     let wkt = info.pointer("/coordinateSystem/wkt")?.as_str()?;
     // A compound CRS: its first component is the horizontal one.
-    let node = if wkt.starts_with("COMPOUNDCRS[") {
-        let inner = &wkt["COMPOUNDCRS[".len()..];
-        let at = inner.find(|c: char| c.is_ascii_uppercase())?;
-        &inner[at..]
-    } else {
-        wkt
+    let node = match wkt.strip_prefix("COMPOUNDCRS[") {
+        Some(inner) => &inner[inner.find(|c: char| c.is_ascii_uppercase())?..],
+        None => wkt,
     };
     if !(node.starts_with("PROJCRS[") || node.starts_with("GEOGCRS[")) {
         return None;
@@ -187,10 +178,7 @@ fn gdal_epsg(info: &Value) -> Option<u32> {
             }
             'I' if !in_string && depth == 1 && node[i..].starts_with("ID[\"EPSG\",") => {
                 let rest = &node[i + 10..];
-                return rest[..rest.find(|c: char| c == ']' || c == ',')?]
-                    .trim()
-                    .parse()
-                    .ok();
+                return rest[..rest.find([']', ','])?].trim().parse().ok();
             }
             _ => {}
         }
@@ -563,6 +551,59 @@ fn gdal_translate_variants_match_gdal() {
             &float64,
             vec!["-ot", "Float32", "-a_nodata", "-3.4028234663852886e+38"],
         ),
+        // Integer rasters where about one cell in ten is nodata.
+        (
+            "int16_nodata_hits.tif",
+            &int16,
+            vec![
+                "-scale",
+                "1111",
+                "3270",
+                "-5",
+                "5",
+                "-a_nodata",
+                "0",
+                "-co",
+                "COMPRESS=LZW",
+                "-co",
+                "TILED=YES",
+            ],
+        ),
+        (
+            "uint8_nodata_hits.tif",
+            &int16,
+            vec![
+                "-ot",
+                "Byte",
+                "-scale",
+                "1111",
+                "3270",
+                "0",
+                "20",
+                "-a_nodata",
+                "5",
+            ],
+        ),
+        (
+            "int_grid_nodata.asc",
+            &int16,
+            vec![
+                "-of",
+                "AAIGrid",
+                "-scale",
+                "1111",
+                "3270",
+                "-5",
+                "5",
+                "-a_nodata",
+                "0",
+                "-srcwin",
+                "0",
+                "0",
+                "200",
+                "150",
+            ],
+        ),
         (
             "int_grid.asc",
             &int16,
@@ -573,7 +614,15 @@ fn gdal_translate_variants_match_gdal() {
     for (name, src, args) in &variants {
         let out = tmp.path(name);
         translate(src, &out, args);
-        compare_with_gdal(&out, 4326);
+        // The CRS to give an ASCII grid: its source's.
+        let crs = if *src == int16 {
+            4326
+        } else if *src == float32 {
+            26918
+        } else {
+            32616
+        };
+        compare_with_gdal(&out, crs);
     }
 
     // SRTM .hgt: warp the Copernicus tile onto the 3" SRTM grid of N45E005.
@@ -603,27 +652,33 @@ fn gdal_translate_variants_match_gdal() {
     let dem = compare_with_gdal(&hgt, 4326);
     assert_eq!(dem.format, planner_core::terrain::DemFormat::Hgt);
 
-    // A rotated ModelTransformation (GDAL writes one for a rotated geotransform).
-    let rotated = tmp.path("rotated.tif");
-    run(Command::new(python())
-        .arg("-c")
-        .arg(
-            r#"
+    // A rotated ModelTransformation (GDAL writes one for a rotated
+    // geotransform), as PixelIsArea and as PixelIsPoint (GDAL shifts the
+    // matrix by half a pixel too).
+    for raster_type in ["Area", "Point"] {
+        let rotated = tmp.path(&format!("rotated_{raster_type}.tif"));
+        run(Command::new(python())
+            .arg("-c")
+            .arg(
+                r#"
 import math, sys
 from osgeo import gdal
 gdal.UseExceptions()
 src = gdal.Open(sys.argv[1])
 ds = gdal.GetDriverByName('GTiff').CreateCopy(sys.argv[2], src, options=['COMPRESS=LZW'])
+ds.SetMetadataItem('AREA_OR_POINT', sys.argv[3])
 a = math.radians(20)
 x, dx, _, y, _, dy = src.GetGeoTransform()
 ds.SetGeoTransform([x, dx * math.cos(a), dx * math.sin(a), y, dx * math.sin(a), dy * math.cos(a)])
 ds = None
 "#,
-        )
-        .arg(&float32)
-        .arg(&rotated));
-    let dem = compare_with_gdal(&rotated, 4326);
-    assert!(dem.transform.row_rotation != 0.0 && dem.transform.col_rotation != 0.0);
+            )
+            .arg(&float32)
+            .arg(&rotated)
+            .arg(raster_type));
+        let dem = compare_with_gdal(&rotated, 4326);
+        assert!(dem.transform.row_rotation != 0.0 && dem.transform.col_rotation != 0.0);
+    }
 }
 
 #[test]

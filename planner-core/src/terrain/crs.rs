@@ -46,7 +46,11 @@ impl Crs {
             // would be read as degrees everywhere else.
             let unit = v
                 .pointer("/coordinate_system/axis/0/unit")
-                .and_then(|u| u.as_str().map(str::to_string).or_else(|| u.get("name")?.as_str().map(str::to_string)))
+                .and_then(|u| {
+                    u.as_str()
+                        .map(str::to_string)
+                        .or_else(|| u.get("name")?.as_str().map(str::to_string))
+                })
                 .unwrap_or_default();
             if unit != "degree" {
                 return Err(TerrainError::Crs(format!(

@@ -115,6 +115,8 @@ struct Entry {
     count: u64,
     /// Absolute offset of the first value.
     data: u64,
+    /// Absolute offset of the entry itself.
+    pos: u64,
 }
 
 /// Size in bytes of one value of a TIFF field type; `None` for unknown
@@ -240,6 +242,7 @@ impl<'a> TiffBytes<'a> {
                     typ,
                     count,
                     data,
+                    pos: e,
                 });
             }
         }
@@ -309,7 +312,7 @@ impl<'a> TiffBytes<'a> {
                     out.push(u64::from(v));
                 }
             }
-            16 | 17 | 18 => {
+            16..=18 => {
                 for c in raw.chunks_exact(8) {
                     let v = self.u64_of(c);
                     if e.typ == 17 && (v as i64) < 0 {
@@ -567,6 +570,10 @@ struct Header {
     transform: GeoTransform,
     crs_code: Result<u32, String>,
     nodata: Option<f64>,
+    /// Where the ImageWidth entry is (to widen a tiled image, see `decode`).
+    width_entry: Option<u64>,
+    le: bool,
+    big: bool,
 }
 
 fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError> {
@@ -659,6 +666,13 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
     };
 
     let grid = chunk_grid(&ifd, width, height)?;
+    // One decoded chunk (a tile, cut at the bottom) must fit the limits too.
+    if grid.tiled && grid.cw.saturating_mul(grid.ch.min(height)) > limits.max_pixels {
+        return Err(invalid(format!(
+            "the TIFF's {}×{} tiles are larger than the limit of {} pixels",
+            grid.cw, grid.ch, limits.max_pixels
+        )));
+    }
     let (off_tag, cnt_tag) = if grid.tiled {
         (TILE_OFFSETS, TILE_BYTE_COUNTS)
     } else {
@@ -714,6 +728,9 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
         transform,
         crs_code,
         nodata,
+        width_entry: ifd.entry(IMAGE_WIDTH).map(|e| e.pos),
+        le,
+        big,
     })
 }
 
@@ -955,9 +972,9 @@ fn tiff_error(e: TiffError) -> TerrainError {
         TiffError::UnsupportedError(u) => {
             unsupported(format!("the TIFF uses an unsupported feature: {u}"))
         }
-        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            invalid("the TIFF's image data ends early: the file is truncated")
-        }
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => invalid(
+            format!("the TIFF's image data ends early ({io}): the file is truncated or corrupt"),
+        ),
         TiffError::LimitsExceeded => {
             invalid("the TIFF's image data is larger than its header declares")
         }
@@ -1010,23 +1027,38 @@ fn decode(
     width: usize,
     out: &mut [f64],
 ) -> Result<(), TerrainError> {
+    // The tiff crate (0.11.3) reads the right-hand tiles of an image whose
+    // width is not a multiple of the tile width row by row, and its LZW
+    // reader then fails on valid streams ("no lzw end code found" when the
+    // last bytes come out of the decoder's buffer after the input is
+    // consumed). Declaring the image as wide as its tiles makes every tile a
+    // whole-tile read; the padding columns are dropped below.
+    let padded_width = if h.grid.tiled {
+        h.grid.across * h.grid.cw
+    } else {
+        h.width
+    };
+    let widened;
+    let bytes = match h.width_entry {
+        Some(pos) if padded_width != h.width => {
+            widened = widen(bytes, h, pos, padded_width)?;
+            &widened[..]
+        }
+        _ => bytes,
+    };
     let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_error)?;
     let mut limits = Limits::default();
+    // The largest decoded chunk: a whole strip or tile (cut at the bottom).
     let chunk_bytes = h
         .grid
         .cw
-        .saturating_mul(h.grid.ch)
-        .saturating_mul(h.sample.bytes())
-        .min(
-            h.width
-                .saturating_mul(h.height)
-                .saturating_mul(h.sample.bytes()),
-        );
+        .saturating_mul(h.grid.ch.min(h.height))
+        .saturating_mul(h.sample.bytes());
     limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
     limits.intermediate_buffer_size = bytes.len().max(1);
     dec = dec.with_limits(limits);
     let (dw, dh) = dec.dimensions().map_err(tiff_error)?;
-    if (u64::from(dw), u64::from(dh)) != (h.width, h.height) {
+    if (u64::from(dw), u64::from(dh)) != (padded_width, h.height) {
         return Err(invalid("the TIFF's first image directory is inconsistent"));
     }
 
@@ -1054,10 +1086,56 @@ fn decode(
             let e = tiff_error(e);
             invalid(format!("{} {i} of {n}: {e}", h.grid.kind()))
         })?;
-        put_chunk(res, h.white_is_zero, nd, out, width, x0, y0, cw, ch)
-            .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
+        let src_width = if h.grid.tiled { h.grid.cw as usize } else { cw };
+        put_chunk(
+            res,
+            h.white_is_zero,
+            nd,
+            out,
+            width,
+            src_width,
+            x0,
+            y0,
+            cw,
+            ch,
+        )
+        .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
     }
     Ok(())
+}
+
+/// A copy of the file whose ImageWidth entry says `new_width` (as a LONG).
+fn widen(bytes: &[u8], h: &Header, pos: u64, new_width: u64) -> Result<Vec<u8>, TerrainError> {
+    let value = u32::try_from(new_width).map_err(|_| invalid("the TIFF's tiles are too wide"))?;
+    let mut b = bytes.to_vec();
+    let mut put = |at: u64, data: &[u8]| -> Option<()> {
+        let at = usize::try_from(at).ok()?;
+        b.get_mut(at..at.checked_add(data.len())?)?
+            .copy_from_slice(data);
+        Some(())
+    };
+    let (typ, count, v) = if h.le {
+        (4u16.to_le_bytes(), 1u64.to_le_bytes(), value.to_le_bytes())
+    } else {
+        (4u16.to_be_bytes(), 1u64.to_be_bytes(), value.to_be_bytes())
+    };
+    let ok = if h.big {
+        put(pos + 2, &typ)
+            .and_then(|_| put(pos + 4, &count))
+            .and_then(|_| put(pos + 12, &[0; 8]))
+            .and_then(|_| put(pos + 12, &v))
+    } else {
+        let count32 = if h.le {
+            1u32.to_le_bytes()
+        } else {
+            1u32.to_be_bytes()
+        };
+        put(pos + 2, &typ)
+            .and_then(|_| put(pos + 4, &count32))
+            .and_then(|_| put(pos + 8, &v))
+    };
+    ok.ok_or_else(|| invalid("the TIFF's ImageWidth entry is outside the file"))?;
+    Ok(b)
 }
 
 /// Copy one decoded chunk (`cw`×`ch`, row-major) into the output.
@@ -1068,6 +1146,7 @@ fn put_chunk(
     nd: NoDataMatch,
     out: &mut [f64],
     width: usize,
+    src_width: usize,
     x0: usize,
     y0: usize,
     cw: usize,
@@ -1077,19 +1156,19 @@ fn put_chunk(
         src: &[T],
         out: &mut [f64],
         width: usize,
-        (x0, y0, cw, ch): (usize, usize, usize, usize),
+        (x0, y0, cw, ch, sw): (usize, usize, usize, usize, usize),
         conv: impl Fn(T) -> f64,
     ) -> Result<(), String> {
-        if src.len() < cw * ch {
+        if src.len() < sw * ch || sw < cw {
             return Err(format!(
                 "decoded {} samples, expected {}",
                 src.len(),
-                cw * ch
+                sw * ch
             ));
         }
         for r in 0..ch {
             let s = src
-                .get(r * cw..(r + 1) * cw)
+                .get(r * sw..r * sw + cw)
                 .ok_or("chunk row out of range")?;
             let start = (y0 + r) * width + x0;
             let d = out
@@ -1101,7 +1180,7 @@ fn put_chunk(
         }
         Ok(())
     }
-    let area = (x0, y0, cw, ch);
+    let area = (x0, y0, cw, ch, src_width);
     let int = move |v: i64| -> f64 {
         match nd {
             NoDataMatch::Int(n) if n == v => f64::NAN,
@@ -1481,6 +1560,92 @@ mod tests {
             ),
             (1000.0, 3.0, 4.0, 2000.0, 4.0, -3.0)
         );
+    }
+
+    #[test]
+    fn compressed_tiles_with_padding() {
+        use tiff::encoder::compression::{CompressionAlgorithm, Deflate, Lzw, Packbits};
+        // 20×18 Int16 in 16×16 tiles: the right and bottom tiles are padded
+        // with zeros, which compress to a long run at the end of the stream.
+        let (w, h) = (20usize, 18usize);
+        let value = |x: usize, y: usize| (y * 100 + x) as i16 - 700;
+        for method in [5u16, 8, 32773] {
+            for predictor in [1u16, 2] {
+                let mut chunks = Vec::new();
+                for ty in 0..2 {
+                    for tx in 0..2 {
+                        let mut raw: Vec<i16> = Vec::new();
+                        for y in 0..16 {
+                            for x in 0..16 {
+                                let (gx, gy) = (tx * 16 + x, ty * 16 + y);
+                                raw.push(if gx < w && gy < h { value(gx, gy) } else { 0 });
+                            }
+                        }
+                        if predictor == 2 {
+                            for row in raw.chunks_mut(16) {
+                                for i in (1..16).rev() {
+                                    row[i] = row[i].wrapping_sub(row[i - 1]);
+                                }
+                            }
+                        }
+                        let bytes: Vec<u8> = raw.iter().flat_map(|v| v.to_le_bytes()).collect();
+                        let mut out = Vec::new();
+                        match method {
+                            5 => Lzw.write_to(&mut out, &bytes),
+                            8 => Deflate::default().write_to(&mut out, &bytes),
+                            _ => Packbits.write_to(&mut out, &bytes),
+                        }
+                        .unwrap();
+                        chunks.push(out);
+                    }
+                }
+                let b = Builder::image(w as u32, h as u32, 2, 16)
+                    .tag(COMPRESSION, V::Short(vec![method]))
+                    .tag(PREDICTOR, V::Short(vec![predictor]))
+                    .tiles(16, 16, chunks)
+                    .build();
+                let dem = read(&b)
+                    .unwrap_or_else(|e| panic!("compression {method} predictor {predictor}: {e}"));
+                for y in 0..h {
+                    for x in 0..w {
+                        assert_eq!(dem.value(x, y), Some(f64::from(value(x, y))), "({x},{y})");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn tiles_larger_than_the_image() {
+        use tiff::encoder::compression::{CompressionAlgorithm, Lzw};
+        // A 3×2 image in one 64×32 LZW tile (zero padding).
+        let mut raw = vec![0i16; 64 * 32];
+        raw[..3].copy_from_slice(&[1, 2, 3]);
+        raw[64..67].copy_from_slice(&[4, 5, 6]);
+        let bytes: Vec<u8> = raw.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let mut tile = Vec::new();
+        Lzw.write_to(&mut tile, &bytes).unwrap();
+        let b = Builder::image(3, 2, 2, 16)
+            .tag(COMPRESSION, V::Short(vec![5]))
+            .tiles(64, 32, vec![tile])
+            .build();
+        assert_eq!(read(&b).unwrap().values, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        // Tiles far larger than the image: their data is missing here...
+        let b = Builder::image(3, 2, 2, 16)
+            .tiles(65536, 65536, vec![vec![0; 16]])
+            .build();
+        let e = read(&b).unwrap_err();
+        assert!(e.to_string().contains("truncated"), "{e}");
+        // ...and a decoded tile must fit the limits.
+        let small = DemLimits {
+            max_pixels: 1000,
+            max_side: 100,
+        };
+        let b = Builder::image(3, 2, 2, 16)
+            .tiles(4096, 16, vec![vec![0; 16]])
+            .build();
+        let e = read_dem(&b, None, None, &small).unwrap_err();
+        assert!(e.to_string().contains("4096×16 tiles"), "{e}");
     }
 
     #[test]

@@ -1,6 +1,9 @@
 //! Format detection and the pieces the three readers share: the size
 //! limits, the CRS decision and a C-like number parser.
 
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+
 use super::{Crs, Dem, DemLimits, TerrainError, asc, geotiff, hgt};
 
 /// Read a DEM from the bytes of a file. The format is detected from the
@@ -96,16 +99,33 @@ pub(super) fn resolve_crs(
     given: Option<u32>,
 ) -> Result<Crs, TerrainError> {
     if let Some(code) = given {
-        return Crs::from_epsg(code);
+        return crs_from_epsg(code);
     }
     match from_file {
-        Ok(code) => Crs::from_epsg(code).map_err(|e| {
+        Ok(code) => crs_from_epsg(code).map_err(|e| {
             TerrainError::UnknownCrs(format!(
                 "the file declares EPSG:{code}, which cannot be used: {e}"
             ))
         }),
         Err(reason) => Err(TerrainError::UnknownCrs(reason)),
     }
+}
+
+/// [`Crs::from_epsg`], remembered: asking PROJ costs milliseconds, about
+/// as much as reading a DEM of a few megabytes.
+fn crs_from_epsg(code: u32) -> Result<Crs, TerrainError> {
+    static CACHE: OnceLock<Mutex<HashMap<u32, Crs>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(crs) = cache.lock().ok().and_then(|c| c.get(&code).cloned()) {
+        return Ok(crs);
+    }
+    let crs = Crs::from_epsg(code)?;
+    if let Ok(mut c) = cache.lock()
+        && c.len() < 4096
+    {
+        c.insert(code, crs.clone());
+    }
+    Ok(crs)
 }
 
 /// A number as C's `atof` (GDAL's `CPLAtofM`) reads it: leading white space
