@@ -185,7 +185,15 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     }
     let dem = match &args.dem {
         None => None,
-        Some(path) => Some(read_dem_file(path, args.dem_crs.as_deref(), DemLimits::default())?.0),
+        Some(path) => Some(
+            read_dem_file(
+                path,
+                args.dem_crs.as_deref(),
+                "--dem-crs",
+                DemLimits::default(),
+            )?
+            .0,
+        ),
     };
 
     let limits = Limits {
@@ -240,7 +248,8 @@ fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
         max_pixels: args.max_pixels,
         ..DemLimits::default()
     };
-    let (dem, file_name, size_bytes) = read_dem_file(&args.file, args.crs.as_deref(), limits)?;
+    let (dem, file_name, size_bytes) =
+        read_dem_file(&args.file, args.crs.as_deref(), "--crs", limits)?;
     let info = dem
         .info()
         .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
@@ -255,16 +264,18 @@ fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
 }
 
 /// Read a DEM file as the service reads an upload: (DEM, file name, size).
+/// `crs_flag` names the option that gave `crs`, for messages.
 fn read_dem_file(
     file: &Path,
     crs: Option<&str>,
+    crs_flag: &str,
     limits: DemLimits,
 ) -> Result<(Dem, Option<String>, u64), Failure> {
     let path = file.display();
     let crs = crs
         .map(crate::api::dems::parse_epsg)
         .transpose()
-        .map_err(|m| Failure::input(format!("--crs: {m}")))?;
+        .map_err(|m| Failure::input(format!("{crs_flag}: {m}")))?;
     let bytes = std::fs::read(file)
         .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
     let file_name = file.file_name().map(|n| n.to_string_lossy().into_owned());
@@ -272,7 +283,7 @@ fn read_dem_file(
         Failure::input(match e {
             TerrainError::UnknownCrs(why) => format!(
                 "{path}: the raster's coordinate reference system cannot be determined ({why}); \
-                 give it with --crs, e.g. --crs EPSG:32633"
+                 give it with {crs_flag}, e.g. {crs_flag} EPSG:32633"
             ),
             TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
             other => format!("{path}: {other}"),

@@ -744,6 +744,30 @@ pub fn plan_survey_over(
     let terrain = match dem {
         None => None,
         Some(dem) => {
+            // Cheap checks first: the start needs a height (relative
+            // altitudes are measured from it), unless the DEM misses the
+            // whole area (reported as such below).
+            let home_pointer = if params.uavs.is_empty() {
+                "/uavs"
+            } else {
+                "/uavs/0/start"
+            };
+            let no_home = || {
+                PlanError::Invalid(vec![Issue::new(
+                    home_pointer,
+                    &format!(
+                        "the DEM has no height under the UAV's start ({:.6}, {:.6}): relative \
+                         altitudes are measured from there; start inside the DEM",
+                        uav.start[0], uav.start[1]
+                    ),
+                )])
+            };
+            let sampler = crate::terrain::TerrainSampler::new(dem, proj.epsg())
+                .map_err(|e| PlanError::Invalid(vec![Issue::new(DEM_POINTER, &e.to_string())]))?;
+            let roi_vertex = area.roi.0[0].exterior().0[0];
+            if sampler.height(start_utm).is_none() && sampler.height(roi_vertex).is_some() {
+                return Err(no_home());
+            }
             let t = prepare_terrain(dem, &area, start_utm, &geometry, &plans, params, &free)?;
             if t.known_fraction < 1.0 {
                 warnings.push(format!(
@@ -775,21 +799,7 @@ pub fn plan_survey_over(
                         .map_or(p, |(_, c)| c)
                 })
                 .collect();
-            let home_pointer = if params.uavs.is_empty() {
-                "/uavs"
-            } else {
-                "/uavs/0/start"
-            };
-            let home_amsl = t.model.terrain(start_utm).ok_or_else(|| {
-                PlanError::Invalid(vec![Issue::new(
-                    home_pointer,
-                    &format!(
-                        "the DEM has no height under the UAV's start ({:.6}, {:.6}): relative \
-                         altitudes are measured from there; start inside the DEM",
-                        uav.start[0], uav.start[1]
-                    ),
-                )])
-            })?;
+            let home_amsl = t.model.terrain(start_utm).ok_or_else(no_home)?;
             Some((t, home_amsl))
         }
     };
@@ -949,12 +959,29 @@ fn prepare_terrain(
             .flat_map(|p| p.exterior().0.iter().copied()),
     );
     pts.push(start_utm);
-    let extent = geo_types::LineString(pts)
+    let bbox = geo_types::LineString(pts)
         .bounding_rect()
         .ok_or_else(|| PlanError::Internal("empty survey extent".into()))?;
+    // Transits round no-fly zones pass their corners pushed out by the
+    // clearance: keep them inside the model.
+    let grow = params.nfz_clearance_m + 10.0;
+    let extent = geo_types::Rect::new(
+        Coord {
+            x: bbox.min().x - grow,
+            y: bbox.min().y - grow,
+        },
+        Coord {
+            x: bbox.max().x + grow,
+            y: bbox.max().y + grow,
+        },
+    );
     // Everything under the footprint must be cleared: dilate by half of it.
     let radius = geometry.footprint_side_m.max(geometry.footprint_front_m) / 2.0;
-    let model = TerrainModel::new(dem, area.projection.epsg(), extent, radius)
+    // About what will be flown: the cells' paths and a transit per cell.
+    let diagonal = (extent.width()).hypot(extent.height());
+    let path_length: f64 =
+        plans.iter().map(CellPlan::length_m).sum::<f64>() + (plans.len() + 1) as f64 * diagonal;
+    let model = TerrainModel::new(dem, area.projection.epsg(), extent, radius, path_length)
         .map_err(|e| PlanError::Invalid(vec![Issue::new(DEM_POINTER, &e.to_string())]))?;
     let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
     let known_fraction = lanes_known_fraction(&model, &lanes);

@@ -61,7 +61,8 @@ pub struct UavTerrain {
     /// Highest altitude flown.
     pub max_altitude_m: f64,
     /// Lowest height above the (undilated) DEM along lanes and links,
-    /// checked every half cell; `None` where the DEM has no data.
+    /// checked every half block of the safe surface; `None` where the DEM
+    /// has no data.
     pub min_lane_agl_m: Option<f64>,
     /// Lowest height above the DEM along transits.
     pub min_transit_clearance_m: Option<f64>,
@@ -319,7 +320,7 @@ struct Figures {
     lane_within_fraction: f64,
 }
 
-/// Heights above the DEM along every leg, checked every half cell, and the
+/// Heights above the DEM along every leg, checked at the model's step, and the
 /// altitude profile.
 fn measure(
     model: &TerrainModel,
@@ -330,7 +331,16 @@ fn measure(
     let mut min_transit: Option<f64> = None;
     let mut lane_len = 0.0;
     let mut lane_within = 0.0;
-    let mut samples: Vec<ProfilePoint> = Vec::new();
+    // The profile is thinned while it is sampled: evenly spaced points for
+    // a chart, the first and the last kept.
+    let total: f64 = legs
+        .iter()
+        .flat_map(|(_, pts)| pts.windows(2))
+        .map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y))
+        .sum();
+    let spacing = total.max(1e-9) / PROFILE_POINTS;
+    let mut profile: Vec<ProfilePoint> = Vec::new();
+    let mut last_point = None;
     let mut offset = 0.0;
     for (kind, pts) in legs {
         let xy: Vec<Coord<f64>> = pts.iter().map(Point3::xy).collect();
@@ -379,28 +389,24 @@ fn measure(
                 }
             }
             prev_s = s;
-            samples.push(ProfilePoint {
+            let point = ProfilePoint {
                 distance_m: offset + s,
                 altitude_m: z,
                 terrain_m: terrain,
-            });
+            };
+            if profile
+                .last()
+                .is_none_or(|p: &ProfilePoint| point.distance_m - p.distance_m >= spacing)
+            {
+                profile.push(point);
+                last_point = None;
+            } else {
+                last_point = Some(point);
+            }
         }
         offset += wp_s.last().copied().unwrap_or(0.0);
     }
-    // Evenly thinned for a chart; the first and last points are kept.
-    let total = offset.max(1e-9);
-    let spacing = total / PROFILE_POINTS;
-    let mut profile: Vec<ProfilePoint> = Vec::new();
-    let n = samples.len();
-    for (i, p) in samples.into_iter().enumerate() {
-        let keep = match profile.last() {
-            None => true,
-            Some(last) => i + 1 == n || p.distance_m - last.distance_m >= spacing,
-        };
-        if keep {
-            profile.push(p);
-        }
-    }
+    profile.extend(last_point);
     (
         Figures {
             min_lane_agl: min_lane,

@@ -11,9 +11,10 @@ use proj::Proj;
 
 use super::{Crs, Dem, DemFormat, GeoTransform, TerrainError, dilate};
 
-/// Most samples along one path: bounds time and memory on huge surveys over
-/// fine DEMs (the step grows instead).
-const MAX_SAMPLES_PER_PATH: f64 = 2.0e6;
+/// Most samples along all the paths of one survey: bounds time and memory
+/// on huge surveys over fine DEMs (the step grows instead, and the safe
+/// surface with it).
+const MAX_SURVEY_SAMPLES: f64 = 4.0e6;
 /// Share of the tolerance used when choosing waypoints: the terrain between
 /// two samples is bilinear, not linear, so keep a little in reserve.
 const BAND_RESERVE: f64 = 0.9;
@@ -67,7 +68,8 @@ pub struct TerrainModel {
     /// Height used where the DEM has no data: the highest dilated height in
     /// the model, so unknown terrain is never assumed low.
     fallback_m: f64,
-    /// Sampling step along paths, metres (half the DEM's cell size).
+    /// Sampling step along paths, metres (half a block, more on huge
+    /// surveys).
     step_m: f64,
     dilation_radius_m: f64,
 }
@@ -84,18 +86,23 @@ impl std::fmt::Debug for TerrainModel {
 
 /// Most blocks of the safe-surface grid (bounds its time and memory).
 const MAX_BLOCKS: f64 = 2.0e6;
+/// Most block-edge samples for the safe surface.
+const MAX_EDGE_SAMPLES: f64 = 1.6e7;
 /// Blocks per dilation radius (the finer, the closer the disk).
 const BLOCKS_PER_RADIUS: f64 = 10.0;
 
 impl TerrainModel {
     /// The part of `dem` under `extent` (planning-CRS metres, EPSG
     /// `planning_epsg`) plus a margin, and its safe surface for
-    /// `dilation_radius_m`.
+    /// `dilation_radius_m`. `path_length_m` is about how much will be
+    /// flown: the sampling step is half a block, coarser if the paths would
+    /// need more than a few million samples.
     pub fn new(
         dem: &Dem,
         planning_epsg: u32,
         extent: Rect<f64>,
         dilation_radius_m: f64,
+        path_length_m: f64,
     ) -> Result<Self, TerrainError> {
         let crs_err = |e: proj::ProjCreateError| {
             TerrainError::Crs(format!("transformation to the DEM's CRS: {e}"))
@@ -110,8 +117,7 @@ impl TerrainModel {
             )
         };
         let res = dem.resolution_m();
-        let cell = res[0].min(res[1]);
-        if !(cell.is_finite() && cell > 0.0) {
+        if !(res[0].min(res[1]).is_finite() && res[0].min(res[1]) > 0.0) {
             return Err(TerrainError::Invalid(
                 "the DEM's cell size is not positive".into(),
             ));
@@ -125,16 +131,38 @@ impl TerrainModel {
             // sample is unknown.
             None => dem.window(0, 0, 0, 0),
         };
+        // Cell size where the survey is (for a geographic DEM the metres per
+        // degree of the window's latitude, not the whole raster's).
+        let local = if raw.width > 0 && raw.height > 0 {
+            raw.resolution_m()
+        } else {
+            res
+        };
+        let cell = local[0].min(local[1]);
+        let cell = if cell.is_finite() && cell > 0.0 {
+            cell
+        } else {
+            res[0].min(res[1])
+        };
         let (min, max) = (extent.min(), extent.max());
         let area = (max.x - min.x + 2.0 * margin) * (max.y - min.y + 2.0 * margin);
         let g = (radius / BLOCKS_PER_RADIUS)
             .max((area / MAX_BLOCKS).sqrt())
             .max(0.25);
+        // Paths are checked every half block, where the safe surface (a
+        // bilinear surface on the blocks) is sampled finely enough; tied to
+        // the blocks, not to the DEM's cells, so that two DEMs of one area
+        // give one flight.
+        let step_m = (g / 2.0).max(path_length_m.max(0.0) / MAX_SURVEY_SAMPLES);
         let blocks = BlockGrid::around(extent, margin + 2.0 * g, g, planning_epsg, &dem.crs.name);
         let maxima = blocks.maxima(&raw, to_dem.as_ref(), from_dem.as_ref(), cell);
         // Every point within `radius` of a point p lies in a block whose
-        // centre is within radius + 1.5·√2·g of the centres around p.
-        let dilated = dilate(&maxima, radius + 1.5 * std::f64::consts::SQRT_2 * g);
+        // centre is within radius + 1.5·√2·g of the centres around p; a
+        // block's maximum may sit on its edge, next to the neighbouring
+        // block's cells (one more g); and paths are checked every `step`,
+        // so a point between two samples is within step/2 of one (one more
+        // step, conservatively).
+        let dilated = dilate(&maxima, radius + step_m + 3.0 * g);
         let fallback_m = dilated
             .values
             .iter()
@@ -146,7 +174,7 @@ impl TerrainModel {
             dilated,
             to_dem,
             fallback_m,
-            step_m: cell / 2.0,
+            step_m,
             dilation_radius_m: radius,
         })
     }
@@ -202,8 +230,7 @@ impl TerrainModel {
         &self,
         path: &[Coord<f64>],
     ) -> (Vec<(f64, Coord<f64>)>, Vec<usize>) {
-        let total: f64 = path.windows(2).map(|w| dist(w[0], w[1])).sum();
-        let step = self.step_m.max(total / MAX_SAMPLES_PER_PATH);
+        let step = self.step_m;
         let mut out = Vec::new();
         let mut vertices = Vec::with_capacity(path.len());
         let Some(&first) = path.first() else {
@@ -229,8 +256,8 @@ impl TerrainModel {
 
     /// The 3D waypoints flying `path` under `rule`: every vertex of `path`
     /// (where the track turns) plus the points needed to keep the straight
-    /// segments between waypoints within the band, checked at half the
-    /// DEM's cell size. The first and last points are `path`'s ends.
+    /// segments between waypoints within the band, checked every
+    /// [`TerrainModel::step_m`]. The first and last points are `path`'s ends.
     pub fn follow(&self, path: &[Coord<f64>], rule: &HeightRule) -> Vec<Point3> {
         self.follow_marked(path, rule).0
     }
@@ -379,7 +406,7 @@ impl BlockGrid {
 
     /// The maximum of `raw`'s bilinear surface over each block (`NaN` where
     /// the block has no DEM data): DEM cell centres inside the block, and
-    /// the block edges sampled every half `cell_m` (at most 64 per edge).
+    /// the block edges sampled every half `cell_m` (at most 256 per edge).
     fn maxima(
         &self,
         raw: &Dem,
@@ -389,6 +416,9 @@ impl BlockGrid {
     ) -> Dem {
         let (nx, ny, g) = (self.nx, self.ny, self.g);
         let mut v = vec![f64::NAN; nx * ny];
+        if raw.width == 0 || raw.height == 0 {
+            return self.grid(v);
+        }
         let mut raise = |i: usize, j: usize, h: f64| {
             let slot = &mut v[j * nx + i];
             if slot.is_nan() || h > *slot {
@@ -402,7 +432,11 @@ impl BlockGrid {
             };
             raw.sample(dx, dy)
         };
-        let m = (g / (cell_m / 2.0)).ceil().clamp(1.0, 64.0) as usize;
+        // Edge samples per block side: every half DEM cell, within a budget
+        // for the whole grid (where cells are much finer than blocks, the
+        // cell centres inside carry the maxima anyway).
+        let budget = (MAX_EDGE_SAMPLES / (2.0 * nx as f64 * ny as f64)).max(1.0);
+        let m = (g / (cell_m / 2.0)).ceil().clamp(1.0, budget.min(256.0)) as usize;
         let s = g / m as f64;
         // Horizontal edges (y = y1 − j·g) and vertical ones (x = x0 + i·g);
         // a sample on an edge belongs to the blocks on both sides.
@@ -467,10 +501,16 @@ impl BlockGrid {
                 }
             }
         }
+        self.grid(v)
+    }
+
+    /// The grid as a raster holding `values`.
+    fn grid(&self, values: Vec<f64>) -> Dem {
+        let (nx, ny, g) = (self.nx, self.ny, self.g);
         Dem {
             width: nx,
             height: ny,
-            values: v,
+            values,
             nodata: None,
             transform: GeoTransform {
                 origin_x: self.x0,
@@ -636,7 +676,7 @@ mod tests {
     #[test]
     fn flat_terrain_needs_only_the_ends() {
         let d = dem(200, 50, |_, _| 120.0);
-        let m = TerrainModel::new(&d, 32631, extent(&d), 5.0).unwrap();
+        let m = TerrainModel::new(&d, 32631, extent(&d), 5.0, 1000.0).unwrap();
         let a = Coord {
             x: 500_010.0,
             y: 5_000_025.0,
@@ -658,7 +698,7 @@ mod tests {
             100.0 + 40.0 * (-(dx * dx + dy * dy) / (2.0 * 20.0f64.powi(2))).exp()
         };
         let d = dem(200, 50, hill);
-        let m = TerrainModel::new(&d, 32631, extent(&d), 4.0).unwrap();
+        let m = TerrainModel::new(&d, 32631, extent(&d), 4.0, 1000.0).unwrap();
         let a = Coord {
             x: 500_005.0,
             y: 5_000_025.0,
@@ -694,11 +734,49 @@ mod tests {
         }
     }
 
+    /// A single tall cell on coarse cells with almost no dilation: the
+    /// flight must clear the bilinear surface between its own samples too.
+    #[test]
+    fn spikes_between_samples_are_cleared() {
+        let transform = GeoTransform {
+            origin_x: 500_000.0,
+            pixel_width: 10.0,
+            row_rotation: 0.0,
+            origin_y: 5_000_200.0,
+            col_rotation: 0.0,
+            pixel_height: -10.0,
+        };
+        let mut d = dem(20, 20, |_, _| 0.0);
+        d.transform = transform;
+        d.values = vec![100.0; 400];
+        d.values[10 * 20 + 10] = 160.0; // centre at (500 105, 5 000 095)
+        let (agl, tol) = (30.0, 0.5);
+        for offset in [0.0, 1.3, 2.5, 3.7, 5.0] {
+            let m = TerrainModel::new(&d, 32631, extent(&d), 0.5, 1000.0).unwrap();
+            let y = 5_000_095.0 + offset;
+            let a = Coord { x: 500_012.3, y };
+            let b = Coord { x: 500_187.7, y };
+            let wps = m.follow(&[a, b], &rule(agl, tol));
+            let mut s = 0.0;
+            while s <= b.x - a.x {
+                let p = Coord { x: a.x + s, y };
+                let z = z_at(&wps, |c| c.x - a.x, s);
+                let raw = m.terrain(p).unwrap();
+                assert!(
+                    z - raw >= agl - tol - 1e-9,
+                    "offset {offset}, at {s}: {} above the DEM",
+                    z - raw
+                );
+                s += 0.05;
+            }
+        }
+    }
+
     #[test]
     fn rate_limits_hold_and_keep_the_flight_above_the_targets() {
         // A 30 m cliff: with a 0.2 m/m climb limit the climb starts early.
         let d = dem(300, 20, |x, _| if x < 500_150.0 { 100.0 } else { 130.0 });
-        let m = TerrainModel::new(&d, 32631, extent(&d), 2.0).unwrap();
+        let m = TerrainModel::new(&d, 32631, extent(&d), 2.0, 1000.0).unwrap();
         let a = Coord {
             x: 500_005.0,
             y: 5_000_010.0,
@@ -739,7 +817,7 @@ mod tests {
                 d.values[r * 100 + c] = f64::NAN;
             }
         }
-        let m = TerrainModel::new(&d, 32631, extent(&d), 1.0).unwrap();
+        let m = TerrainModel::new(&d, 32631, extent(&d), 1.0, 1000.0).unwrap();
         let p = Coord {
             x: 500_050.0,
             y: 5_000_005.0,
@@ -785,7 +863,7 @@ mod tests {
                 y: 5_100_100.0,
             },
         );
-        let m = TerrainModel::new(&d, 32631, far, 1.0).unwrap();
+        let m = TerrainModel::new(&d, 32631, far, 1.0, 1000.0).unwrap();
         assert!(m.is_empty());
         assert!(
             m.terrain(Coord {

@@ -58,6 +58,7 @@ const GEOGRAPHIC_TYPE: u16 = 2048;
 const GEOG_GEODETIC_DATUM: u16 = 2050;
 const PROJECTED_CS_TYPE: u16 = 3072;
 const PROJECTION: u16 = 3074;
+const VERTICAL_UNITS: u16 = 4099;
 
 /// GeoKey value "user-defined".
 const USER_DEFINED: u16 = 32767;
@@ -570,6 +571,8 @@ struct Header {
     transform: GeoTransform,
     crs_code: Result<u32, String>,
     nodata: Option<f64>,
+    /// Metres per unit of the heights (VerticalUnitsGeoKey; 1 when absent).
+    vertical_scale: f64,
     /// Where the ImageWidth entry is (to widen a tiled image, see `decode`).
     width_entry: Option<u64>,
     le: bool,
@@ -716,6 +719,18 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
     let nodata = ifd
         .ascii(GDAL_NODATA)?
         .map(|t| c_atof(t.split('\0').next().unwrap_or("")).0);
+    // Heights in feet would be flown as metres: convert them.
+    let vertical_scale = match keys.as_ref().and_then(|k| k.short(VERTICAL_UNITS)) {
+        None | Some(9001) | Some(USER_DEFINED) => 1.0,
+        Some(9002) => 0.3048,
+        Some(9003) => 1200.0 / 3937.0,
+        Some(u) => {
+            return Err(TerrainError::Unsupported(format!(
+                "the heights are in unit EPSG:{u} (VerticalUnitsGeoKey); terraplan reads \
+                 metres (9001), feet (9002) and US survey feet (9003)"
+            )));
+        }
+    };
 
     Ok(Header {
         width,
@@ -728,6 +743,7 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
         transform,
         crs_code,
         nodata,
+        vertical_scale,
         width_entry: ifd.entry(IMAGE_WIDTH).map(|e| e.pos),
         le,
         big,
@@ -1006,6 +1022,11 @@ pub(super) fn read(
             return Err(invalid(
                 "the TIFF's image data is corrupt (the decoder failed)",
             ));
+        }
+    }
+    if h.vertical_scale != 1.0 {
+        for v in &mut values {
+            *v *= h.vertical_scale;
         }
     }
     Ok(Dem {
@@ -1446,8 +1467,11 @@ mod tests {
         v.iter().flat_map(|x| x.to_le_bytes()).collect()
     }
 
+    /// The GeoTIFF reader itself (`read_dem` adds format detection and a
+    /// degrees check that these synthetic rasters need not pass).
     fn read(bytes: &[u8]) -> Result<Dem, TerrainError> {
-        read_dem(bytes, Some("x.tif"), None, &DemLimits::default())
+        assert!(is_tiff(bytes));
+        super::read(bytes, None, &DemLimits::default())
     }
 
     #[test]
@@ -1857,6 +1881,21 @@ mod tests {
                 .build();
             read(&b)
         };
+        // Heights in feet are converted to metres; other units are refused.
+        let feet = with(&[(1024, 1), (3072, 32616), (4099, 9002)]).unwrap();
+        assert!((feet.values[0] - 0.3048).abs() < 1e-15);
+        let survey_feet = with(&[(1024, 1), (3072, 32616), (4099, 9003)]).unwrap();
+        assert!((survey_feet.values[0] - 1200.0 / 3937.0).abs() < 1e-15);
+        assert_eq!(
+            with(&[(1024, 1), (3072, 32616), (4099, 9001)])
+                .unwrap()
+                .values[0],
+            1.0
+        );
+        assert!(matches!(
+            with(&[(1024, 1), (3072, 32616), (4099, 9036)]),
+            Err(TerrainError::Unsupported(_))
+        ));
         // Compound: projected + vertical → the horizontal code.
         assert_eq!(
             with(&[(1024, 1), (1025, 1), (3072, 32616), (4096, 3855)])

@@ -83,6 +83,12 @@ pub(super) fn read(
     };
     check_limits(n as u64, n as u64, limits)?;
     let crs = resolve_crs(Ok(4326), crs)?;
+    if !crs.geographic {
+        return Err(TerrainError::Crs(format!(
+            "an SRTM .hgt tile's positions are degrees; EPSG:{} is projected (metres)",
+            crs.epsg
+        )));
+    }
 
     let step = 1.0 / (n - 1) as f64;
     let transform = GeoTransform {
@@ -171,6 +177,18 @@ mod tests {
         )
         .unwrap();
         assert_eq!(dem.crs.epsg, 4258);
+        // A projected override would read the degrees as metres.
+        let e = read_dem(
+            &bytes,
+            Some("N45E006.hgt"),
+            Some(32632),
+            &DemLimits::default(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(e, TerrainError::Crs(ref m) if m.contains("projected")),
+            "{e}"
+        );
     }
 
     #[test]

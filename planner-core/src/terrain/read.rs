@@ -20,6 +20,47 @@ pub fn read_dem(
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
+    let dem = read_any(bytes, file_name, crs, limits)?;
+    check_degrees(&dem)?;
+    Ok(dem)
+}
+
+/// A geographic CRS whose coordinates are not degrees (e.g. a UTM raster
+/// uploaded with `crs=EPSG:4326`) would put the DEM somewhere absurd.
+fn check_degrees(dem: &Dem) -> Result<(), TerrainError> {
+    if !dem.crs.geographic {
+        return Ok(());
+    }
+    let corners = [
+        (0.0, 0.0),
+        (dem.width as f64, 0.0),
+        (0.0, dem.height as f64),
+        (dem.width as f64, dem.height as f64),
+    ];
+    for (c, r) in corners {
+        let (x, y) = dem.transform.apply(c, r);
+        // Half-pixel borders may reach a little past the poles or ±180°.
+        if !(x.is_finite()
+            && y.is_finite()
+            && (-181.0..=361.0).contains(&x)
+            && (-91.0..=91.0).contains(&y))
+        {
+            return Err(TerrainError::Crs(format!(
+                "the raster's corner ({x}, {y}) is not a longitude/latitude in degrees, yet \
+                 its CRS EPSG:{} is geographic: check the crs",
+                dem.crs.epsg
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn read_any(
+    bytes: &[u8],
+    file_name: Option<&str>,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
     if geotiff::is_tiff(bytes) {
         return geotiff::read(bytes, crs, limits);
     }
@@ -188,6 +229,20 @@ pub(super) fn c_atof(text: &str) -> (f64, bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn geographic_crs_needs_degrees() {
+        // A 2×2 ASCII grid at UTM-like coordinates declared EPSG:4326.
+        let asc = b"ncols 2\nnrows 2\nxllcorner 500000\nyllcorner 4000000\ncellsize 10\n1 2\n3 4\n";
+        let e = read_dem(asc, Some("x.asc"), Some(4326), &DemLimits::default()).unwrap_err();
+        assert!(
+            matches!(e, TerrainError::Crs(ref m) if m.contains("not a longitude/latitude")),
+            "{e}"
+        );
+        assert!(read_dem(asc, Some("x.asc"), Some(32633), &DemLimits::default()).is_ok());
+        let deg = b"ncols 2\nnrows 2\nxllcorner 6\nyllcorner 45\ncellsize 0.001\n1 2\n3 4\n";
+        assert!(read_dem(deg, Some("x.asc"), Some(4326), &DemLimits::default()).is_ok());
+    }
 
     #[test]
     fn atof_like_c() {
