@@ -24,6 +24,7 @@ use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
 use super::json_body::JsonBody;
+use super::paging::{ListQuery, page};
 use crate::app::AppState;
 use crate::db::DemMetaRow;
 use crate::error::{ApiError, Problem};
@@ -106,17 +107,6 @@ pub struct UploadQuery {
     /// an SRTM `.hgt` file's extent is in its name, e.g. `N45E006.hgt`.
     #[param(max_length = 255, example = "N45E006.hgt")]
     file_name: Option<String>,
-}
-
-#[derive(Deserialize, IntoParams)]
-#[into_params(parameter_in = Query)]
-pub struct ListQuery {
-    /// Page size.
-    #[param(minimum = 1, maximum = 100, default = 20)]
-    limit: Option<i64>,
-    /// DEMs to skip.
-    #[param(minimum = 0, default = 0)]
-    offset: Option<i64>,
 }
 
 #[derive(Deserialize, IntoParams)]
@@ -473,18 +463,7 @@ pub async fn list_dems(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<DemList>, ApiError> {
-    let Query(q) =
-        query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
-    let limit = q.limit.unwrap_or(20);
-    let offset = q.offset.unwrap_or(0);
-    if !(1..=100).contains(&limit) {
-        return Err(ApiError::BadRequest(format!(
-            "limit {limit} is outside [1, 100]"
-        )));
-    }
-    if offset < 0 {
-        return Err(ApiError::BadRequest(format!("offset {offset} is negative")));
-    }
+    let (limit, offset) = page(query)?;
     let (rows, total) = state.db.list_dems(limit, offset).await?;
     let items = rows
         .iter()

@@ -3,4 +3,5 @@
 pub mod dems;
 pub mod health;
 pub mod json_body;
+pub mod paging;
 pub mod surveys;

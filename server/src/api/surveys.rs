@@ -13,9 +13,10 @@ use planner_core::survey::{
 };
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
-use utoipa::{IntoParams, ToSchema};
+use utoipa::ToSchema;
 
 use super::json_body::JsonBody;
+use super::paging::{ListQuery, page};
 use crate::app::AppState;
 use crate::db::{SurveyRow, SurveySummaryRow};
 use crate::error::{ApiError, Problem};
@@ -168,17 +169,6 @@ pub struct SurveyList {
     total: i64,
     limit: i64,
     offset: i64,
-}
-
-#[derive(Deserialize, IntoParams)]
-#[into_params(parameter_in = Query)]
-pub struct ListQuery {
-    /// Page size.
-    #[param(minimum = 1, maximum = 100, default = 20)]
-    limit: Option<i64>,
-    /// Surveys to skip.
-    #[param(minimum = 0, default = 0)]
-    offset: Option<i64>,
 }
 
 fn survey_url(id: &str) -> String {
@@ -380,18 +370,7 @@ pub async fn list_surveys(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<SurveyList>, ApiError> {
-    let Query(q) =
-        query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
-    let limit = q.limit.unwrap_or(20);
-    let offset = q.offset.unwrap_or(0);
-    if !(1..=100).contains(&limit) {
-        return Err(ApiError::BadRequest(format!(
-            "limit {limit} is outside [1, 100]"
-        )));
-    }
-    if offset < 0 {
-        return Err(ApiError::BadRequest(format!("offset {offset} is negative")));
-    }
+    let (limit, offset) = page(query)?;
     let (rows, total) = state.db.list_surveys(limit, offset).await?;
     let items = rows.iter().map(summary).collect::<Result<Vec<_>, _>>()?;
     Ok(Json(SurveyList {
