@@ -366,7 +366,7 @@ fn window_max(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::terrain::{Crs, DemFormat};
+    use crate::terrain::test_support::{dem, north_up};
 
     struct Rng(u64);
     impl Rng {
@@ -376,33 +376,6 @@ mod tests {
             self.0 ^= self.0 << 25;
             self.0 ^= self.0 >> 27;
             (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
-
-    fn dem(w: usize, h: usize, values: Vec<f64>, t: GeoTransform, geographic: bool) -> Dem {
-        Dem {
-            width: w,
-            height: h,
-            values,
-            nodata: None,
-            transform: t,
-            crs: Crs {
-                epsg: if geographic { 4326 } else { 32633 },
-                name: String::new(),
-                geographic,
-            },
-            format: DemFormat::GeoTiff,
-        }
-    }
-
-    fn north_up(x0: f64, y0: f64, sx: f64, sy: f64) -> GeoTransform {
-        GeoTransform {
-            origin_x: x0,
-            pixel_width: sx,
-            row_rotation: 0.0,
-            origin_y: y0,
-            col_rotation: 0.0,
-            pixel_height: -sy,
         }
     }
 

@@ -231,35 +231,7 @@ fn encode_png(w: usize, h: usize, pixels: &[u8]) -> Option<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::terrain::{Crs, DemFormat};
-
-    fn dem(w: usize, h: usize, values: Vec<f64>, t: GeoTransform, geographic: bool) -> Dem {
-        assert_eq!(values.len(), w * h);
-        Dem {
-            width: w,
-            height: h,
-            values,
-            nodata: None,
-            transform: t,
-            crs: Crs {
-                epsg: if geographic { 4326 } else { 32633 },
-                name: String::new(),
-                geographic,
-            },
-            format: DemFormat::GeoTiff,
-        }
-    }
-
-    fn north_up(x0: f64, y0: f64, sx: f64, sy: f64) -> GeoTransform {
-        GeoTransform {
-            origin_x: x0,
-            pixel_width: sx,
-            row_rotation: 0.0,
-            origin_y: y0,
-            col_rotation: 0.0,
-            pixel_height: -sy,
-        }
-    }
+    use crate::terrain::test_support::{dem, north_up};
 
     /// A `w`×`h` DEM of 10 m cells with height `f(east, north)` in metres.
     fn plane(w: usize, h: usize, f: impl Fn(f64, f64) -> f64) -> Dem {

@@ -224,3 +224,40 @@ impl Dem {
         }
     }
 }
+
+/// Small rasters for the stages' unit tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::{Crs, Dem, DemFormat, GeoTransform};
+
+    /// A `w`×`h` DEM (row-major `values`) in EPSG:4326 or EPSG:32633.
+    pub fn dem(w: usize, h: usize, values: Vec<f64>, t: GeoTransform, geographic: bool) -> Dem {
+        assert_eq!(values.len(), w * h);
+        Dem {
+            width: w,
+            height: h,
+            values,
+            nodata: None,
+            transform: t,
+            crs: Crs {
+                epsg: if geographic { 4326 } else { 32633 },
+                name: String::new(),
+                geographic,
+            },
+            format: DemFormat::GeoTiff,
+        }
+    }
+
+    /// A north-up transform with its top-left corner at (x0, y0) and
+    /// cells `sx` wide and `sy` tall.
+    pub fn north_up(x0: f64, y0: f64, sx: f64, sy: f64) -> GeoTransform {
+        GeoTransform {
+            origin_x: x0,
+            pixel_width: sx,
+            row_rotation: 0.0,
+            origin_y: y0,
+            col_rotation: 0.0,
+            pixel_height: -sy,
+        }
+    }
+}
