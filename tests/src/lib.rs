@@ -282,3 +282,21 @@ pub fn example_survey_request() -> serde_json::Value {
         "slice_angle_deg": 0,
     })
 }
+
+/// `r` is an RFC 9457 problem with `status` whose detail or errors mention
+/// `detail_has`; returns the problem document.
+pub fn assert_problem(r: &Reply, status: u16, detail_has: &str) -> serde_json::Value {
+    assert_eq!(r.status, status, "{}", r.text());
+    assert_eq!(
+        r.header("content-type"),
+        Some("application/problem+json"),
+        "{}",
+        r.text()
+    );
+    let p = r.json();
+    assert_eq!(p["status"], status);
+    assert!(p["title"].is_string());
+    let all = format!("{} {}", p["detail"], p["errors"]);
+    assert!(all.contains(detail_has), "expected {detail_has:?} in {p}");
+    p
+}

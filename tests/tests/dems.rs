@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Part, Reply, Server, delete, get, get_with_headers, multipart_body, post, post_json,
-    post_multipart, shared_data, terraplan, text,
+    Part, Reply, Server, assert_problem, delete, get, get_with_headers, multipart_body, post,
+    post_json, post_multipart, shared_data, terraplan, text,
 };
 
 /// A DEM to test with: its file, the CRS to give when the file has none,
@@ -114,21 +114,6 @@ fn created(r: &Reply) -> Value {
         Some(format!("/api/v1/dems/{id}").as_str())
     );
     dem
-}
-
-fn assert_problem(r: &Reply, status: u16, detail_has: &str) -> Value {
-    assert_eq!(r.status, status, "{}", r.text());
-    assert_eq!(
-        r.header("content-type"),
-        Some("application/problem+json"),
-        "{}",
-        r.text()
-    );
-    let p = r.json();
-    assert_eq!(p["status"], status);
-    let all = format!("{} {}", p["detail"], p["errors"]);
-    assert!(all.contains(detail_has), "expected {detail_has:?} in {p}");
-    p
 }
 
 fn close(a: f64, b: f64, tol: f64) -> bool {

@@ -6,7 +6,9 @@
 use std::io::{Read, Write};
 
 use serde_json::{Value, json};
-use terraplan_e2e::{Server, delete, example_survey_request, get, post, post_json, validator};
+use terraplan_e2e::{
+    Server, assert_problem, delete, example_survey_request, get, post, post_json, validator,
+};
 
 fn example_request() -> Value {
     let mut req = example_survey_request();
@@ -14,22 +16,6 @@ fn example_request() -> Value {
     req["altitude_m"] = json!(60);
     req["uavs"] = json!([{"id": "uav1", "start": [6.0620, 51.5110]}]);
     req
-}
-
-fn assert_problem(r: &terraplan_e2e::Reply, status: u16, detail_has: &str) -> Value {
-    assert_eq!(r.status, status, "{}", r.text());
-    assert_eq!(
-        r.header("content-type"),
-        Some("application/problem+json"),
-        "{}",
-        r.text()
-    );
-    let p = r.json();
-    assert_eq!(p["status"], status);
-    assert!(p["title"].is_string());
-    let all = format!("{} {}", p["detail"], p["errors"]);
-    assert!(all.contains(detail_has), "expected {detail_has:?} in {p}");
-    p
 }
 
 #[test]

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
-use super::json_body::JsonBody;
+use super::json_body::{JsonBody, media_type};
 use super::paging::{ListQuery, page};
 use crate::app::AppState;
 use crate::db::DemMetaRow;
@@ -349,18 +349,7 @@ pub async fn upload_dem(
     let Query(q) =
         query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
     let limit = state.dems.max_upload_bytes;
-    let content_type = req
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("")
-        .to_string();
-    let essence = content_type
-        .split(';')
-        .next()
-        .unwrap_or("")
-        .trim()
-        .to_ascii_lowercase();
+    let (content_type, essence) = media_type(req.headers());
     let upload = if essence == "multipart/form-data" {
         read_multipart(req, &state, limit).await?
     } else if RAW_TYPES.contains(&essence.as_str()) {

@@ -17,18 +17,7 @@ impl<S: Send + Sync> FromRequest<S> for JsonBody {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
-        let content_type = req
-            .headers()
-            .get(header::CONTENT_TYPE)
-            .and_then(|v| v.to_str().ok())
-            .unwrap_or("")
-            .to_string();
-        let essence = content_type
-            .split(';')
-            .next()
-            .unwrap_or("")
-            .trim()
-            .to_ascii_lowercase();
+        let (content_type, essence) = media_type(req.headers());
         if !(essence == "application/json"
             || (essence.starts_with("application/") && essence.ends_with("+json")))
         {
@@ -59,4 +48,21 @@ impl<S: Send + Sync> FromRequest<S> for JsonBody {
             .map(JsonBody)
             .map_err(|e| ApiError::BadRequest(format!("the request body is not valid JSON: {e}")))
     }
+}
+
+/// A request's Content-Type as sent, and its essence (type/subtype,
+/// lower-case, without parameters); both empty when there is none.
+pub fn media_type(headers: &axum::http::HeaderMap) -> (String, String) {
+    let content_type = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    let essence = content_type
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    (content_type, essence)
 }
