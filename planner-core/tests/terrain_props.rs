@@ -153,7 +153,7 @@ proptest! {
             max_climb_rate_m_s: rates.map(|r| r.0),
             max_descent_rate_m_s: rates.map(|r| r.1),
             altitude_frame: frame,
-            uavs: vec![UavSpec { id: "u".into(), start: [start.x, start.y] }],
+            uavs: vec![UavSpec { id: "u".into(), start: [start.x, start.y], speed_m_s: None, max_flight_time_s: None }],
             ..SurveyParams::default()
         };
         let req = SurveyRequest {
@@ -166,7 +166,7 @@ proptest! {
             Err(planner_core::survey::PlanError::Invalid(i)) if i.iter().any(|i| i.message.contains("too small or too thin")) => return Ok(()),
             Err(e) => return Err(TestCaseError::fail(format!("planning failed: {e}"))),
         };
-        let uav = &plan.uavs[0];
+        let uav = &plan.uavs[0].sorties[0];
         let t = uav.terrain.as_ref().unwrap();
         let clearance = clearance.unwrap_or(altitude);
         let speed = params.speed_m_s;

@@ -37,7 +37,7 @@ fn create_get_list_download_delete() {
     assert_eq!(created["name"], "field with a mast");
     assert!(created["stats"]["coverage_ratio"].as_f64().unwrap() >= 0.995);
     assert_eq!(created["cells"]["type"], "FeatureCollection");
-    let uav = &created["uavs"][0];
+    let uav = &created["uavs"][0]["sorties"][0];
     assert_eq!(uav["route"]["type"], "LineString");
     assert_eq!(uav["route"]["coordinates"][1].as_array().unwrap().len(), 3);
 
@@ -156,7 +156,11 @@ fn surveys_survive_a_restart() {
     let r = get(&server.url(&format!("/api/v1/surveys/{id}")));
     assert_eq!(r.status, 200);
     assert_eq!(r.json(), created);
-    let wp = get(&server.url(created["uavs"][0]["files"]["waypoints"].as_str().unwrap()));
+    let wp = get(&server.url(
+        created["uavs"][0]["sorties"][0]["files"]["waypoints"]
+            .as_str()
+            .unwrap(),
+    ));
     assert_eq!(wp.status, 200);
 }
 
@@ -268,10 +272,40 @@ fn bad_input_is_a_problem_naming_the_fault() {
             "invalid type",
         ),
         (
-            "two UAVs",
-            json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "b", "start": [5.0, 52.0]}]}),
+            "65 UAVs",
+            json!({"roi": small, "uavs": (0..65).map(|i| json!({"id": format!("u{i}"), "start": [5.0, 52.0]})).collect::<Vec<_>>()}),
             "/uavs",
-            "not available yet",
+            "at most 64",
+        ),
+        (
+            "UAV id twice",
+            json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "a", "start": [5.001, 52.0]}]}),
+            "/uavs/1/id",
+            "given twice",
+        ),
+        (
+            "UAV speed 0",
+            json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0], "speed_m_s": 0}]}),
+            "/uavs/0/speed_m_s",
+            "outside the allowed range",
+        ),
+        (
+            "battery of 5 s",
+            json!({"roi": small, "uavs": [{"id": "a", "start": [5.0, 52.0], "max_flight_time_s": 5}]}),
+            "/uavs/0/max_flight_time_s",
+            "outside the allowed range",
+        ),
+        (
+            "battery too small to reach the area",
+            json!({"roi": small, "uavs": [{"id": "a", "start": [4.99, 52.0], "max_flight_time_s": 60}]}),
+            "/uavs/0/max_flight_time_s",
+            "within its battery",
+        ),
+        (
+            "unknown policy",
+            json!({"roi": small, "assignment": "fastest"}),
+            "/assignment",
+            "unknown variant",
         ),
         ("not an object", json!([1, 2]), "", "JSON object"),
     ];

@@ -228,11 +228,18 @@ fn bad_input_names_its_fault() {
             "too large",
         ),
         (
-            "two UAVs",
+            "UAV id twice",
             rect(5.0, 52.0, 5.005, 52.003),
             None,
-            json!({"uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "b", "start": [5.0, 52.0]}]}),
-            "not available yet",
+            json!({"uavs": [{"id": "a", "start": [5.0, 52.0]}, {"id": "a", "start": [5.0, 52.0]}]}),
+            "given twice",
+        ),
+        (
+            "battery too small to reach the area",
+            rect(5.0, 52.0, 5.005, 52.003),
+            None,
+            json!({"uavs": [{"id": "a", "start": [4.99, 52.0], "max_flight_time_s": 60}]}),
+            "within its battery",
         ),
         (
             "start in NFZ",

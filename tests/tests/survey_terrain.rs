@@ -63,7 +63,7 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
     let dir = tempfile::tempdir().unwrap();
     let survey_path = dir.path().join("survey.json");
     std::fs::write(&survey_path, survey.to_string()).unwrap();
-    let uav = &survey["uavs"][0];
+    let uav = &survey["uavs"][0]["sorties"][0];
     let wp = get(uav["files"]["waypoints"]
         .as_str()
         .map(|u| server.url(u))
@@ -97,7 +97,7 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
         .arg(workspace().join("tests/validators/check_terrain.py"))
         .arg(dem_file)
         .arg(&survey_path)
-        .arg(uav["id"].as_str().unwrap())
+        .arg(survey["uavs"][0]["id"].as_str().unwrap())
         .arg(&wp_path)
         .output()
         .expect("run check_terrain.py");
@@ -179,7 +179,7 @@ fn terrain_following_is_safe_over_every_real_dem() {
         body["no_fly_zones"] = json!([nfz]);
         body["uavs"] = json!([{"id": "uav1", "start": corner(&roi, 0)}]);
         let (survey, summary) = plan_and_check(&server, &path, dem["id"].as_str().unwrap(), body);
-        let t = &survey["uavs"][0]["terrain"];
+        let t = &survey["uavs"][0]["sorties"][0]["terrain"];
         assert!(t["legs"].as_array().unwrap().len() >= 3);
         assert!(t["profile"].as_array().unwrap().len() >= 10);
         assert!(summary["samples"].as_u64().unwrap() > 100);
@@ -308,7 +308,7 @@ fn geographic_and_projected_copies_of_a_dem_give_the_same_lanes() {
     let (a, _) = plan_and_check(&server, &src, info["id"].as_str().unwrap(), body.clone());
     let (b, _) = plan_and_check(&server, &warped, utm["id"].as_str().unwrap(), body);
     let lanes = |s: &Value| -> Vec<Vec<[f64; 3]>> {
-        s["uavs"][0]["terrain"]["legs"]
+        s["uavs"][0]["sorties"][0]["terrain"]["legs"]
             .as_array()
             .unwrap()
             .iter()

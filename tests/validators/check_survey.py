@@ -62,12 +62,13 @@ def main():
 
     summary = {"uavs": {}}
     lanes = []
-    for uav in plan["uavs"]:
-        uid = uav["id"]
+    flights = [(uav, sortie) for uav in plan["uavs"] for sortie in uav["sorties"]]
+    for uav, sortie in flights:
+        uid = sortie["file_stem"]
         wp_path = out / f"{uid}.waypoints"
         loader = mavwp.MAVWPLoader()
         n = loader.load(str(wp_path))
-        expected = 1 + len(uav["mission"]["items"])
+        expected = 1 + len(sortie["mission"]["items"])
         if n != expected:
             fail(f"{wp_path}: pymavlink loaded {n} items, plan.json has {expected}")
         items = [loader.wp(i) for i in range(n)]
@@ -76,7 +77,7 @@ def main():
             fail(f"{wp_path}: item 0 is not a home waypoint in frame 0")
         if abs(home.x - uav["start"][1]) > POS_TOL_DEG or abs(home.y - uav["start"][0]) > POS_TOL_DEG:
             fail(f"{wp_path}: home position differs from the UAV start")
-        expected_wps = [it for it in uav["mission"]["items"] if it["kind"] == "waypoint"]
+        expected_wps = [it for it in sortie["mission"]["items"] if it["kind"] == "waypoint"]
         got_wps = [it for it in items[1:] if it.command == CMD_WAYPOINT]
         if len(got_wps) != len(expected_wps):
             fail(f"{wp_path}: {len(got_wps)} waypoints, plan.json has {len(expected_wps)}")
@@ -123,8 +124,22 @@ def main():
                 fail(f"{uid}.kml: route point {c} differs from the mission")
         summary["uavs"][uid] = {"items": n, "waypoints": len(got_wps)}
 
-    if len(lanes) != plan["stats"]["lane_count"]:
-        fail(f"found {len(lanes)} lanes in the missions, plan.json says {plan['stats']['lane_count']}")
+    # Together the UAVs fly every cell exactly once: each flown lane (or
+    # piece of a lane) belongs to the cell it overlaps most, each cell's
+    # flown lane length equals its planned one, and no two lanes overlap.
+    cells = {c["id"]: project(shape(c["polygon"])).buffer(GEOM_TOL_M) for c in plan["cells"]}
+    flown = {cid: 0.0 for cid in cells}
+    for lane in lanes:
+        owner = max(cells, key=lambda cid: cells[cid].intersection(lane).length)
+        flown[owner] += lane.length
+    for c in plan["cells"]:
+        if abs(flown[c["id"]] - c["lane_length_m"]) > 1e-4 * c["lane_length_m"] + 0.05:
+            fail(f"cell {c['id']}: {flown[c['id']]:.2f} m of lanes flown, {c['lane_length_m']:.2f} m planned")
+    total = sum(l.length for l in lanes)
+    merged = unary_union(lanes).length if lanes else 0.0
+    if total - merged > 0.05 + 1e-6 * total:
+        fail(f"lanes overlap: {total:.2f} m flown, {merged:.2f} m distinct")
+    summary["flown_lane_m"] = total
     half = plan["stats"]["footprint_side_m"] / 2.0
     swaths = unary_union([l.buffer(half, cap_style="flat") for l in lanes if l.length > 0])
     ratio = swaths.intersection(free).area / free.area

@@ -84,7 +84,7 @@ else:
 step = res_m / 2
 
 uav = next(u for u in survey["uavs"] if u["id"] == uav_id)
-terrain = uav["terrain"]
+terrain = uav["sorties"][0]["terrain"]
 stats = survey["stats"]
 agl = stats["altitude_m"]
 tol = stats["terrain"]["agl_tolerance_m"]

@@ -70,6 +70,20 @@ impl CellPlan {
             .sum()
     }
 
+    /// The same path flown exactly backwards.
+    pub fn reversed(&self) -> CellPlan {
+        let mut out = self.clone();
+        out.lanes.reverse();
+        for lane in &mut out.lanes {
+            std::mem::swap(&mut lane.start, &mut lane.end);
+        }
+        out.links.reverse();
+        for link in &mut out.links {
+            link.reverse();
+        }
+        out
+    }
+
     /// Turns flown inside the cell: every change from one lane to the next is
     /// two 90° turns (the usual count for a lawnmower pattern).
     pub fn turns(&self) -> usize {

@@ -221,7 +221,7 @@ impl Job {
             return if forwards {
                 plan.clone()
             } else {
-                reversed(plan)
+                plan.reversed()
             };
         };
         let candidates: [(bool, bool); 3] = if forwards {
@@ -247,20 +247,6 @@ impl Job {
         }
         best.map_or_else(|| plan.clone(), |(_, p)| p)
     }
-}
-
-/// Flies `plan` exactly backwards.
-fn reversed(plan: &CellPlan) -> CellPlan {
-    let mut out = plan.clone();
-    out.lanes.reverse();
-    for lane in &mut out.lanes {
-        std::mem::swap(&mut lane.start, &mut lane.end);
-    }
-    out.links.reverse();
-    for link in &mut out.links {
-        link.reverse();
-    }
-    out
 }
 
 /// A leg's end points as bits, the smaller point first: a leg and its
@@ -1077,7 +1063,7 @@ mod tests {
         let tour = plan_tour(start, &plans, &cells, &MultiPolygon(cells.clone()), &map).unwrap();
         assert_eq!(tour.visits.len(), 1);
         let v = &tour.visits[0];
-        assert!(*v == orphan || *v == reversed(&orphan));
+        assert!(*v == orphan || *v == orphan.reversed());
 
         // Non-finite input is an error, not a panic.
         let nan = coord! { x: f64::NAN, y: 0.0 };

@@ -12,21 +12,23 @@ use crate::decompose;
 use crate::export::{
     self, AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem, geojson as gj,
 };
-use crate::flock::{ObstacleMap, plan_tour};
+use crate::flock::{FlockUav, ObstacleMap, Piece, Policy, count_turns};
 use crate::geo::{
     GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area,
 };
 use crate::terrain::{Dem, TerrainModel};
 
+mod flock_plan;
 mod terrain_flight;
 
 pub use terrain_flight::{FlightLeg, LegKind, ProfilePoint, UavTerrain};
 use terrain_flight::{FlightRules, cell_length_3d, fly_tour, lanes_known_fraction};
 
+/// Most UAVs in one survey.
+pub const MAX_UAVS: usize = 64;
+
 /// Free space smaller than this (m²) is treated as nothing left to survey.
 const MIN_FREE_AREA_M2: f64 = 1.0;
-/// A heading change above this many degrees counts as a turn.
-const TURN_THRESHOLD_DEG: f64 = 10.0;
 /// How many slice angles `auto` tries at most: every 15° plus the bearings
 /// of the longest boundary edges, where the fewest turns usually are.
 const AUTO_EDGE_CANDIDATES: usize = 12;
@@ -105,6 +107,16 @@ pub struct UavSpec {
     pub id: String,
     /// Take-off and landing point, [lon, lat].
     pub start: [f64; 2],
+    /// Cruise speed of this UAV, m/s, (0, 50]; the survey's `speed_m_s`
+    /// when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 50))]
+    pub speed_m_s: Option<f64>,
+    /// Battery endurance, s, [30, 86400]: a longer mission is flown in
+    /// sorties that each return home (one mission file per sortie).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 30, maximum = 86400))]
+    pub max_flight_time_s: Option<f64>,
 }
 
 /// Survey request parameters: the fields of the params file and of the API
@@ -141,8 +153,9 @@ pub struct SurveyParams {
     /// Time charged per turn in the flight-time estimate, s, in [0, 120]; default 2.
     #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 120))]
     pub turn_penalty_s: f64,
-    /// UAVs; default one UAV starting at the ROI's first vertex.
-    #[cfg_attr(feature = "openapi", schema(max_items = 1))]
+    /// UAVs (at most 64, ids unique); default one UAV starting at the ROI's
+    /// first vertex.
+    #[cfg_attr(feature = "openapi", schema(max_items = 64))]
     pub uavs: Vec<UavSpec>,
     /// Altitude frame of the mission; default relative.
     pub altitude_frame: AltitudeFrame,
@@ -173,6 +186,10 @@ pub struct SurveyParams {
     /// the highest height nearby there); default false: a 422 says how much
     /// is missing.
     pub allow_partial_dem: bool,
+    /// How the cells are shared among the UAVs: `balanced` (default,
+    /// shortest makespan), `competition` (thesis Algorithm 3) or
+    /// `min_reach` (thesis policy 1, least summed reach distance).
+    pub assignment: Policy,
 }
 
 impl Default for SurveyParams {
@@ -198,6 +215,7 @@ impl Default for SurveyParams {
             max_climb_rate_m_s: None,
             max_descent_rate_m_s: None,
             allow_partial_dem: false,
+            assignment: Policy::Balanced,
         }
     }
 }
@@ -336,17 +354,45 @@ impl SurveyParams {
             )),
             _ => {}
         }
-        if self.uavs.len() > 1 {
+        if self.uavs.len() > MAX_UAVS {
             issues.push(Issue::new(
                 &p("uavs"),
                 &format!(
-                    "{} UAVs given, but planning for several UAVs (flock assignment) is not \
-                     available yet: give exactly one UAV",
+                    "{} UAVs given; a survey takes at most {MAX_UAVS}",
                     self.uavs.len()
                 ),
             ));
         }
         for (i, u) in self.uavs.iter().enumerate() {
+            if self.uavs[..i].iter().any(|o| o.id == u.id) {
+                issues.push(Issue::new(
+                    &p(&format!("uavs/{i}/id")),
+                    &format!(
+                        "UAV id {:?} is given twice (ids name the mission files)",
+                        u.id
+                    ),
+                ));
+            }
+            if let Some(v) = u.speed_m_s {
+                check_range(
+                    &mut issues,
+                    &p(&format!("uavs/{i}/speed_m_s")),
+                    v,
+                    0.0,
+                    50.0,
+                    true,
+                );
+            }
+            if let Some(t) = u.max_flight_time_s {
+                check_range(
+                    &mut issues,
+                    &p(&format!("uavs/{i}/max_flight_time_s")),
+                    t,
+                    30.0,
+                    86_400.0,
+                    false,
+                );
+            }
             if u.id.trim().is_empty() || u.id.len() > 64 {
                 issues.push(Issue::new(
                     &p(&format!("uavs/{i}/id")),
@@ -546,6 +592,32 @@ pub struct SurveyStats {
     pub turns: usize,
     pub flight_time_s: f64,
     pub coverage_ratio: f64,
+    /// UAVs in the flock.
+    #[serde(default)]
+    pub uav_count: usize,
+    /// The assignment policy used.
+    #[serde(default)]
+    pub assignment: Policy,
+    /// The longest UAV mission (all its sorties), s.
+    #[serde(default)]
+    pub makespan_s: f64,
+    /// No way of sharing the cells can have a shorter makespan than this, s.
+    #[serde(default)]
+    pub makespan_lower_bound_s: f64,
+    /// `makespan_s / makespan_lower_bound_s - 1`: how far the plan can at
+    /// most be from the best possible.
+    #[serde(default)]
+    pub makespan_gap: f64,
+    /// Longest minus shortest UAV mission time, s.
+    #[serde(default)]
+    pub imbalance_s: f64,
+    /// Longest minus shortest UAV 3D length, m.
+    #[serde(default)]
+    pub imbalance_3d_m: f64,
+    /// Sorties flown by the whole flock (more than one per UAV when a
+    /// battery is too small for its share).
+    #[serde(default)]
+    pub sorties: usize,
     /// Terrain following, when the survey is flown over a DEM.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub terrain: Option<SurveyTerrainStats>,
@@ -575,7 +647,15 @@ pub struct UavStats {
     pub turns: usize,
     pub flight_time_s: f64,
     pub photos: usize,
+    /// Cells flown, wholly or in part.
     pub cells: usize,
+    /// Flights from take-off to landing (battery sorties).
+    #[serde(default = "one")]
+    pub sorties: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -584,21 +664,47 @@ pub struct CellOut {
     pub area_m2: f64,
     pub lane_bearing_deg: f64,
     pub lanes: usize,
+    /// Summed length of the cell's survey lanes, m.
+    #[serde(default)]
+    pub lane_length_m: f64,
     /// GeoJSON Polygon, WGS84.
     pub polygon: Value,
+}
+
+/// One flight of a UAV, from take-off at its start to landing there.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SortiePlan {
+    /// Stem of the sortie's file names: the UAV id, or `<id>.sortie<k>`
+    /// (k from 1) when the UAV flies several sorties.
+    pub file_stem: String,
+    /// Cell ids in the order flown.
+    pub cells: Vec<usize>,
+    /// The parts of cells flown, in order.
+    pub pieces: Vec<Piece>,
+    pub stats: UavStats,
+    pub mission: Mission,
+    /// The flight over the DEM, when there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terrain: Option<UavTerrain>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UavPlan {
     pub id: String,
     pub start: [f64; 2],
-    /// Cell ids in the order flown.
-    pub cells: Vec<usize>,
-    pub stats: UavStats,
-    pub mission: Mission,
-    /// The flight over the DEM, when there is one.
+    pub speed_m_s: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub terrain: Option<UavTerrain>,
+    pub max_flight_time_s: Option<f64>,
+    /// Cell ids in the order flown (a cell flown in parts appears once per
+    /// run of its parts).
+    pub cells: Vec<usize>,
+    /// The parts of cells flown, in order: a whole cell, or part of it when
+    /// cells were halved for more UAVs than cells or for the battery.
+    pub pieces: Vec<Piece>,
+    /// Totals over the sorties.
+    pub stats: UavStats,
+    /// At least one; several when the battery needs them.
+    pub sorties: Vec<SortiePlan>,
 }
 
 /// A planned survey: what `plan.json` holds and the files are made from.
@@ -696,12 +802,18 @@ pub fn plan_survey_over(
             ),
         )]));
     }
+    let fastest = params
+        .uavs
+        .iter()
+        .filter_map(|u| u.speed_m_s)
+        .fold(params.speed_m_s, f64::max);
     let rules = FlightRules {
         agl_m: altitude,
         tolerance_m: params.agl_tolerance_m,
         transit_clearance_m: params.transit_clearance_m.unwrap_or(altitude),
-        max_climb_per_m: params.max_climb_rate_m_s.map(|r| r / params.speed_m_s),
-        max_descent_per_m: params.max_descent_rate_m_s.map(|r| r / params.speed_m_s),
+        // Slopes from rates at the fastest UAV's speed: safe for all.
+        max_climb_per_m: params.max_climb_rate_m_s.map(|r| r / fastest),
+        max_descent_per_m: params.max_descent_rate_m_s.map(|r| r / fastest),
     };
     if dem.is_some() && rules.tolerance_m >= altitude {
         return Err(PlanError::Invalid(vec![Issue::new(
@@ -720,55 +832,86 @@ pub fn plan_survey_over(
         ..
     } = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
 
-    // One UAV (flock assignment comes with its own stage).
-    let uav = params.uavs.first().cloned().unwrap_or_else(|| {
+    // The flock: every UAV's start in planning coordinates, out of the NFZs.
+    let default_uav;
+    let uav_specs: &[UavSpec] = if params.uavs.is_empty() {
         let c = req.roi[0].polygon.exterior().0[0];
-        UavSpec {
+        default_uav = [UavSpec {
             id: "uav1".to_string(),
             start: [c.x, c.y],
+            speed_m_s: None,
+            max_flight_time_s: None,
+        }];
+        &default_uav
+    } else {
+        &params.uavs
+    };
+    let pointer = |i: usize, field: &str| -> String {
+        if params.uavs.is_empty() {
+            "/uavs".to_string()
+        } else {
+            format!("/uavs/{i}/{field}")
         }
-    });
-    let start_utm = proj.to_utm(Coord {
-        x: uav.start[0],
-        y: uav.start[1],
-    })?;
+    };
+    let homes: Vec<Coord<f64>> = uav_specs
+        .iter()
+        .map(|u| {
+            proj.to_utm(Coord {
+                x: u.start[0],
+                y: u.start[1],
+            })
+        })
+        .collect::<Result<_, _>>()?;
     let nfz_union = nfz_union(&area.no_fly);
     let obstacles = ObstacleMap::new(&nfz_union, params.nfz_clearance_m);
-    if obstacles.contains_point(start_utm) {
-        return Err(PlanError::Invalid(vec![Issue::new(
-            "/uavs/0/start",
-            "the UAV's start position is inside a no-fly zone",
-        )]));
+    let inside: Vec<Issue> = homes
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| obstacles.contains_point(**h))
+        .map(|(i, _)| {
+            Issue::new(
+                &pointer(i, "start"),
+                &format!(
+                    "UAV {}'s start position is inside a no-fly zone",
+                    uav_specs[i].id
+                ),
+            )
+        })
+        .collect();
+    if !inside.is_empty() {
+        return Err(PlanError::Invalid(inside));
     }
     let mut warnings = Vec::new();
     let terrain = match dem {
         None => None,
         Some(dem) => {
-            // Cheap checks first: the start needs a height (relative
+            // Cheap checks first: every start needs a height (relative
             // altitudes are measured from it), unless the DEM misses the
             // whole area (reported as such below).
-            let home_pointer = if params.uavs.is_empty() {
-                "/uavs"
-            } else {
-                "/uavs/0/start"
-            };
-            let no_home = || {
-                PlanError::Invalid(vec![Issue::new(
-                    home_pointer,
+            let no_home = |i: usize| {
+                let u = &uav_specs[i];
+                Issue::new(
+                    &pointer(i, "start"),
                     &format!(
-                        "the DEM has no height under the UAV's start ({:.6}, {:.6}): relative \
+                        "the DEM has no height under UAV {}'s start ({:.6}, {:.6}): relative \
                          altitudes are measured from there; start inside the DEM",
-                        uav.start[0], uav.start[1]
+                        u.id, u.start[0], u.start[1]
                     ),
-                )])
+                )
             };
             let sampler = crate::terrain::TerrainSampler::new(dem, proj.epsg())
                 .map_err(|e| PlanError::Invalid(vec![Issue::new(DEM_POINTER, &e.to_string())]))?;
             let roi_vertex = area.roi.0[0].exterior().0[0];
-            if sampler.height(start_utm).is_none() && sampler.height(roi_vertex).is_some() {
-                return Err(no_home());
+            if sampler.height(roi_vertex).is_some() {
+                let missing: Vec<Issue> = (0..homes.len())
+                    .filter(|&i| sampler.height(homes[i]).is_none())
+                    .map(no_home)
+                    .collect();
+                if !missing.is_empty() {
+                    return Err(PlanError::Invalid(missing));
+                }
             }
-            let t = prepare_terrain(dem, &area, start_utm, &geometry, &plans, params, &free)?;
+            let t = prepare_terrain(dem, &area, &homes, &geometry, &plans, params, &free)?;
             if t.known_fraction < 1.0 {
                 warnings.push(format!(
                     "the DEM has no heights under {:.1} % of the survey area: flown there at the \
@@ -799,64 +942,120 @@ pub fn plan_survey_over(
                         .map_or(p, |(_, c)| c)
                 })
                 .collect();
-            let home_amsl = t.model.terrain(start_utm).ok_or_else(no_home)?;
-            Some((t, home_amsl))
+            let homes_amsl: Vec<f64> = (0..homes.len())
+                .map(|i| t.model.terrain(homes[i]).ok_or_else(|| no_home(i)))
+                .collect::<Result<_, Issue>>()
+                .map_err(|i| PlanError::Invalid(vec![i]))?;
+            Some((t, homes_amsl))
         }
     };
-    let tour = plan_tour(start_utm, &plans, &cells, &free, &obstacles)
-        .map_err(|e| PlanError::Internal(e.to_string()))?;
 
-    let (mission, length_3d, uav_terrain) = match &terrain {
-        None => {
-            let home = GeoPoint {
-                lon: uav.start[0],
-                lat: uav.start[1],
-                alt: 0.0,
-            };
-            let mission = build_mission(&tour, home, altitude, &geometry, params, proj)?;
-            // Flat survey: 3D adds the climb after take-off and the descent home.
-            (mission, tour.length_m() + 2.0 * altitude, None)
-        }
-        Some((t, home_amsl)) => {
-            let flight = fly_tour(
-                &tour,
-                &t.model,
-                &rules,
-                uav.start,
-                *home_amsl,
-                params.altitude_frame,
-                params.speed_m_s,
-                &geometry,
-                proj,
-            )?;
-            (flight.mission, flight.length_3d_m, Some(flight.terrain))
-        }
-    };
-    let path = tour.path();
-    let path_len = tour.length_m();
-    let lane_lengths: Vec<f64> = tour
-        .visits
+    let speeds: Vec<f64> = uav_specs
         .iter()
-        .flat_map(|v| &v.lanes)
-        .map(|l| dist(l.start, l.end))
+        .map(|u| u.speed_m_s.unwrap_or(params.speed_m_s))
         .collect();
-    let survey_len: f64 = lane_lengths.iter().sum();
-    let turns = count_turns(&path);
-    let photos: usize = lane_lengths
-        .iter()
-        .map(|&len| coverage::photo_count(len, geometry.trigger_distance_m))
-        .sum();
-    let flight_time = length_3d / params.speed_m_s + turns as f64 * params.turn_penalty_s;
-    let uav_stats = UavStats {
-        length_m: path_len,
-        length_3d_m: length_3d,
-        survey_length_m: survey_len,
-        transit_length_m: tour.transit_length_m(),
-        turns,
-        flight_time_s: flight_time,
-        photos,
-        cells: tour.visits.len(),
+    let input = flock_plan::FlockInput {
+        plans: &plans,
+        cells: &cells,
+        free: &free,
+        obstacles: &obstacles,
+        uavs: homes
+            .iter()
+            .zip(&speeds)
+            .map(|(&home, &speed_m_s)| FlockUav { home, speed_m_s })
+            .collect(),
+        batteries: uav_specs.iter().map(|u| u.max_flight_time_s).collect(),
+        ids: uav_specs.iter().map(|u| u.id.clone()).collect(),
+        pointer: &pointer,
+        policy: params.assignment,
+        turn_penalty_s: params.turn_penalty_s,
+        altitude_m: altitude,
+        terrain: terrain.as_ref().map(|(t, _)| (&t.model, rules)),
     };
+    let outcome = flock_plan::share(&input)?;
+
+    let mut uav_plans = Vec::with_capacity(uav_specs.len());
+    let mut all_paths: Vec<Coord<f64>> = Vec::new();
+    for (i, (spec, flights)) in uav_specs.iter().zip(outcome.sorties).enumerate() {
+        let speed = speeds[i];
+        let several = flights.len() > 1;
+        let mut sorties = Vec::with_capacity(flights.len());
+        for (k, flight) in flights.into_iter().enumerate() {
+            let tour = &flight.tour;
+            let (mission, length_3d, uav_terrain) = match &terrain {
+                None => {
+                    let home = GeoPoint {
+                        lon: spec.start[0],
+                        lat: spec.start[1],
+                        alt: 0.0,
+                    };
+                    let mission =
+                        build_mission(tour, home, altitude, speed, &geometry, params, proj)?;
+                    // Flat survey: 3D adds the climb after take-off and the
+                    // descent home.
+                    (mission, tour.length_m() + 2.0 * altitude, None)
+                }
+                Some((t, homes_amsl)) => {
+                    let flight = fly_tour(
+                        tour,
+                        &t.model,
+                        &rules,
+                        spec.start,
+                        homes_amsl[i],
+                        params.altitude_frame,
+                        speed,
+                        &geometry,
+                        proj,
+                    )?;
+                    (flight.mission, flight.length_3d_m, Some(flight.terrain))
+                }
+            };
+            let path = tour.path();
+            let stats = tour_stats(tour, &path, length_3d, speed, params, &geometry);
+            all_paths.extend(path);
+            sorties.push(SortiePlan {
+                file_stem: if several {
+                    format!("{}.sortie{}", spec.id, k + 1)
+                } else {
+                    spec.id.clone()
+                },
+                cells: visited_cells(&flight.pieces),
+                pieces: flight.pieces,
+                stats,
+                mission,
+                terrain: uav_terrain,
+            });
+        }
+        let pieces: Vec<Piece> = sorties.iter().flat_map(|s| s.pieces.clone()).collect();
+        let cells_flown = visited_cells(&pieces);
+        let sum = |f: fn(&UavStats) -> f64| sorties.iter().map(|s| f(&s.stats)).sum::<f64>();
+        let stats = UavStats {
+            length_m: sum(|s| s.length_m),
+            length_3d_m: sum(|s| s.length_3d_m),
+            survey_length_m: sum(|s| s.survey_length_m),
+            transit_length_m: sum(|s| s.transit_length_m),
+            turns: sorties.iter().map(|s| s.stats.turns).sum(),
+            flight_time_s: sum(|s| s.flight_time_s),
+            photos: sorties.iter().map(|s| s.stats.photos).sum(),
+            cells: {
+                let mut c = cells_flown.clone();
+                c.sort_unstable();
+                c.dedup();
+                c.len()
+            },
+            sorties: sorties.len(),
+        };
+        uav_plans.push(UavPlan {
+            id: spec.id.clone(),
+            start: spec.start,
+            speed_m_s: speed,
+            max_flight_time_s: spec.max_flight_time_s,
+            cells: cells_flown,
+            pieces,
+            stats,
+            sorties,
+        });
+    }
 
     let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
     let coverage_ratio = coverage::coverage_ratio(&lanes, geometry.footprint_side_m, &free);
@@ -877,12 +1076,22 @@ pub fn plan_survey_over(
                 area_m2: c.unsigned_area(),
                 lane_bearing_deg: plan.map_or(slice_angle, |p| p.direction_deg),
                 lanes: plan.map_or(0, |p| p.lanes.len()),
+                lane_length_m: plan
+                    .map_or(0.0, |p| p.lanes.iter().map(|l| dist(l.start, l.end)).sum()),
                 polygon: gj::polygon_geometry(&proj.polygon_to_wgs84(c)?),
             })
         })
         .collect::<Result<Vec<_>, GeoError>>()?;
 
-    let fences = fences(&area, &path, params.fence_margin_m)?;
+    let fences = fences(&area, &all_paths, params.fence_margin_m)?;
+    let times: Vec<f64> = uav_plans.iter().map(|u| u.stats.flight_time_s).collect();
+    let lengths: Vec<f64> = uav_plans.iter().map(|u| u.stats.length_3d_m).collect();
+    let spread = |v: &[f64]| {
+        v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - v.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    let makespan = times.iter().copied().fold(0.0, f64::max);
+    let total = |f: fn(&UavStats) -> f64| uav_plans.iter().map(|u| f(&u.stats)).sum::<f64>();
     let stats = SurveyStats {
         area_m2: area.roi.unsigned_area(),
         free_area_m2: free_area,
@@ -895,12 +1104,24 @@ pub fn plan_survey_over(
         slice_angle_deg: slice_angle,
         cell_count: cells.len(),
         lane_count: lanes.len(),
-        photos,
-        length_m: path_len,
-        length_3d_m: length_3d,
-        turns,
-        flight_time_s: flight_time,
+        photos: uav_plans.iter().map(|u| u.stats.photos).sum(),
+        length_m: total(|s| s.length_m),
+        length_3d_m: total(|s| s.length_3d_m),
+        turns: uav_plans.iter().map(|u| u.stats.turns).sum(),
+        flight_time_s: total(|s| s.flight_time_s),
         coverage_ratio,
+        uav_count: uav_plans.len(),
+        assignment: params.assignment,
+        makespan_s: makespan,
+        makespan_lower_bound_s: outcome.lower_bound_s,
+        makespan_gap: if outcome.lower_bound_s > 0.0 {
+            makespan / outcome.lower_bound_s - 1.0
+        } else {
+            0.0
+        },
+        imbalance_s: spread(&times),
+        imbalance_3d_m: spread(&lengths),
+        sorties: uav_plans.iter().map(|u| u.stats.sorties).sum(),
         terrain: terrain.as_ref().map(|(t, _)| SurveyTerrainStats {
             dem_known_fraction: t.known_fraction,
             dilation_radius_m: t.model.dilation_radius_m(),
@@ -913,17 +1134,57 @@ pub fn plan_survey_over(
         altitude_frame: params.altitude_frame,
         stats,
         cells: cells_out,
-        uavs: vec![UavPlan {
-            id: uav.id.clone(),
-            start: uav.start,
-            cells: tour.visits.iter().map(|v| v.cell_index).collect(),
-            stats: uav_stats,
-            mission,
-            terrain: uav_terrain,
-        }],
+        uavs: uav_plans,
         fences,
         warnings,
     })
+}
+
+/// Statistics of one flown tour.
+fn tour_stats(
+    tour: &crate::flock::Tour,
+    path: &[Coord<f64>],
+    length_3d: f64,
+    speed: f64,
+    params: &SurveyParams,
+    geometry: &SurveyGeometry,
+) -> UavStats {
+    let lane_lengths: Vec<f64> = tour
+        .visits
+        .iter()
+        .flat_map(|v| &v.lanes)
+        .map(|l| dist(l.start, l.end))
+        .collect();
+    let turns = count_turns(path);
+    let mut cells: Vec<usize> = tour.visits.iter().map(|v| v.cell_index).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    UavStats {
+        length_m: tour.length_m(),
+        length_3d_m: length_3d,
+        survey_length_m: lane_lengths.iter().sum(),
+        transit_length_m: tour.transit_length_m(),
+        turns,
+        flight_time_s: length_3d / speed + turns as f64 * params.turn_penalty_s,
+        photos: lane_lengths
+            .iter()
+            .map(|&len| coverage::photo_count(len, geometry.trigger_distance_m))
+            .sum(),
+        cells: cells.len(),
+        sorties: 1,
+    }
+}
+
+/// Cell ids in the order the pieces are flown, a cell once per run of its
+/// pieces.
+fn visited_cells(pieces: &[Piece]) -> Vec<usize> {
+    let mut out: Vec<usize> = Vec::new();
+    for p in pieces {
+        if out.last() != Some(&p.cell) {
+            out.push(p.cell);
+        }
+    }
+    out
 }
 
 /// The DEM prepared for one survey.
@@ -940,7 +1201,7 @@ struct SurveyTerrain {
 fn prepare_terrain(
     dem: &Dem,
     area: &SurveyArea,
-    start_utm: Coord<f64>,
+    homes: &[Coord<f64>],
     geometry: &SurveyGeometry,
     plans: &[CellPlan],
     params: &SurveyParams,
@@ -958,7 +1219,7 @@ fn prepare_terrain(
             .iter()
             .flat_map(|p| p.exterior().0.iter().copied()),
     );
-    pts.push(start_utm);
+    pts.extend_from_slice(homes);
     let bbox = geo_types::LineString(pts)
         .bounding_rect()
         .ok_or_else(|| PlanError::Internal("empty survey extent".into()))?;
@@ -1129,35 +1390,13 @@ fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
     (b.x - a.x).hypot(b.y - a.y)
 }
 
-/// Heading changes above [`TURN_THRESHOLD_DEG`] along a polyline.
-fn count_turns(path: &[Coord<f64>]) -> usize {
-    let mut headings = path
-        .windows(2)
-        .filter(|w| dist(w[0], w[1]) > 1e-6)
-        .map(|w| (w[1].y - w[0].y).atan2(w[1].x - w[0].x));
-    let Some(mut prev) = headings.next() else {
-        return 0;
-    };
-    let mut turns = 0;
-    for h in headings {
-        let mut d = (h - prev).abs();
-        if d > std::f64::consts::PI {
-            d = 2.0 * std::f64::consts::PI - d;
-        }
-        if d.to_degrees() > TURN_THRESHOLD_DEG {
-            turns += 1;
-        }
-        prev = h;
-    }
-    turns
-}
-
 /// The mission: take-off, speed, then every transit and lane in order, with
 /// the camera triggering by distance along each lane, back above home, RTL.
 fn build_mission(
     tour: &crate::flock::Tour,
     home: GeoPoint,
     altitude: f64,
+    speed_m_s: f64,
     geometry: &SurveyGeometry,
     params: &SurveyParams,
     proj: &crate::geo::UtmProjection,
@@ -1172,9 +1411,7 @@ fn build_mission(
     };
     let mut items = vec![
         MissionItem::Takeoff { alt: altitude },
-        MissionItem::ChangeSpeed {
-            speed_m_s: params.speed_m_s,
-        },
+        MissionItem::ChangeSpeed { speed_m_s },
     ];
     let transit =
         |items: &mut Vec<MissionItem>, t: &[Coord<f64>], keep_last: bool| -> Result<(), GeoError> {
@@ -1213,7 +1450,7 @@ fn build_mission(
     Ok(Mission {
         home,
         frame: params.altitude_frame,
-        cruise_speed_m_s: params.speed_m_s,
+        cruise_speed_m_s: speed_m_s,
         items,
         over_terrain: false,
     })
@@ -1269,19 +1506,22 @@ fn ring_lonlat(p: &Polygon<f64>) -> Vec<[f64; 2]> {
 }
 
 impl SurveyPlan {
-    /// Names of the plan's files: per UAV `<id>.waypoints`, `<id>.plan`,
-    /// `<id>.route.geojson`, `<id>.kml` and `<id>.fence.waypoints`; then
-    /// `cells.geojson`.
+    /// Names of the plan's files: per sortie `<stem>.waypoints`,
+    /// `<stem>.plan`, `<stem>.route.geojson` and `<stem>.kml` (the stem is
+    /// the UAV id, or `<id>.sortie<k>` for a UAV flying several sorties);
+    /// per UAV `<id>.fence.waypoints`; then `cells.geojson`.
     pub fn file_names(&self) -> Vec<String> {
-        let mut out: Vec<String> = self
-            .uavs
-            .iter()
-            .flat_map(|u| {
-                UAV_FILE_SUFFIXES
-                    .iter()
-                    .map(move |suffix| format!("{}.{suffix}", u.id))
-            })
-            .collect();
+        let mut out: Vec<String> = Vec::new();
+        for u in &self.uavs {
+            for s in &u.sorties {
+                out.extend(
+                    SORTIE_FILE_SUFFIXES
+                        .iter()
+                        .map(|suffix| format!("{}.{suffix}", s.file_stem)),
+                );
+            }
+            out.push(format!("{}.{FENCE_FILE_SUFFIX}", u.id));
+        }
         out.push(CELLS_FILE.to_string());
         out
     }
@@ -1297,59 +1537,65 @@ impl SurveyPlan {
     /// One file of the plan by name (see [`SurveyPlan::file_names`]),
     /// rendered alone; `None` for an unknown name.
     pub fn file(&self, name: &str) -> Option<PlanFile> {
-        if name == CELLS_FILE {
-            return Some(PlanFile {
+        let text = "text/plain; charset=utf-8";
+        let done = |content_type: &'static str, content: String| {
+            Some(PlanFile {
                 name: name.to_string(),
-                content_type: "application/geo+json",
-                content: pretty(&self.cells_geojson()),
-            });
+                content_type,
+                content,
+            })
+        };
+        if name == CELLS_FILE {
+            return done("application/geo+json", pretty(&self.cells_geojson()));
         }
-        let (u, suffix) = self.uavs.iter().find_map(|u| {
-            let rest = name.strip_prefix(u.id.as_str())?.strip_prefix('.')?;
-            UAV_FILE_SUFFIXES.contains(&rest).then_some((u, rest))
+        if self
+            .uavs
+            .iter()
+            .any(|u| name.strip_prefix(u.id.as_str()) == Some(&format!(".{FENCE_FILE_SUFFIX}")))
+        {
+            return done(text, export::write_fence(&self.fences));
+        }
+        let (u, s, suffix) = self.uavs.iter().find_map(|u| {
+            u.sorties.iter().find_map(|s| {
+                let rest = name.strip_prefix(s.file_stem.as_str())?.strip_prefix('.')?;
+                SORTIE_FILE_SUFFIXES.contains(&rest).then_some((u, s, rest))
+            })
         })?;
-        let (content_type, content) = match suffix {
-            "waypoints" => (
-                "text/plain; charset=utf-8",
-                export::write_waypoints(&u.mission),
-            ),
-            "plan" => (
+        match suffix {
+            "waypoints" => done(text, export::write_waypoints(&s.mission)),
+            "plan" => done(
                 "application/json",
-                pretty(&export::write_plan(&u.mission, &self.fences)),
+                pretty(&export::write_plan(&s.mission, &self.fences)),
             ),
             "route.geojson" => {
                 let mut props = Map::new();
                 props.insert("uav".into(), json!(u.id));
+                props.insert("sortie".into(), json!(s.file_stem));
                 props.insert("altitude_frame".into(), json!(self.altitude_frame));
-                props.insert("length_m".into(), json!(u.stats.length_m));
-                props.insert("flight_time_s".into(), json!(u.stats.flight_time_s));
-                let route = json!({"type": "FeatureCollection", "features": [gj::route_feature(&u.mission, props)]});
-                ("application/geo+json", pretty(&route))
+                props.insert("length_m".into(), json!(s.stats.length_m));
+                props.insert("flight_time_s".into(), json!(s.stats.flight_time_s));
+                let route = json!({"type": "FeatureCollection", "features": [gj::route_feature(&s.mission, props)]});
+                done("application/geo+json", pretty(&route))
             }
             "kml" => {
                 let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
                     .cells
                     .iter()
-                    .filter(|c| u.cells.contains(&c.id))
+                    .filter(|c| s.cells.contains(&c.id))
                     .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
                     .collect();
-                let title = format!("terraplan survey, UAV {}", u.id);
-                (
+                let title = if u.sorties.len() > 1 {
+                    format!("terraplan survey, UAV {}, {}", u.id, s.file_stem)
+                } else {
+                    format!("terraplan survey, UAV {}", u.id)
+                };
+                done(
                     "application/vnd.google-earth.kml+xml",
-                    export::write_kml(&title, &u.mission, &cell_rings),
+                    export::write_kml(&title, &s.mission, &cell_rings),
                 )
             }
-            "fence.waypoints" => (
-                "text/plain; charset=utf-8",
-                export::write_fence(&self.fences),
-            ),
-            _ => return None,
-        };
-        Some(PlanFile {
-            name: name.to_string(),
-            content_type,
-            content,
-        })
+            _ => None,
+        }
     }
 
     /// The cells as a GeoJSON FeatureCollection (WGS84).
@@ -1360,19 +1606,16 @@ impl SurveyPlan {
             props.insert("area_m2".into(), json!(c.area_m2));
             props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
             props.insert("lanes".into(), json!(c.lanes));
+            props.insert("lane_length_m".into(), json!(c.lane_length_m));
             (c.polygon.clone(), props)
         }))
     }
 }
 
-/// Suffixes of each UAV's files, after `<uav id>.`.
-const UAV_FILE_SUFFIXES: [&str; 5] = [
-    "waypoints",
-    "plan",
-    "route.geojson",
-    "kml",
-    "fence.waypoints",
-];
+/// Suffixes of each sortie's files, after `<stem>.`.
+const SORTIE_FILE_SUFFIXES: [&str; 4] = ["waypoints", "plan", "route.geojson", "kml"];
+/// Suffix of each UAV's fence file, after `<uav id>.`.
+const FENCE_FILE_SUFFIX: &str = "fence.waypoints";
 /// Name of the cells file.
 const CELLS_FILE: &str = "cells.geojson";
 
@@ -1528,7 +1771,7 @@ mod tests {
             });
             let req = SurveyRequest::from_document(&doc).unwrap();
             let plan = plan_survey_over(&req, &Limits::default(), Some(&dem)).unwrap();
-            let uav = &plan.uavs[0];
+            let uav = &plan.uavs[0].sorties[0];
             let t = uav.terrain.as_ref().unwrap();
             assert!((uav.mission.home.alt - home_amsl).abs() < 1e-9);
             assert!((t.home_amsl_m - home_amsl).abs() < 1e-9);

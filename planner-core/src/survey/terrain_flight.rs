@@ -118,6 +118,30 @@ pub(super) fn cell_length_3d(
     length_3d(&model.follow(&plan.path(), &rules.lane()))
 }
 
+/// The 3D length of a transit as [`fly_tour`] flies it: along `path` at
+/// transit height, plus the climb from and descent to each end (a home on
+/// the ground, or a job end at lane height).
+pub(super) fn transit_length_3d(
+    model: &TerrainModel,
+    rules: &FlightRules,
+    path: &[Coord<f64>],
+    homes: [bool; 2],
+) -> f64 {
+    let pts = model.follow(path, &rules.transit());
+    let (Some(first), Some(last)) = (pts.first(), pts.last()) else {
+        return 0.0;
+    };
+    let end_height = |p: Coord<f64>, home: bool| -> Option<f64> {
+        if home {
+            model.terrain(p)
+        } else {
+            model.safe_terrain(p).map(|s| s + rules.agl_m)
+        }
+    };
+    let climb = |p: &Point3, home: bool| end_height(p.xy(), home).map_or(0.0, |h| (p.z - h).abs());
+    length_3d(&pts) + climb(first, homes[0]) + climb(last, homes[1])
+}
+
 /// Fraction of the lanes' length with DEM heights under it, in [0, 1].
 pub(super) fn lanes_known_fraction(model: &TerrainModel, lanes: &[crate::coverage::Lane]) -> f64 {
     let mut known = 0usize;

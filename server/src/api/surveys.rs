@@ -6,6 +6,7 @@ use axum::extract::{Path, Query, State, rejection::QueryRejection};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::export::{AltitudeFrame, FencePolygon, geojson as gj};
+use planner_core::flock::Piece;
 use planner_core::geo::Issue;
 use planner_core::survey::{
     DEM_POINTER, SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, UavTerrain,
@@ -88,7 +89,7 @@ impl ToSchema for CreateSurvey {
     }
 }
 
-/// Download links of one UAV's files.
+/// Download links of one sortie's files (and its UAV's fence).
 #[derive(Serialize, Deserialize, ToSchema)]
 pub struct UavFiles {
     /// `QGC WPL 110` mission.
@@ -103,13 +104,15 @@ pub struct UavFiles {
     kml: String,
 }
 
+/// One flight of a UAV, from take-off to landing at its start.
 #[derive(Serialize, Deserialize, ToSchema)]
-pub struct UavResponse {
-    id: String,
-    /// Take-off and landing point [lon, lat].
-    start: [f64; 2],
+pub struct SortieResponse {
+    /// 1, 2, … in flight order.
+    number: usize,
     /// Cell ids in the order flown.
     cells: Vec<usize>,
+    /// The parts of cells flown, in order.
+    pieces: Vec<Piece>,
     stats: UavStats,
     /// GeoJSON LineString of [lon, lat, alt] (altitude in the survey's frame).
     #[schema(value_type = Object)]
@@ -119,6 +122,27 @@ pub struct UavResponse {
     #[serde(skip_serializing_if = "Option::is_none")]
     terrain: Option<UavTerrain>,
     files: UavFiles,
+}
+
+#[derive(Serialize, Deserialize, ToSchema)]
+pub struct UavResponse {
+    id: String,
+    /// Take-off and landing point [lon, lat].
+    start: [f64; 2],
+    /// Cruise speed, m/s.
+    speed_m_s: f64,
+    /// Battery endurance given for this UAV, s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_flight_time_s: Option<f64>,
+    /// Cell ids in the order flown.
+    cells: Vec<usize>,
+    /// The parts of cells flown, in order (whole cells, or halves when
+    /// there are more UAVs than cells or a battery is too small).
+    pieces: Vec<Piece>,
+    /// Totals over the sorties.
+    stats: UavStats,
+    /// One mission each; several when the battery needs them.
+    sorties: Vec<SortieResponse>,
 }
 
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -204,22 +228,44 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
         .uavs
         .iter()
         .map(|u| {
-            let route = gj::route_feature(&u.mission, Map::new())["geometry"].clone();
-            let f = |name: &str| format!("{base}/uavs/{}/{name}", u.id);
+            let several = u.sorties.len() > 1;
+            let sorties = u
+                .sorties
+                .iter()
+                .enumerate()
+                .map(|(k, s)| {
+                    let query = if several {
+                        format!("?sortie={}", k + 1)
+                    } else {
+                        String::new()
+                    };
+                    let f = |name: &str| format!("{base}/uavs/{}/{name}{query}", u.id);
+                    SortieResponse {
+                        number: k + 1,
+                        cells: s.cells.clone(),
+                        pieces: s.pieces.clone(),
+                        stats: s.stats.clone(),
+                        route: gj::route_feature(&s.mission, Map::new())["geometry"].clone(),
+                        terrain: s.terrain.clone(),
+                        files: UavFiles {
+                            waypoints: f("mission.waypoints"),
+                            plan: f("mission.plan"),
+                            route: f("route.geojson"),
+                            fence: format!("{base}/uavs/{}/fence.waypoints", u.id),
+                            kml: f("route.kml"),
+                        },
+                    }
+                })
+                .collect();
             UavResponse {
                 id: u.id.clone(),
                 start: u.start,
+                speed_m_s: u.speed_m_s,
+                max_flight_time_s: u.max_flight_time_s,
                 cells: u.cells.clone(),
+                pieces: u.pieces.clone(),
                 stats: u.stats.clone(),
-                route,
-                terrain: u.terrain.clone(),
-                files: UavFiles {
-                    waypoints: f("mission.waypoints"),
-                    plan: f("mission.plan"),
-                    route: f("route.geojson"),
-                    fence: f("fence.waypoints"),
-                    kml: f("route.kml"),
-                },
+                sorties,
             }
         })
         .collect();
@@ -454,8 +500,19 @@ fn short(id: &str) -> &str {
     id.get(..8).unwrap_or(id)
 }
 
+/// Which sortie of a UAV a file belongs to.
+#[derive(Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct SortieQuery {
+    /// Sortie number (1, 2, …); needed for a UAV that flies several.
+    #[param(minimum = 1)]
+    sortie: Option<usize>,
+}
+
 /// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
 /// (QGroundControl), `route.geojson`, `route.kml` or `fence.waypoints`.
+/// A UAV whose battery needs several sorties has one mission per sortie,
+/// chosen with `?sortie=k`.
 #[utoipa::path(
     get,
     path = "/api/v1/surveys/{id}/uavs/{uav}/{file}",
@@ -464,6 +521,7 @@ fn short(id: &str) -> &str {
         ("id" = String, Path, description = "Survey id"),
         ("uav" = String, Path, description = "UAV id"),
         ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints"),
+        SortieQuery,
     ),
     responses(
         (status = 200, description = "The file, as an attachment", content(
@@ -472,13 +530,21 @@ fn short(id: &str) -> &str {
             (Object = "application/geo+json"),
             (String = "application/vnd.google-earth.kml+xml"),
         )),
-        (status = 404, description = "No such survey, UAV or file", body = Problem, content_type = "application/problem+json"),
+        (status = 400, description = "Malformed sortie number", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such survey, UAV, sortie or file", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn uav_file(
     State(state): State<AppState>,
     Path((id, uav, file)): Path<(String, String, String)>,
+    query: Result<Query<SortieQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
+    let Query(SortieQuery { sortie }) = query.map_err(|e| {
+        ApiError::BadRequest(format!(
+            "sortie must be a whole number from 1: {}",
+            e.body_text()
+        ))
+    })?;
     let (suffix, ext) = match file.as_str() {
         "mission.waypoints" => ("waypoints", "waypoints"),
         "mission.plan" => ("plan", "plan"),
@@ -492,13 +558,28 @@ pub async fn uav_file(
             )));
         }
     };
-    let download_name = format!("terraplan-{}-{uav}.{ext}", short(&id));
+    // Per-sortie files are named `<uav>.sortie<k>.<suffix>` in the plan
+    // when the UAV flies several sorties; the fence is the UAV's.
+    let stem = match sortie {
+        Some(k) if suffix != "fence.waypoints" => format!("{uav}.sortie{k}"),
+        _ => uav.clone(),
+    };
+    let download_name = format!("terraplan-{}-{stem}.{ext}", short(&id));
     download(
         &state,
         &id,
-        &format!("{uav}.{suffix}"),
+        &format!("{stem}.{suffix}"),
         &download_name,
-        || format!("survey {id} has no UAV {uav:?}"),
+        || match sortie {
+            Some(k) => format!(
+                "survey {id} has no sortie {k} of UAV {uav:?} (a UAV flying one sortie takes no \
+                 sortie number)"
+            ),
+            None => format!(
+                "survey {id} has no UAV {uav:?}, or that UAV flies several sorties: add \
+                 ?sortie=1, 2, …"
+            ),
+        },
     )
     .await
 }

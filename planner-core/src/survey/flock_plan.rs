@@ -1,0 +1,318 @@
+//! Sharing a survey among the flock (SPEC §3.4–3.5): the cells' plans
+//! become jobs (halved while there are more UAVs than cells), the chosen
+//! policy shares them into routes, each route is cut into battery sorties,
+//! and each sortie is flown as one tour from home and back.
+//!
+//! With `balanced`, each UAV's route is also offered to the single-UAV tour
+//! optimiser ([`plan_tour`], which may enter a cell at any of its four
+//! corners); its order is kept when it is quicker. A single UAV with
+//! `balanced` is planned by the tour optimiser alone.
+
+use geo_types::{Coord, MultiPolygon, Polygon};
+
+use super::PlanError;
+use super::terrain_flight::{FlightRules, cell_length_3d, transit_length_3d};
+use crate::coverage::CellPlan;
+use crate::flock::{
+    Flock, FlockJob, FlockUav, ObstacleMap, Part, Piece, Policy, Stop, Tour, Visit, assign,
+    count_turns, halve_until, makespan_lower_bound, plan_tour, polyline_length,
+};
+use crate::geo::Issue;
+use crate::terrain::TerrainModel;
+
+/// Most pieces a battery split may cut one UAV's work into.
+const MAX_PIECES_PER_UAV: usize = 10_000;
+
+/// What the flock stage needs from the survey.
+pub(super) struct FlockInput<'a> {
+    pub plans: &'a [CellPlan],
+    pub cells: &'a [Polygon<f64>],
+    pub free: &'a MultiPolygon<f64>,
+    pub obstacles: &'a ObstacleMap,
+    pub uavs: Vec<FlockUav>,
+    /// Battery endurance of each UAV, seconds.
+    pub batteries: Vec<Option<f64>>,
+    /// UAV ids, for messages.
+    pub ids: Vec<String>,
+    /// JSON pointer of UAV `i`'s member `field`.
+    pub pointer: &'a dyn Fn(usize, &str) -> String,
+    pub policy: Policy,
+    pub turn_penalty_s: f64,
+    /// Flight height of a flat survey.
+    pub altitude_m: f64,
+    pub terrain: Option<(&'a TerrainModel, FlightRules)>,
+}
+
+/// One sortie: its tour and the pieces it flies, in order.
+pub(super) struct SortieTour {
+    pub tour: Tour,
+    pub pieces: Vec<Piece>,
+}
+
+pub(super) struct FlockOutcome {
+    /// Per UAV, its sorties.
+    pub sorties: Vec<Vec<SortieTour>>,
+    /// Lower bound of the makespan, seconds (before battery splits).
+    pub lower_bound_s: f64,
+}
+
+/// Shares the survey among the UAVs and flies each share.
+pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
+    let internal = |e: crate::flock::FlockError| PlanError::Internal(e.to_string());
+    let cell_3d = |plan: &CellPlan| match &input.terrain {
+        Some((model, rules)) => cell_length_3d(model, plan, rules),
+        None => plan.length_m(),
+    };
+    let whole: Vec<Part> = input
+        .plans
+        .iter()
+        .filter(|p| !p.lanes.is_empty())
+        .cloned()
+        .map(Part::whole)
+        .collect();
+    let mut parts = halve_until(whole, input.uavs.len(), cell_3d);
+    let jobs = parts
+        .iter()
+        .filter_map(|p| FlockJob::from_plan(&p.plan, cell_3d(&p.plan)))
+        .collect();
+
+    let lift;
+    let mut flock = match &input.terrain {
+        None => Flock::flat(
+            input.uavs.clone(),
+            jobs,
+            input.turn_penalty_s,
+            input.obstacles,
+            input.altitude_m,
+        ),
+        Some((model, rules)) => {
+            let (model, rules) = (*model, *rules);
+            lift = move |path: &[Coord<f64>], homes: [bool; 2]| {
+                transit_length_3d(model, &rules, path, homes)
+            };
+            Flock::over_terrain(
+                input.uavs.clone(),
+                jobs,
+                input.turn_penalty_s,
+                input.obstacles,
+                &lift,
+            )
+        }
+    };
+
+    let single_tour = input.uavs.len() == 1 && input.policy == Policy::Balanced;
+    let mut routes = if single_tour {
+        vec![(0..parts.len()).map(|j| Visit::new(j, 0)).collect()]
+    } else {
+        assign(&mut flock, input.policy).map_err(internal)?
+    };
+    let lower_bound_s = makespan_lower_bound(&mut flock).map_err(|e| internal(e.into()))?;
+
+    if input.policy == Policy::Balanced {
+        for (u, route) in routes.iter_mut().enumerate() {
+            reorder_by_tour(input, &mut flock, &mut parts, u, route, single_tour)?;
+        }
+    }
+
+    let mut sorties = Vec::with_capacity(routes.len());
+    for (u, route) in routes.into_iter().enumerate() {
+        let cut = cut_sorties(input, &mut flock, &mut parts, u, route)?;
+        let mut flights = Vec::with_capacity(cut.len());
+        for s in cut {
+            let tour = tour_of(&mut flock, &parts, u, &s).map_err(|e| internal(e.into()))?;
+            flights.push(SortieTour {
+                tour,
+                pieces: s.iter().map(|v| parts[v.job].piece.clone()).collect(),
+            });
+        }
+        sorties.push(flights);
+    }
+    Ok(FlockOutcome {
+        sorties,
+        lower_bound_s,
+    })
+}
+
+/// The tour flying `route` from UAV `u`'s home and back.
+fn tour_of(
+    flock: &mut Flock,
+    parts: &[Part],
+    u: usize,
+    route: &[Visit],
+) -> Result<Tour, crate::flock::TransitError> {
+    let visits: Vec<CellPlan> = route
+        .iter()
+        .map(|v| {
+            let plan = &parts[v.job].plan;
+            if v.way == 0 {
+                plan.clone()
+            } else {
+                plan.reversed()
+            }
+        })
+        .collect();
+    let mut transits = Vec::with_capacity(route.len() + 1);
+    for (a, b) in Flock::legs_of(u, route) {
+        transits.push(flock.leg_path(a, b)?);
+    }
+    Ok(Tour { visits, transits })
+}
+
+/// Mission time of a tour in the flock's model (3D lengths over the speed,
+/// a penalty per turn).
+fn tour_time(input: &FlockInput, u: usize, tour: &Tour) -> f64 {
+    let n = tour.transits.len();
+    let mut length = 0.0;
+    for (i, t) in tour.transits.iter().enumerate() {
+        let homes = [i == 0, i + 1 == n];
+        length += match &input.terrain {
+            Some((model, rules)) => transit_length_3d(model, rules, t, homes),
+            None => {
+                polyline_length(t) + input.altitude_m * homes.iter().filter(|&&h| h).count() as f64
+            }
+        };
+    }
+    for v in &tour.visits {
+        length += match &input.terrain {
+            Some((model, rules)) => cell_length_3d(model, v, rules),
+            None => v.length_m(),
+        };
+    }
+    length / input.uavs[u].speed_m_s + count_turns(&tour.path()) as f64 * input.turn_penalty_s
+}
+
+/// Offers UAV `u`'s jobs to the tour optimiser and keeps its order when it
+/// is quicker (always, with `forced`). The chosen cells' plans, as the tour
+/// flies them, become new parts flown as planned (way 0).
+fn reorder_by_tour(
+    input: &FlockInput,
+    flock: &mut Flock,
+    parts: &mut Vec<Part>,
+    u: usize,
+    route: &mut Vec<Visit>,
+    forced: bool,
+) -> Result<(), PlanError> {
+    if route.len() < 2 {
+        return Ok(());
+    }
+    // Pieces are matched back by cell, so each cell may appear once.
+    let mut cells: Vec<usize> = route.iter().map(|v| parts[v.job].piece.cell).collect();
+    cells.sort_unstable();
+    if cells.windows(2).any(|w| w[0] == w[1]) {
+        return Ok(());
+    }
+    let plans: Vec<CellPlan> = route.iter().map(|v| parts[v.job].plan.clone()).collect();
+    let home = input.uavs[u].home;
+    let candidate = plan_tour(home, &plans, input.cells, input.free, input.obstacles)
+        .map_err(|e| PlanError::Internal(e.to_string()))?;
+    if !forced {
+        let current =
+            tour_of(flock, parts, u, route).map_err(|e| PlanError::Internal(e.to_string()))?;
+        if tour_time(input, u, &candidate) >= tour_time(input, u, &current) {
+            return Ok(());
+        }
+    }
+    let cell_3d = |plan: &CellPlan| match &input.terrain {
+        Some((model, rules)) => cell_length_3d(model, plan, rules),
+        None => plan.length_m(),
+    };
+    let mut new_route = Vec::with_capacity(candidate.visits.len());
+    for visit in candidate.visits {
+        let Some(old) = route
+            .iter()
+            .find(|v| parts[v.job].piece.cell == visit.cell_index)
+        else {
+            return Err(PlanError::Internal("tour lost a cell".into()));
+        };
+        let piece = parts[old.job].piece.clone();
+        let job = FlockJob::from_plan(&visit, cell_3d(&visit))
+            .ok_or_else(|| PlanError::Internal("tour visit without lanes".into()))?;
+        flock.jobs.push(job);
+        parts.push(Part { piece, plan: visit });
+        new_route.push(Visit::new(parts.len() - 1, 0));
+    }
+    *route = new_route;
+    Ok(())
+}
+
+/// Cuts UAV `u`'s route into sorties that each fit its battery, in flight
+/// order, returning home between them. A job too long for one battery is
+/// halved until its pieces fit.
+fn cut_sorties(
+    input: &FlockInput,
+    flock: &mut Flock,
+    parts: &mut Vec<Part>,
+    u: usize,
+    route: Vec<Visit>,
+) -> Result<Vec<Vec<Visit>>, PlanError> {
+    let internal = |e: crate::flock::TransitError| PlanError::Internal(e.to_string());
+    let Some(limit) = input.batteries[u] else {
+        return Ok(vec![route]);
+    };
+    let mut sorties: Vec<Vec<Visit>> = Vec::new();
+    let mut current: Vec<Visit> = Vec::new();
+    let mut queue: std::collections::VecDeque<Visit> = route.into();
+    let mut splits = 0usize;
+    while let Some(v) = queue.pop_front() {
+        current.push(v);
+        if flock.route_time(u, &current).map_err(internal)? <= limit {
+            continue;
+        }
+        current.pop();
+        if !current.is_empty() {
+            sorties.push(std::mem::take(&mut current));
+            queue.push_front(v);
+            continue;
+        }
+        // Alone it is too long: halve it, unless even getting there and
+        // back takes the whole battery.
+        let there_and_back = flock
+            .leg_time_of(u, Stop::Home(u), Stop::entry_of(v))
+            .map_err(internal)?
+            + flock
+                .leg_time_of(u, Stop::exit_of(v), Stop::Home(u))
+                .map_err(internal)?;
+        let piece = &parts[v.job].piece;
+        let halves = parts[v.job].halve();
+        splits += 1;
+        let (Some((a, b)), true) = (
+            halves,
+            splits < MAX_PIECES_PER_UAV && there_and_back < limit,
+        ) else {
+            return Err(PlanError::Invalid(vec![Issue::new(
+                &(input.pointer)(u, "max_flight_time_s"),
+                &format!(
+                    "UAV {} cannot fly cell {} within its battery of {limit:.0} s: getting there \
+                     and back alone takes {there_and_back:.0} s; start it nearer or give it a \
+                     longer max_flight_time_s",
+                    input.ids[u], piece.cell
+                ),
+            )]));
+        };
+        let mut halves = Vec::with_capacity(2);
+        for part in [a, b] {
+            let length_3d = match &input.terrain {
+                Some((model, rules)) => cell_length_3d(model, &part.plan, rules),
+                None => part.plan.length_m(),
+            };
+            let job = FlockJob::from_plan(&part.plan, length_3d)
+                .ok_or_else(|| PlanError::Internal("split piece without lanes".into()))?;
+            flock.jobs.push(job);
+            parts.push(part);
+            halves.push(parts.len() - 1);
+        }
+        // Flown in the direction the whole job was: backwards means the
+        // second half first.
+        let (first, second) = if v.way == 0 {
+            (Visit::new(halves[0], 0), Visit::new(halves[1], 0))
+        } else {
+            (Visit::new(halves[1], 1), Visit::new(halves[0], 1))
+        };
+        queue.push_front(second);
+        queue.push_front(first);
+    }
+    if !current.is_empty() {
+        sorties.push(current);
+    }
+    Ok(sorties)
+}
