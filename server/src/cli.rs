@@ -36,6 +36,21 @@ enum Command {
     /// Read a DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) and print its
     /// metadata as JSON: size, resolution, CRS, bounds, height range.
     DemInfo(DemInfoArgs),
+    /// Reproducible experiments on embedded real data.
+    #[command(subcommand)]
+    Experiment(ExperimentCommand),
+}
+
+#[derive(Subcommand)]
+enum ExperimentCommand {
+    /// The thesis' flock experiment (§5.6): 12 cells, 3–8 UAVs, 10 starting
+    /// formations, 60 trials, `competition` and `balanced` side by side;
+    /// prints tables like thesis Tables 5.1–5.7.
+    Flock {
+        /// Also write trials.csv, uavs.csv and flocks.csv here.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
 }
 
 #[derive(clap::Args)]
@@ -122,6 +137,7 @@ pub fn run() -> ExitCode {
         Command::Serve(config) => serve(config),
         Command::Survey(args) => survey(&args),
         Command::DemInfo(args) => dem_info(&args),
+        Command::Experiment(ExperimentCommand::Flock { out }) => experiment_flock(out.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -130,6 +146,17 @@ pub fn run() -> ExitCode {
             ExitCode::from(f.status)
         }
     }
+}
+
+fn experiment_flock(out: Option<&Path>) -> Result<(), Failure> {
+    let trials = crate::experiment::run_trials().map_err(Failure::other)?;
+    print!("{}", crate::experiment::report(&trials));
+    if let Some(dir) = out {
+        for path in crate::experiment::write_csv(&trials, dir).map_err(Failure::other)? {
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
 }
 
 fn serve(config: ServeConfig) -> Result<(), Failure> {

@@ -7,6 +7,7 @@ mod cli;
 mod config;
 mod db;
 mod error;
+mod experiment;
 mod serve;
 
 fn main() -> std::process::ExitCode {

@@ -62,6 +62,7 @@ def main():
 
     summary = {"uavs": {}}
     lanes = []
+    lane_cells = []
     flights = [(uav, sortie) for uav in plan["uavs"] for sortie in uav["sorties"]]
     for uav, sortie in flights:
         uid = sortie["file_stem"]
@@ -98,6 +99,8 @@ def main():
                 if seg is not None and seg.intersection(nfz_core).length > 0:
                     fail(f"{wp_path}: segment {a} -> {b} crosses a no-fly zone")
         # Lanes: the waypoint before a trigger-on to the waypoint after it.
+        owners = [p["cell"] for p in sortie["pieces"] for _ in range(p["lanes"])]
+        first_lane = len(lanes)
         last_wp = None
         trig = None
         for it in items[1:]:
@@ -112,6 +115,9 @@ def main():
                     trig = None
             elif it.command == CMD_WAYPOINT:
                 last_wp = it
+        if len(lanes) - first_lane != len(owners):
+            fail(f"{wp_path}: {len(lanes) - first_lane} lanes flown, plan.json's pieces have {len(owners)}")
+        lane_cells.extend(owners)
         # The KML route parses as XML and holds home, the waypoints, home.
         kml = ET.parse(out / f"{uid}.kml").getroot()
         ns = {"k": "http://www.opengis.net/kml/2.2"}
@@ -124,14 +130,13 @@ def main():
                 fail(f"{uid}.kml: route point {c} differs from the mission")
         summary["uavs"][uid] = {"items": n, "waypoints": len(got_wps)}
 
-    # Together the UAVs fly every cell exactly once: each flown lane (or
-    # piece of a lane) belongs to the cell it overlaps most, each cell's
-    # flown lane length equals its planned one, and no two lanes overlap.
-    cells = {c["id"]: project(shape(c["polygon"])).buffer(GEOM_TOL_M) for c in plan["cells"]}
-    flown = {cid: 0.0 for cid in cells}
-    for lane in lanes:
-        owner = max(cells, key=lambda cid: cells[cid].intersection(lane).length)
-        flown[owner] += lane.length
+    # Together the UAVs fly every cell exactly once: the lanes flown (read
+    # from the .waypoints files) are attributed to cells in flight order by
+    # plan.json's pieces, each cell's flown lane length must equal its
+    # planned one, and no two flown lanes may overlap.
+    flown = {c["id"]: 0.0 for c in plan["cells"]}
+    for lane, cell in zip(lanes, lane_cells):
+        flown[cell] += lane.length
     for c in plan["cells"]:
         if abs(flown[c["id"]] - c["lane_length_m"]) > 1e-4 * c["lane_length_m"] + 0.05:
             fail(f"cell {c['id']}: {flown[c['id']]:.2f} m of lanes flown, {c['lane_length_m']:.2f} m planned")

@@ -169,10 +169,14 @@ fn best_move(
             + flock.job_time(c, x.job)
             + flock.leg_time_of(c, Stop::exit_of(x), ap)?;
         // c without x (only if c keeps some work).
-        let c_without = if rc.len() >= 2 {
-            Some(times[c] - with_x + flock.leg_time_of(c, bp, ap)?)
-        } else {
+        let c_without = if rc.len() < 2 {
             None
+        } else if flock.has_battery(c) {
+            let mut r = rc.clone();
+            r.remove(p);
+            Some(flock.route_time(c, &r)?)
+        } else {
+            Some(times[c] - with_x + flock.leg_time_of(c, bp, ap)?)
         };
         for v in (0..m).filter(|&v| v != c) {
             let rv = &routes[v];
@@ -198,13 +202,19 @@ fn best_move(
                             + job
                             + flock.leg_time_lower(v, exit, next);
                         let bar = best.as_ref().map_or(current, |b| b.0);
-                        if !score_with(v, new_c, lower).beats(&bar) {
+                        // A battery makes times non-additive: no bound.
+                        if !flock.has_battery(v) && !score_with(v, new_c, lower).beats(&bar) {
                             continue;
                         }
-                        let new_v = base
-                            + flock.leg_time_of(v, prev, entry)?
-                            + job
-                            + flock.leg_time_of(v, exit, next)?;
+                        let new_v = if flock.has_battery(v) {
+                            let mut r = rv.clone();
+                            r.insert(at, xv);
+                            flock.route_time(v, &r)?
+                        } else {
+                            base + flock.leg_time_of(v, prev, entry)?
+                                + job
+                                + flock.leg_time_of(v, exit, next)?
+                        };
                         let s = score_with(v, new_c, new_v);
                         if s.beats(&bar) {
                             best = Some((
@@ -238,14 +248,23 @@ fn best_move(
                         + f.job_time(u, job)
                 };
                 let bar = best.as_ref().map_or(current, |b| b.0);
+                let batteries = flock.has_battery(c) || flock.has_battery(v);
                 let new_c_lower = times[c] - with_x + lower_in(flock, c, y.job, bp, ap);
                 let new_v_lower = times[v] - with_y + lower_in(flock, v, x.job, bq, aq);
-                if !score_with(v, new_c_lower, new_v_lower).beats(&bar) {
+                if !batteries && !score_with(v, new_c_lower, new_v_lower).beats(&bar) {
                     continue;
                 }
                 let (into_c, in_c) = best_way(flock, c, y.job, bp, ap)?;
                 let (into_v, in_v) = best_way(flock, v, x.job, bq, aq)?;
-                let s = score_with(v, times[c] - with_x + in_c, times[v] - with_y + in_v);
+                let (new_c, new_v) = if batteries {
+                    let (mut r_c, mut r_v) = (rc.clone(), rv.clone());
+                    r_c[p] = into_c;
+                    r_v[q] = into_v;
+                    (flock.route_time(c, &r_c)?, flock.route_time(v, &r_v)?)
+                } else {
+                    (times[c] - with_x + in_c, times[v] - with_y + in_v)
+                };
+                let s = score_with(v, new_c, new_v);
                 if s.beats(&bar) {
                     best = Some((
                         s,
@@ -294,12 +313,21 @@ pub(super) fn improve_route(
 ) -> Result<bool, TransitError> {
     let mut changed = false;
     for _ in 0..MAX_ROUTE_PASSES {
-        let scale = REL_EPS * flock.route_time(u, route)?.max(1.0);
-        if two_opt(flock, u, route, scale)? || or_opt(flock, u, route, scale)? {
-            changed = true;
-        } else {
+        // The moves are costed on the single flight; with a battery a
+        // sweep is kept only if the time with sorties improves too.
+        let before = flock.route_time(u, route)?;
+        let saved = flock.has_battery(u).then(|| route.clone());
+        let scale = REL_EPS * flock.flight_time(u, route)?.max(1.0);
+        if !(two_opt(flock, u, route, scale)? || or_opt(flock, u, route, scale)?) {
             break;
         }
+        if let Some(saved) = saved
+            && flock.route_time(u, route)? >= before - REL_EPS * before.max(1.0)
+        {
+            *route = saved;
+            break;
+        }
+        changed = true;
     }
     Ok(changed)
 }
@@ -512,6 +540,33 @@ mod tests {
         }
         let mean = gains.iter().sum::<f64>() / gains.len() as f64;
         assert!(mean > 0.10, "mean makespan reduction {mean}");
+    }
+
+    #[test]
+    fn batteries_count_their_sorties_and_are_never_worse() {
+        let mut rng = Lcg(0x0bad_ba77);
+        let map = ObstacleMap::new(&MultiPolygon(vec![]), 0.0);
+        for trial in 0..12 {
+            let m = 2 + trial % 3;
+            let (uavs, jobs) = random_flock(&mut rng, m, 10);
+            let mut flock = Flock::flat(uavs, jobs, 2.0, &map, 40.0);
+            // One UAV with a battery of about a third of its plain share.
+            let (start, _) = competition(&mut flock).unwrap();
+            let plain = flock.flight_time(0, &start[0]).unwrap();
+            flock.batteries[0] = Some((plain / 3.0).max(400.0));
+            let before = flock.makespan(&start).unwrap();
+            let routes = balanced(&mut flock, start).unwrap();
+            check_partition(&routes, 10);
+            let after = flock.makespan(&routes).unwrap();
+            assert!(
+                after <= before * (1.0 + 1e-12),
+                "trial {trial}: {after} > {before}"
+            );
+            // The battery UAV's time counts its returns home.
+            let with = flock.route_time(0, &routes[0]).unwrap();
+            let without = flock.flight_time(0, &routes[0]).unwrap();
+            assert!(with >= without - 1e-9, "{with} < {without}");
+        }
     }
 
     #[test]

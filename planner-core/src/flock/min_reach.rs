@@ -21,39 +21,43 @@ pub fn min_reach(flock: &mut Flock) -> Result<Routes, FlockError> {
     let mut position: Vec<Stop> = (0..m).map(Stop::Home).collect();
     let mut left: Vec<usize> = (0..flock.jobs.len()).collect();
     while !left.is_empty() && m > 0 {
-        // reach[i][k]: UAV i to job left[k], with the way Algorithm 2 picks.
-        let mut reach = Vec::with_capacity(m * left.len());
-        let mut ways: Vec<Visit> = Vec::with_capacity(m * left.len());
+        // reach[i * cols + k]: UAV i to job left[k]. Entries start as
+        // straight-line lower bounds and are searched round the NFZs only
+        // when the optimal assignment picks them; once every picked entry is
+        // exact, no other assignment can be cheaper (its entries are at
+        // least their bounds), so the result is the exact optimum.
+        let cols = left.len();
+        let mut reach = Vec::with_capacity(m * cols);
         for &at in &position {
             for &j in &left {
-                let (visit, length) = nearer_end(flock, at, j)?;
-                reach.push(length);
-                ways.push(visit);
+                reach.push(
+                    flock
+                        .leg_lower_3d(at, Stop::End { job: j, end: 0 })
+                        .min(flock.leg_lower_3d(at, Stop::End { job: j, end: 1 })),
+                );
             }
         }
-        let cols = left.len();
-        let pairs: Vec<(usize, usize)> = if m <= cols {
-            min_cost_assignment(&reach, m, cols)?
-                .into_iter()
-                .enumerate()
-                .collect()
-        } else {
-            // Fewer jobs than UAVs: every job gets the UAV of least reach.
-            let mut transposed = vec![0.0; m * cols];
-            for i in 0..m {
-                for k in 0..cols {
-                    transposed[k * m + i] = reach[i * cols + k];
+        let mut ways: Vec<Option<Visit>> = vec![None; m * cols];
+        let pairs = loop {
+            let pairs = solve(&reach, m, cols)?;
+            let mut refined = false;
+            for &(i, k) in &pairs {
+                if ways[i * cols + k].is_none() {
+                    let (visit, length) = nearer_end(flock, position[i], left[k])?;
+                    reach[i * cols + k] = length;
+                    ways[i * cols + k] = Some(visit);
+                    refined = true;
                 }
             }
-            min_cost_assignment(&transposed, cols, m)?
-                .into_iter()
-                .enumerate()
-                .map(|(k, i)| (i, k))
-                .collect()
+            if !refined {
+                break pairs;
+            }
         };
         let mut taken = vec![false; cols];
         for (i, k) in pairs {
-            let visit = ways[i * cols + k];
+            let Some(visit) = ways[i * cols + k] else {
+                continue;
+            };
             routes[i].push(visit);
             position[i] = Stop::exit_of(visit);
             taken[k] = true;
@@ -66,6 +70,29 @@ pub fn min_reach(flock: &mut Flock) -> Result<Routes, FlockError> {
         });
     }
     Ok(routes)
+}
+
+/// The optimal (UAV, column) pairs of one round: every UAV a job when
+/// there are enough, else every job a UAV.
+fn solve(reach: &[f64], m: usize, cols: usize) -> Result<Vec<(usize, usize)>, FlockError> {
+    Ok(if m <= cols {
+        min_cost_assignment(reach, m, cols)?
+            .into_iter()
+            .enumerate()
+            .collect()
+    } else {
+        let mut transposed = vec![0.0; m * cols];
+        for i in 0..m {
+            for k in 0..cols {
+                transposed[k * m + i] = reach[i * cols + k];
+            }
+        }
+        min_cost_assignment(&transposed, cols, m)?
+            .into_iter()
+            .enumerate()
+            .map(|(k, i)| (i, k))
+            .collect()
+    })
 }
 
 #[cfg(test)]

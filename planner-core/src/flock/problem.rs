@@ -15,6 +15,10 @@ use geo_types::Coord;
 use super::transit::{ObstacleMap, TransitError, polyline_length};
 use crate::coverage::CellPlan;
 
+/// Cost of work a UAV cannot reach and come back from within its battery:
+/// huge but finite, so that scores still compare.
+pub const INFEASIBLE_S: f64 = 1e9;
+
 /// Heading changes above this many degrees count as turns.
 pub const TURN_THRESHOLD_DEG: f64 = 10.0;
 
@@ -155,6 +159,8 @@ pub struct Flock<'a> {
     pub jobs: Vec<FlockJob>,
     /// Seconds added per turn.
     pub turn_penalty_s: f64,
+    /// Battery endurance per UAV, s (see [`Flock::route_time`]).
+    pub batteries: Vec<Option<f64>>,
     obstacles: &'a ObstacleMap,
     lift: Option<&'a Lift<'a>>,
     /// Flat surveys: the climb after take-off and the descent before
@@ -173,6 +179,7 @@ impl<'a> Flock<'a> {
         altitude_m: f64,
     ) -> Flock<'a> {
         Flock {
+            batteries: vec![None; uavs.len()],
             uavs,
             jobs,
             turn_penalty_s,
@@ -192,6 +199,7 @@ impl<'a> Flock<'a> {
         lift: &'a Lift<'a>,
     ) -> Flock<'a> {
         Flock {
+            batteries: vec![None; uavs.len()],
             uavs,
             jobs,
             turn_penalty_s,
@@ -311,8 +319,59 @@ impl<'a> Flock<'a> {
         out
     }
 
-    /// Mission time of UAV `u` flying `route` (0 for an empty route).
+    /// True if UAV `u` has a battery limit.
+    pub fn has_battery(&self, u: usize) -> bool {
+        self.batteries.get(u).is_some_and(Option::is_some)
+    }
+
+    /// Mission time of UAV `u` flying `route`, all sorties included: with a
+    /// battery the route is cut into sorties the way the survey flies it
+    /// (greedily, in order, back home when the next job would not fit),
+    /// and a job too long for one battery counts as flown in pieces, each
+    /// a round trip from home. Work the UAV cannot reach and come back from
+    /// within its battery costs [`INFEASIBLE_S`].
     pub fn route_time(&mut self, u: usize, route: &[Visit]) -> Result<f64, TransitError> {
+        let Some(limit) = self.batteries.get(u).copied().flatten() else {
+            return self.flight_time(u, route);
+        };
+        let home = Stop::Home(u);
+        let mut total = 0.0;
+        // The open sortie: time so far (without the way home) and where.
+        let (mut open, mut at) = (0.0, home);
+        for &v in route {
+            let (entry, exit) = (Stop::entry_of(v), Stop::exit_of(v));
+            let job = self.job_time(u, v.job);
+            let back = self.leg_time_of(u, exit, home)?;
+            let with = open + self.leg_time_of(u, at, entry)? + job;
+            if with + back <= limit {
+                (open, at) = (with, exit);
+                continue;
+            }
+            if at != home {
+                total += open + self.leg_time_of(u, at, home)?;
+                (open, at) = (0.0, home);
+            }
+            let out = self.leg_time_of(u, home, entry)?;
+            if out + job + back <= limit {
+                (open, at) = (out + job, exit);
+                continue;
+            }
+            let round_trip = out + back;
+            if round_trip >= limit {
+                return Ok(INFEASIBLE_S + total);
+            }
+            let pieces = (job / (limit - round_trip)).ceil();
+            total += pieces * round_trip + job;
+        }
+        if at != home {
+            total += open + self.leg_time_of(u, at, home)?;
+        }
+        Ok(total)
+    }
+
+    /// Time of UAV `u` flying `route` in one flight, home to home (0 for
+    /// an empty route), whatever its battery.
+    pub fn flight_time(&mut self, u: usize, route: &[Visit]) -> Result<f64, TransitError> {
         let mut t = 0.0;
         for (a, b) in Self::legs_of(u, route) {
             let leg = self.leg(a, b)?;

@@ -100,13 +100,15 @@ pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
         }
     };
 
+    flock.batteries = input.batteries.clone();
     let single_tour = input.uavs.len() == 1 && input.policy == Policy::Balanced;
+    // Before any policy prices legs, so that the bound is the same for all.
+    let lower_bound_s = makespan_lower_bound(&mut flock).map_err(|e| internal(e.into()))?;
     let mut routes = if single_tour {
         vec![(0..parts.len()).map(|j| Visit::new(j, 0)).collect()]
     } else {
         assign(&mut flock, input.policy).map_err(internal)?
     };
-    let lower_bound_s = makespan_lower_bound(&mut flock).map_err(|e| internal(e.into()))?;
 
     if input.policy == Policy::Balanced {
         for (u, route) in routes.iter_mut().enumerate() {
@@ -192,7 +194,8 @@ fn reorder_by_tour(
     route: &mut Vec<Visit>,
     forced: bool,
 ) -> Result<(), PlanError> {
-    if route.len() < 2 {
+    // The optimiser knows no battery: sorties are the local search's.
+    if route.len() < 2 || (flock.has_battery(u) && !forced) {
         return Ok(());
     }
     // Pieces are matched back by cell, so each cell may appear once.
@@ -255,7 +258,7 @@ fn cut_sorties(
     let mut splits = 0usize;
     while let Some(v) = queue.pop_front() {
         current.push(v);
-        if flock.route_time(u, &current).map_err(internal)? <= limit {
+        if flock.flight_time(u, &current).map_err(internal)? <= limit {
             continue;
         }
         current.pop();
@@ -284,8 +287,14 @@ fn cut_sorties(
                 &format!(
                     "UAV {} cannot fly cell {} within its battery of {limit:.0} s: getting there \
                      and back alone takes {there_and_back:.0} s; start it nearer or give it a \
-                     longer max_flight_time_s",
-                    input.ids[u], piece.cell
+                     longer max_flight_time_s{}",
+                    input.ids[u],
+                    piece.cell,
+                    if input.policy == Policy::Balanced {
+                        ""
+                    } else {
+                        " (the balanced assignment shares cells with the batteries in mind)"
+                    }
                 ),
             )]));
         };

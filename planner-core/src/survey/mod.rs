@@ -1548,11 +1548,13 @@ impl SurveyPlan {
         if name == CELLS_FILE {
             return done("application/geo+json", pretty(&self.cells_geojson()));
         }
-        if self
-            .uavs
-            .iter()
-            .any(|u| name.strip_prefix(u.id.as_str()) == Some(&format!(".{FENCE_FILE_SUFFIX}")))
-        {
+        // The fence is the UAV's; it is also served under each sortie's stem.
+        let fence = format!(".{FENCE_FILE_SUFFIX}");
+        if self.uavs.iter().any(|u| {
+            std::iter::once(u.id.as_str())
+                .chain(u.sorties.iter().map(|s| s.file_stem.as_str()))
+                .any(|stem| name.strip_prefix(stem) == Some(fence.as_str()))
+        }) {
             return done(text, export::write_fence(&self.fences));
         }
         let (u, s, suffix) = self.uavs.iter().find_map(|u| {

@@ -545,6 +545,17 @@ pub async fn uav_file(
             e.body_text()
         ))
     })?;
+    if sortie == Some(0) {
+        return Err(ApiError::BadRequest(
+            "sortie must be a whole number from 1".into(),
+        ));
+    }
+    // UAV ids never hold a dot; file stems of sorties do.
+    if uav.contains('.') {
+        return Err(ApiError::NotFound(format!(
+            "survey {id} has no UAV {uav:?}"
+        )));
+    }
     let (suffix, ext) = match file.as_str() {
         "mission.waypoints" => ("waypoints", "waypoints"),
         "mission.plan" => ("plan", "plan"),
@@ -561,8 +572,8 @@ pub async fn uav_file(
     // Per-sortie files are named `<uav>.sortie<k>.<suffix>` in the plan
     // when the UAV flies several sorties; the fence is the UAV's.
     let stem = match sortie {
-        Some(k) if suffix != "fence.waypoints" => format!("{uav}.sortie{k}"),
-        _ => uav.clone(),
+        Some(k) => format!("{uav}.sortie{k}"),
+        None => uav.clone(),
     };
     let download_name = format!("terraplan-{}-{stem}.{ext}", short(&id));
     download(
