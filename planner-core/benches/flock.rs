@@ -30,7 +30,7 @@ use geo_types::{Coord, MultiPolygon, Polygon, polygon};
 use planner_core::coverage::{self, CellPlan};
 use planner_core::decompose;
 use planner_core::flock::{
-    Flock, FlockJob, FlockUav, ObstacleMap, Part, Policy, Stop, assign, balanced, competition,
+    Flock, FlockJob, FlockUav, ObstacleMap, Part, Policy, assign, balanced, competition,
     halve_until, hungarian, makespan_lower_bound,
 };
 use planner_core::geo::{Limits, ParsedPolygon, UtmProjection, prepare_area};
@@ -493,36 +493,6 @@ fn main() {
         let (t_search, _) = once(|| balanced::balanced(&mut flock, start).expect("balanced"));
         profile.push(("balanced: competition start".into(), t_comp));
         profile.push(("balanced: local search after it".into(), t_search));
-
-        // min_reach's first round: every home to both ends of every job,
-        // each leg searched round the NFZs, then one Hungarian solve.
-        let mut flock = instance.flock();
-        let (m, n) = (flock.uavs.len(), flock.jobs.len());
-        let (t_legs, reach) = once(|| {
-            let mut reach = Vec::with_capacity(m * n);
-            for u in 0..m {
-                for j in 0..n {
-                    let l0 = flock.leg(Stop::Home(u), Stop::End { job: j, end: 0 });
-                    let l1 = flock.leg(Stop::Home(u), Stop::End { job: j, end: 1 });
-                    reach.push(
-                        l0.expect("leg")
-                            .length_3d_m
-                            .min(l1.expect("leg").length_3d_m),
-                    );
-                }
-            }
-            reach
-        });
-        let (t_hung, _) = once(|| hungarian::min_cost_assignment(&reach, m, n).expect("solve"));
-        profile.push((
-            format!(
-                "min_reach: round 1 legs ({} searches, {:.1} µs each)",
-                2 * m * n,
-                t_legs / (2 * m * n) as f64 * 1e6
-            ),
-            t_legs,
-        ));
-        profile.push((format!("min_reach: round 1 Hungarian {m}x{n}"), t_hung));
     }
 
     // 3. The Hungarian solver next to SciPy.
