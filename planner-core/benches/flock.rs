@@ -455,7 +455,7 @@ fn main() {
             let (t, routes) = once(|| assign(&mut flock, policy).expect("assign"));
             let makespan_s = flock.makespan(&routes).expect("makespan");
             let (t_bound, lower_bound_s) =
-                once(|| makespan_lower_bound(&mut flock).expect("bound"));
+                once(|| makespan_lower_bound(&mut flock, false).expect("bound"));
             profile.push((
                 format!("{}: makespan_lower_bound after it", policy.name()),
                 t_bound,

@@ -144,7 +144,7 @@ proptest! {
                 if let Some(limit) = battery {
                     // Within the battery, up to the model's small differences
                     // from the flown path.
-                    prop_assert!(sortie.stats.flight_time_s <= limit * 1.02 + 5.0,
+                    prop_assert!(sortie.stats.flight_time_s <= limit * (1.0 + 1e-6),
                         "sortie {} takes {} s > battery {limit} s", sortie.file_stem, sortie.stats.flight_time_s);
                 }
                 for p in &sortie.pieces {

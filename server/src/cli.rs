@@ -255,12 +255,16 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     write("plan.json", &text)?;
     let s = &plan.stats;
     println!(
-        "planned {} cells, {} lanes, {:.0} m, {} photos, {:.0} s flight, coverage {:.2} % -> {}",
+        "planned {} cells, {} lanes, {} UAV(s) ({} sorties, {}), {:.0} m, {} photos, makespan {:.0} \
+         s, coverage {:.2} % -> {}",
         s.cell_count,
         s.lane_count,
+        s.uav_count,
+        s.sorties,
+        s.assignment.name(),
         s.length_m,
         s.photos,
-        s.flight_time_s,
+        s.makespan_s,
         s.coverage_ratio * 100.0,
         args.out.display()
     );

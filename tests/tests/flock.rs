@@ -725,7 +725,7 @@ fn battery_sorties_over_http() {
         assert_eq!(s["number"].as_u64().unwrap() as usize, number);
         let t = num(&s["stats"]["flight_time_s"]);
         assert!(
-            t <= battery * 1.02 + 5.0,
+            t <= battery * (1.0 + 1e-6),
             "sortie {number}: {t} s with a battery of {battery} s"
         );
         let files = &s["files"];
@@ -916,7 +916,9 @@ fn balanced_beats_competition_with_a_battery() {
     let nfz = write(dir.path(), "nfz.geojson", &nl_no_fly_south());
     let ids = ["west", "east", "north"];
     let mut faults = Vec::new();
-    for (uav_count, battery) in [(3usize, 60.0), (2, 80.0)] {
+    // The reviewer's cases: several UAVs with one battery, and one UAV alone
+    // (where the tour optimiser would ignore the battery).
+    for (uav_count, battery) in [(3usize, 60.0), (2, 80.0), (1, 120.0), (1, 300.0)] {
         let uavs: Vec<Value> = (0..uav_count)
             .map(|i| {
                 let mut u = json!({"id": ids[i], "start": NL_STARTS[i]});
@@ -940,7 +942,9 @@ fn balanced_beats_competition_with_a_battery() {
         check_flock_stats(&competition, uav_count, "competition");
         check_pieces_tile_cells(&competition);
         for s in competition["uavs"][0]["sorties"].as_array().unwrap() {
-            assert!(num(&s["stats"]["flight_time_s"]) <= battery * 1.02 + 5.0);
+            // Sorties are cut on the model time, which is the flown time up
+            // to rounding.
+            assert!(num(&s["stats"]["flight_time_s"]) <= battery * (1.0 + 1e-6));
         }
         let c = num(&competition["stats"]["makespan_s"]);
         // A valid plan exists (competition's); balanced must find one too.

@@ -160,6 +160,14 @@ fn best_move(
                 + new_v * new_v,
         }
     };
+    // Single-flight times: with a battery, the sorties only add to them, so
+    // bounds built on these still bound the time with sorties.
+    let mut plain = times.to_vec();
+    for (u, route) in routes.iter().enumerate() {
+        if flock.has_battery(u) {
+            plain[u] = flock.flight_time(u, route)?;
+        }
+    }
     let mut best: Option<(Score, Move)> = None;
     let rc = &routes[c];
     for p in 0..rc.len() {
@@ -189,9 +197,9 @@ fn best_move(
                         Stop::Home(v)
                     };
                     let base = if rv.is_empty() {
-                        times[v]
+                        plain[v]
                     } else {
-                        times[v] - flock.leg_time_of(v, prev, next)?
+                        plain[v] - flock.leg_time_of(v, prev, next)?
                     };
                     for way in 0..2 {
                         let xv = Visit::new(x.job, way);
@@ -202,8 +210,7 @@ fn best_move(
                             + job
                             + flock.leg_time_lower(v, exit, next);
                         let bar = best.as_ref().map_or(current, |b| b.0);
-                        // A battery makes times non-additive: no bound.
-                        if !flock.has_battery(v) && !score_with(v, new_c, lower).beats(&bar) {
+                        if !score_with(v, new_c, lower).beats(&bar) {
                             continue;
                         }
                         let new_v = if flock.has_battery(v) {
@@ -249,9 +256,9 @@ fn best_move(
                 };
                 let bar = best.as_ref().map_or(current, |b| b.0);
                 let batteries = flock.has_battery(c) || flock.has_battery(v);
-                let new_c_lower = times[c] - with_x + lower_in(flock, c, y.job, bp, ap);
-                let new_v_lower = times[v] - with_y + lower_in(flock, v, x.job, bq, aq);
-                if !batteries && !score_with(v, new_c_lower, new_v_lower).beats(&bar) {
+                let new_c_lower = plain[c] - with_x + lower_in(flock, c, y.job, bp, ap);
+                let new_v_lower = plain[v] - with_y + lower_in(flock, v, x.job, bq, aq);
+                if !score_with(v, new_c_lower, new_v_lower).beats(&bar) {
                     continue;
                 }
                 let (into_c, in_c) = best_way(flock, c, y.job, bp, ap)?;

@@ -49,6 +49,14 @@ pub struct FlockJob {
     pub length_3d_m: f64,
     /// Turns inside the job (between its lanes).
     pub turns: usize,
+    /// The other two corners, where the tour optimiser may also enter and
+    /// leave (the first lane's end and the last lane's start).
+    pub across: [Coord<f64>; 2],
+    /// A lower bound of the job's horizontal length however it is flown:
+    /// its lanes plus the straight gap between each two consecutive lanes.
+    pub least_length_m: f64,
+    /// Lanes in the job (a turn at least between each two).
+    pub lanes: usize,
 }
 
 impl FlockJob {
@@ -64,7 +72,22 @@ impl FlockJob {
             .copied()
             .find(|&p| p != last)
             .unwrap_or(last);
+        let lanes = &plan.lanes;
+        let d = |a: Coord<f64>, b: Coord<f64>| (b.x - a.x).hypot(b.y - a.y);
+        let gaps: f64 = lanes
+            .windows(2)
+            .map(|w| {
+                [w[0].start, w[0].end]
+                    .iter()
+                    .flat_map(|&p| [w[1].start, w[1].end].map(|q| d(p, q)))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .sum();
+        let (first_lane, last_lane) = (lanes.first()?, lanes.last()?);
         Some(FlockJob {
+            across: [first_lane.end, last_lane.start],
+            least_length_m: lanes.iter().map(|l| d(l.start, l.end)).sum::<f64>() + gaps,
+            lanes: lanes.len(),
             ends: [
                 JobEnd {
                     at: first,
@@ -259,9 +282,12 @@ impl<'a> Flock<'a> {
         match self.memo.get(&(a, b)).or_else(|| self.memo.get(&(b, a))) {
             Some((leg, _)) => leg.length_3d_m,
             None => {
+                // The same arithmetic as an exact straight leg, so that the
+                // bound is never a rounding above it.
                 let (pa, _) = self.point(a);
                 let (pb, _) = self.point(b);
-                (pb.x - pa.x).hypot(pb.y - pa.y)
+                let homes = [a, b].iter().filter(|s| matches!(s, Stop::Home(_))).count();
+                polyline_length(&[pa, pb]) + self.flat_altitude_m * homes as f64
             }
         }
     }
@@ -303,6 +329,21 @@ impl<'a> Flock<'a> {
     pub fn job_time(&self, u: usize, job: usize) -> f64 {
         let j = &self.jobs[job];
         j.length_3d_m / self.uavs[u].speed_m_s + j.turns as f64 * self.turn_penalty_s
+    }
+
+    /// A lower bound of UAV `u`'s time for the job flown any way, also
+    /// entered at its other corners with new links (as the tour optimiser
+    /// may): its lanes and the straight gaps between them, a turn per gap.
+    pub fn job_time_lower(&self, u: usize, job: usize) -> f64 {
+        let j = &self.jobs[job];
+        let any_way = j.least_length_m / self.uavs[u].speed_m_s
+            + j.lanes.saturating_sub(1) as f64 * self.turn_penalty_s;
+        any_way.min(self.job_time(u, job))
+    }
+
+    /// The flat survey's climb and descent per home end, m (0 over terrain).
+    pub fn flat_altitude_m(&self) -> f64 {
+        self.flat_altitude_m
     }
 
     /// The stops of a route: home, each job in and out, home.

@@ -3,10 +3,11 @@
 //! policy shares them into routes, each route is cut into battery sorties,
 //! and each sortie is flown as one tour from home and back.
 //!
-//! With `balanced`, each UAV's route is also offered to the single-UAV tour
-//! optimiser ([`plan_tour`], which may enter a cell at any of its four
-//! corners); its order is kept when it is quicker. A single UAV with
-//! `balanced` is planned by the tour optimiser alone.
+//! A single UAV with `balanced` (and no battery) is ordered by the tour
+//! optimiser ([`plan_tour`], which may also enter a cell at its other two
+//! corners); flocks keep to the two ends of each path, which the lower
+//! bound and the balanced search price exactly. With a battery, balanced
+//! keeps the competition's sorties if they turn out quicker once cut.
 
 use geo_types::{Coord, MultiPolygon, Polygon};
 
@@ -15,13 +16,15 @@ use super::terrain_flight::{FlightRules, cell_length_3d, transit_length_3d};
 use crate::coverage::CellPlan;
 use crate::flock::{
     Flock, FlockJob, FlockUav, ObstacleMap, Part, Piece, Policy, Stop, Tour, Visit, assign,
-    count_turns, halve_until, makespan_lower_bound, plan_tour, polyline_length,
+    halve_until, makespan_lower_bound, plan_tour,
 };
 use crate::geo::Issue;
 use crate::terrain::TerrainModel;
 
 /// Most pieces a battery split may cut one UAV's work into.
 const MAX_PIECES_PER_UAV: usize = 10_000;
+/// Most sorties one UAV may fly.
+const MAX_SORTIES_PER_UAV: usize = 100;
 
 /// What the flock stage needs from the survey.
 pub(super) struct FlockInput<'a> {
@@ -101,24 +104,45 @@ pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
     };
 
     flock.batteries = input.batteries.clone();
-    let single_tour = input.uavs.len() == 1 && input.policy == Policy::Balanced;
+    let any_battery = input.batteries.iter().any(Option::is_some);
+    // The tour optimiser knows no battery: with one, the local search
+    // orders the work.
+    let single_tour = input.uavs.len() == 1 && input.policy == Policy::Balanced && !any_battery;
     // Before any policy prices legs, so that the bound is the same for all.
-    let lower_bound_s = makespan_lower_bound(&mut flock).map_err(|e| internal(e.into()))?;
+    // Only the single-UAV tour optimiser enters cells at their other corners.
+    let lower_bound_s =
+        makespan_lower_bound(&mut flock, single_tour).map_err(|e| internal(e.into()))?;
+    // The competition's routes are kept to compare sorties with (below).
+    let mut competition_routes = None;
     let mut routes = if single_tour {
         vec![(0..parts.len()).map(|j| Visit::new(j, 0)).collect()]
+    } else if input.policy == Policy::Balanced {
+        let (start, _) =
+            crate::flock::competition::competition(&mut flock).map_err(|e| internal(e.into()))?;
+        competition_routes = Some(start.clone());
+        crate::flock::balanced::balanced(&mut flock, start).map_err(|e| internal(e.into()))?
     } else {
         assign(&mut flock, input.policy).map_err(internal)?
     };
 
-    if input.policy == Policy::Balanced {
-        for (u, route) in routes.iter_mut().enumerate() {
-            reorder_by_tour(input, &mut flock, &mut parts, u, route, single_tour)?;
-        }
+    if single_tour {
+        reorder_by_tour(input, &mut flock, &mut parts, 0, &mut routes[0])?;
     }
 
-    let mut sorties = Vec::with_capacity(routes.len());
-    for (u, route) in routes.into_iter().enumerate() {
-        let cut = cut_sorties(input, &mut flock, &mut parts, u, route)?;
+    let mut cut = cut_all(input, &mut flock, &mut parts, routes)?;
+    // The balanced search prices a job too long for one battery as ideal
+    // round trips, while the cut halves it between lanes: on the sorties
+    // actually cut, keep the competition's if it is quicker, so that
+    // balanced is never worse.
+    if let Some(start) = competition_routes.filter(|_| any_battery)
+        && let Ok(other) = cut_all(input, &mut flock, &mut parts, start)
+        && other.1 < cut.1
+    {
+        cut = other;
+    }
+
+    let mut sorties = Vec::with_capacity(cut.0.len());
+    for (u, cut) in cut.0.into_iter().enumerate() {
         let mut flights = Vec::with_capacity(cut.len());
         for s in cut {
             let tour = tour_of(&mut flock, &parts, u, &s).map_err(|e| internal(e.into()))?;
@@ -133,6 +157,30 @@ pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
         sorties,
         lower_bound_s,
     })
+}
+
+/// Every UAV's sorties (see [`cut_sorties`]) and the makespan they make.
+#[allow(clippy::type_complexity)]
+fn cut_all(
+    input: &FlockInput,
+    flock: &mut Flock,
+    parts: &mut Vec<Part>,
+    routes: Vec<Vec<Visit>>,
+) -> Result<(Vec<Vec<Vec<Visit>>>, f64), PlanError> {
+    let mut out = Vec::with_capacity(routes.len());
+    let mut makespan: f64 = 0.0;
+    for (u, route) in routes.into_iter().enumerate() {
+        let sorties = cut_sorties(input, flock, parts, u, route)?;
+        let mut time = 0.0;
+        for s in &sorties {
+            time += flock
+                .flight_time(u, s)
+                .map_err(|e| PlanError::Internal(e.to_string()))?;
+        }
+        makespan = makespan.max(time);
+        out.push(sorties);
+    }
+    Ok((out, makespan))
 }
 
 /// The tour flying `route` from UAV `u`'s home and back.
@@ -160,42 +208,18 @@ fn tour_of(
     Ok(Tour { visits, transits })
 }
 
-/// Mission time of a tour in the flock's model (3D lengths over the speed,
-/// a penalty per turn).
-fn tour_time(input: &FlockInput, u: usize, tour: &Tour) -> f64 {
-    let n = tour.transits.len();
-    let mut length = 0.0;
-    for (i, t) in tour.transits.iter().enumerate() {
-        let homes = [i == 0, i + 1 == n];
-        length += match &input.terrain {
-            Some((model, rules)) => transit_length_3d(model, rules, t, homes),
-            None => {
-                polyline_length(t) + input.altitude_m * homes.iter().filter(|&&h| h).count() as f64
-            }
-        };
-    }
-    for v in &tour.visits {
-        length += match &input.terrain {
-            Some((model, rules)) => cell_length_3d(model, v, rules),
-            None => v.length_m(),
-        };
-    }
-    length / input.uavs[u].speed_m_s + count_turns(&tour.path()) as f64 * input.turn_penalty_s
-}
-
-/// Offers UAV `u`'s jobs to the tour optimiser and keeps its order when it
-/// is quicker (always, with `forced`). The chosen cells' plans, as the tour
-/// flies them, become new parts flown as planned (way 0).
+/// Orders a single UAV's jobs by the tour optimiser. The cells' plans, as
+/// the tour flies them, become new parts flown as planned (way 0). Not for
+/// a UAV with a battery: the optimiser knows none, and a re-oriented part
+/// must not be halved later (its piece is described in planned lane order).
 fn reorder_by_tour(
     input: &FlockInput,
     flock: &mut Flock,
     parts: &mut Vec<Part>,
     u: usize,
     route: &mut Vec<Visit>,
-    forced: bool,
 ) -> Result<(), PlanError> {
-    // The optimiser knows no battery: sorties are the local search's.
-    if route.len() < 2 || (flock.has_battery(u) && !forced) {
+    if route.len() < 2 || flock.has_battery(u) {
         return Ok(());
     }
     // Pieces are matched back by cell, so each cell may appear once.
@@ -208,13 +232,6 @@ fn reorder_by_tour(
     let home = input.uavs[u].home;
     let candidate = plan_tour(home, &plans, input.cells, input.free, input.obstacles)
         .map_err(|e| PlanError::Internal(e.to_string()))?;
-    if !forced {
-        let current =
-            tour_of(flock, parts, u, route).map_err(|e| PlanError::Internal(e.to_string()))?;
-        if tour_time(input, u, &candidate) >= tour_time(input, u, &current) {
-            return Ok(());
-        }
-    }
     let cell_3d = |plan: &CellPlan| match &input.terrain {
         Some((model, rules)) => cell_length_3d(model, plan, rules),
         None => plan.length_m(),
@@ -257,6 +274,16 @@ fn cut_sorties(
     let mut queue: std::collections::VecDeque<Visit> = route.into();
     let mut splits = 0usize;
     while let Some(v) = queue.pop_front() {
+        if sorties.len() >= MAX_SORTIES_PER_UAV {
+            return Err(PlanError::Invalid(vec![Issue::new(
+                &(input.pointer)(u, "max_flight_time_s"),
+                &format!(
+                    "UAV {} would need more than {MAX_SORTIES_PER_UAV} sorties with a battery of \
+                     {limit:.0} s: give it a longer max_flight_time_s, start it nearer or add UAVs",
+                    input.ids[u]
+                ),
+            )]));
+        }
         current.push(v);
         if flock.flight_time(u, &current).map_err(internal)? <= limit {
             continue;

@@ -586,6 +586,8 @@ pub struct SurveyStats {
     pub slice_angle_deg: f64,
     pub cell_count: usize,
     pub lane_count: usize,
+    /// Photos, lengths, turns and flight time are summed over the flock
+    /// (see `makespan_s` for the survey's duration).
     pub photos: usize,
     pub length_m: f64,
     pub length_3d_m: f64,
@@ -689,6 +691,7 @@ pub struct SortiePlan {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "StoredUavPlan")]
 pub struct UavPlan {
     pub id: String,
     pub start: [f64; 2],
@@ -705,6 +708,62 @@ pub struct UavPlan {
     pub stats: UavStats,
     /// At least one; several when the battery needs them.
     pub sorties: Vec<SortiePlan>,
+}
+
+/// A [`UavPlan`] as stored: the current layout, or the one-mission layout
+/// of plans stored before flocks (`mission`, `terrain` and `stats` at the
+/// top), read as one sortie, so that older surveys still open.
+#[derive(Deserialize)]
+struct StoredUavPlan {
+    id: String,
+    start: [f64; 2],
+    #[serde(default)]
+    speed_m_s: Option<f64>,
+    #[serde(default)]
+    max_flight_time_s: Option<f64>,
+    cells: Vec<usize>,
+    #[serde(default)]
+    pieces: Vec<Piece>,
+    stats: UavStats,
+    #[serde(default)]
+    sorties: Vec<SortiePlan>,
+    #[serde(default)]
+    mission: Option<Mission>,
+    #[serde(default)]
+    terrain: Option<UavTerrain>,
+}
+
+impl From<StoredUavPlan> for UavPlan {
+    fn from(s: StoredUavPlan) -> UavPlan {
+        let mut sorties = s.sorties;
+        if sorties.is_empty()
+            && let Some(mission) = s.mission
+        {
+            sorties.push(SortiePlan {
+                file_stem: s.id.clone(),
+                cells: s.cells.clone(),
+                // Old plans did not say which lanes: their cells were whole.
+                pieces: s.pieces.clone(),
+                stats: s.stats.clone(),
+                mission,
+                terrain: s.terrain,
+            });
+        }
+        let speed_m_s = s
+            .speed_m_s
+            .or_else(|| sorties.first().map(|f| f.mission.cruise_speed_m_s))
+            .unwrap_or(10.0);
+        UavPlan {
+            id: s.id,
+            start: s.start,
+            speed_m_s,
+            max_flight_time_s: s.max_flight_time_s,
+            cells: s.cells,
+            pieces: s.pieces,
+            stats: s.stats,
+            sorties,
+        }
+    }
 }
 
 /// A planned survey: what `plan.json` holds and the files are made from.
@@ -1643,6 +1702,28 @@ fn pretty(v: &Value) -> String {
 mod tests {
     use super::*;
     use geo_types::polygon;
+
+    #[test]
+    fn plans_stored_before_flocks_still_open() {
+        // A UAV as stored by the one-UAV planner (commit 7c9a861).
+        let old = json!({
+            "id": "uav1", "start": [5.0, 52.0], "cells": [0, 1],
+            "stats": {"length_m": 100.0, "length_3d_m": 220.0, "survey_length_m": 80.0,
+                      "transit_length_m": 20.0, "turns": 4, "flight_time_s": 30.0,
+                      "photos": 7, "cells": 2},
+            "mission": {"home": {"lon": 5.0, "lat": 52.0, "alt": 0.0}, "frame": "relative",
+                        "cruise_speed_m_s": 8.0, "items": [], "over_terrain": false}
+        });
+        let uav: UavPlan = serde_json::from_value(old).unwrap();
+        assert_eq!(uav.sorties.len(), 1);
+        assert_eq!(uav.sorties[0].file_stem, "uav1");
+        assert_eq!(uav.sorties[0].cells, vec![0, 1]);
+        assert_eq!(uav.speed_m_s, 8.0);
+        assert_eq!(uav.stats.sorties, 1);
+        // And the current layout reads back as written.
+        let again: UavPlan = serde_json::from_value(serde_json::to_value(&uav).unwrap()).unwrap();
+        assert_eq!(again, uav);
+    }
 
     #[test]
     fn params_defaults_and_ranges() {

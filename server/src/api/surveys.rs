@@ -180,7 +180,10 @@ pub struct SurveySummary {
     cell_count: u64,
     uav_count: u64,
     area_m2: f64,
+    /// Flight time summed over the flock, s.
     flight_time_s: f64,
+    /// The longest UAV mission, s (the whole survey's duration).
+    makespan_s: f64,
     /// URL of the full survey.
     url: String,
 }
@@ -439,6 +442,11 @@ fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
         uav_count: plan["uavs"].as_array().map_or(0, |a| a.len() as u64),
         area_m2: stats["area_m2"].as_f64().unwrap_or(0.0),
         flight_time_s: stats["flight_time_s"].as_f64().unwrap_or(0.0),
+        // Plans stored before flocks had one UAV: its time is the makespan.
+        makespan_s: stats["makespan_s"]
+            .as_f64()
+            .or_else(|| stats["flight_time_s"].as_f64())
+            .unwrap_or(0.0),
         url: survey_url(&row.id),
     })
 }
