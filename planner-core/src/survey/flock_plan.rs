@@ -129,17 +129,26 @@ pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
         reorder_by_tour(input, &mut flock, &mut parts, 0, &mut routes[0])?;
     }
 
-    let mut cut = cut_all(input, &mut flock, &mut parts, routes)?;
     // The balanced search prices a job too long for one battery as ideal
     // round trips, while the cut halves it between lanes: on the sorties
-    // actually cut, keep the competition's if it is quicker, so that
-    // balanced is never worse.
-    if let Some(start) = competition_routes.filter(|_| any_battery)
-        && let Ok(other) = cut_all(input, &mut flock, &mut parts, start)
-        && other.1 < cut.1
-    {
-        cut = other;
-    }
+    // actually cut, keep the competition's if they are quicker (or if only
+    // they can be cut), so that balanced is never worse.
+    let first = cut_all(input, &mut flock, &mut parts, routes);
+    let cut = match competition_routes.filter(|_| any_battery) {
+        None => first?,
+        Some(start) => match (first, cut_all(input, &mut flock, &mut parts, start)) {
+            (Ok(a), Ok(b)) => {
+                if b.1 < a.1 {
+                    b
+                } else {
+                    a
+                }
+            }
+            (Ok(a), Err(_)) => a,
+            (Err(_), Ok(b)) => b,
+            (Err(e), Err(_)) => return Err(e),
+        },
+    };
 
     let mut sorties = Vec::with_capacity(cut.0.len());
     for (u, cut) in cut.0.into_iter().enumerate() {
