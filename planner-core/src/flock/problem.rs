@@ -201,16 +201,7 @@ impl<'a> Flock<'a> {
         obstacles: &'a ObstacleMap,
         altitude_m: f64,
     ) -> Flock<'a> {
-        Flock {
-            batteries: vec![None; uavs.len()],
-            uavs,
-            jobs,
-            turn_penalty_s,
-            obstacles,
-            lift: None,
-            flat_altitude_m: altitude_m,
-            memo: HashMap::new(),
-        }
+        Flock::new(uavs, jobs, turn_penalty_s, obstacles, None, altitude_m)
     }
 
     /// A flock whose transits' 3D lengths come from `lift`.
@@ -221,14 +212,25 @@ impl<'a> Flock<'a> {
         obstacles: &'a ObstacleMap,
         lift: &'a Lift<'a>,
     ) -> Flock<'a> {
+        Flock::new(uavs, jobs, turn_penalty_s, obstacles, Some(lift), 0.0)
+    }
+
+    fn new(
+        uavs: Vec<FlockUav>,
+        jobs: Vec<FlockJob>,
+        turn_penalty_s: f64,
+        obstacles: &'a ObstacleMap,
+        lift: Option<&'a Lift<'a>>,
+        flat_altitude_m: f64,
+    ) -> Flock<'a> {
         Flock {
             batteries: vec![None; uavs.len()],
             uavs,
             jobs,
             turn_penalty_s,
             obstacles,
-            lift: Some(lift),
-            flat_altitude_m: 0.0,
+            lift,
+            flat_altitude_m,
             memo: HashMap::new(),
         }
     }

@@ -59,13 +59,35 @@ pub(super) struct FlockOutcome {
     pub lower_bound_s: f64,
 }
 
+impl FlockInput<'_> {
+    /// The 3D length flown along a cell's (or piece's) path.
+    fn cell_length_3d(&self, plan: &CellPlan) -> f64 {
+        match &self.terrain {
+            Some((model, rules)) => cell_length_3d(model, plan, rules),
+            None => plan.length_m(),
+        }
+    }
+}
+
+/// Adds a part (a re-oriented or split piece) as a new job of the flock;
+/// returns its index, the same in `parts` and `flock.jobs`.
+fn add_part(
+    input: &FlockInput,
+    flock: &mut Flock,
+    parts: &mut Vec<Part>,
+    part: Part,
+) -> Result<usize, PlanError> {
+    let job = FlockJob::from_plan(&part.plan, input.cell_length_3d(&part.plan))
+        .ok_or_else(|| PlanError::Internal("a piece without lanes".into()))?;
+    flock.jobs.push(job);
+    parts.push(part);
+    Ok(parts.len() - 1)
+}
+
 /// Shares the survey among the UAVs and flies each share.
 pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
     let internal = |e: crate::flock::FlockError| PlanError::Internal(e.to_string());
-    let cell_3d = |plan: &CellPlan| match &input.terrain {
-        Some((model, rules)) => cell_length_3d(model, plan, rules),
-        None => plan.length_m(),
-    };
+    let cell_3d = |plan: &CellPlan| input.cell_length_3d(plan);
     let whole: Vec<Part> = input
         .plans
         .iter()
@@ -241,10 +263,6 @@ fn reorder_by_tour(
     let home = input.uavs[u].home;
     let candidate = plan_tour(home, &plans, input.cells, input.free, input.obstacles)
         .map_err(|e| PlanError::Internal(e.to_string()))?;
-    let cell_3d = |plan: &CellPlan| match &input.terrain {
-        Some((model, rules)) => cell_length_3d(model, plan, rules),
-        None => plan.length_m(),
-    };
     let mut new_route = Vec::with_capacity(candidate.visits.len());
     for visit in candidate.visits {
         let Some(old) = route
@@ -254,11 +272,8 @@ fn reorder_by_tour(
             return Err(PlanError::Internal("tour lost a cell".into()));
         };
         let piece = parts[old.job].piece.clone();
-        let job = FlockJob::from_plan(&visit, cell_3d(&visit))
-            .ok_or_else(|| PlanError::Internal("tour visit without lanes".into()))?;
-        flock.jobs.push(job);
-        parts.push(Part { piece, plan: visit });
-        new_route.push(Visit::new(parts.len() - 1, 0));
+        let job = add_part(input, flock, parts, Part { piece, plan: visit })?;
+        new_route.push(Visit::new(job, 0));
     }
     *route = new_route;
     Ok(())
@@ -334,18 +349,10 @@ fn cut_sorties(
                 ),
             )]));
         };
-        let mut halves = Vec::with_capacity(2);
-        for part in [a, b] {
-            let length_3d = match &input.terrain {
-                Some((model, rules)) => cell_length_3d(model, &part.plan, rules),
-                None => part.plan.length_m(),
-            };
-            let job = FlockJob::from_plan(&part.plan, length_3d)
-                .ok_or_else(|| PlanError::Internal("split piece without lanes".into()))?;
-            flock.jobs.push(job);
-            parts.push(part);
-            halves.push(parts.len() - 1);
-        }
+        let halves = [
+            add_part(input, flock, parts, a)?,
+            add_part(input, flock, parts, b)?,
+        ];
         // Flown in the direction the whole job was: backwards means the
         // second half first.
         let (first, second) = if v.way == 0 {
