@@ -300,3 +300,16 @@ pub fn assert_problem(r: &Reply, status: u16, detail_has: &str) -> serde_json::V
     assert!(all.contains(detail_has), "expected {detail_has:?} in {p}");
     p
 }
+
+/// [`assert_problem`] for a 422 whose `errors` also name `pointer`; `what`
+/// labels the case in failure messages.
+pub fn assert_invalid_at(r: &Reply, what: &str, pointer: &str, detail_has: &str) {
+    let p = assert_problem(r, 422, detail_has);
+    let errors = p["errors"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{what}: no errors in {p}"));
+    assert!(
+        errors.iter().any(|e| e["pointer"] == pointer),
+        "{what}: pointer {pointer:?} not in {p}"
+    );
+}

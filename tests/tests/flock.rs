@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_problem, get, post_json, shared_data, terraplan, text, validator,
-    workspace,
+    Reply, Server, assert_invalid_at, assert_problem, get, post_json, shared_data, terraplan, text,
+    validator, workspace,
 };
 
 /// The Dutch field of survey_cli.rs (fields2cover's test parcel).
@@ -869,15 +869,7 @@ fn flock_faults_name_the_uav_at_fault() {
         ),
     ];
     for (name, body, pointer, msg) in cases {
-        let r = post_json(&url, &body);
-        let p = assert_problem(&r, 422, msg);
-        let errors = p["errors"]
-            .as_array()
-            .unwrap_or_else(|| panic!("{name}: no errors in {p}"));
-        assert!(
-            errors.iter().any(|e| e["pointer"] == pointer),
-            "{name}: pointer {pointer:?} not in {p}"
-        );
+        assert_invalid_at(&post_json(&url, &body), name, pointer, msg);
     }
 
     // 64 UAVs, the most a survey takes, sharing one cell (min_reach after

@@ -7,7 +7,8 @@ use std::io::{Read, Write};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, assert_problem, delete, example_survey_request, get, post, post_json, validator,
+    Server, assert_invalid_at, assert_problem, delete, example_survey_request, get, post,
+    post_json, validator,
 };
 
 fn example_request() -> Value {
@@ -310,15 +311,7 @@ fn bad_input_is_a_problem_naming_the_fault() {
         ("not an object", json!([1, 2]), "", "JSON object"),
     ];
     for (name, body, pointer, msg) in cases {
-        let r = post_json(&url, &body);
-        let p = assert_problem(&r, 422, msg);
-        let errors = p["errors"]
-            .as_array()
-            .unwrap_or_else(|| panic!("{name}: no errors in {p}"));
-        assert!(
-            errors.iter().any(|e| e["pointer"] == pointer),
-            "{name}: pointer {pointer:?} not in {p}"
-        );
+        assert_invalid_at(&post_json(&url, &body), name, pointer, msg);
     }
     assert_problem(
         &post(&url, "application/json", b"{\"roi\": "),
