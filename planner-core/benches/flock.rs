@@ -36,52 +36,15 @@ use planner_core::flock::{
 use planner_core::geo::{Limits, ParsedPolygon, UtmProjection, prepare_area};
 use planner_core::survey::{SurveyParams, SurveyPlan, SurveyRequest, UavSpec, plan_survey};
 
-const SIDE_M: f64 = 4000.0;
+mod area;
+
+use area::{Lcg, SIDE_M, nfzs};
 /// NFZs in the ROI: tuned for about 200 cells.
 const NFZ_COUNT: usize = 64;
 const UAV_COUNT: usize = 64;
 /// Where the ROI's south-west corner is (lon, lat).
 const ORIGIN: Coord<f64> = Coord { x: 8.55, y: 47.35 };
 const POLICIES: [Policy; 3] = [Policy::Balanced, Policy::Competition, Policy::MinReach];
-
-/// Deterministic pseudo-random numbers (no RNG dependency for a bench).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-/// `n` disjoint octagonal NFZs, one per cell of a jittered grid (as in
-/// `benches/survey.rs`), in local metres.
-fn nfzs(n: usize) -> Vec<Polygon<f64>> {
-    let mut rng = Lcg(42);
-    let per_row = (n as f64).sqrt().ceil() as usize;
-    let pitch = SIDE_M / per_row as f64;
-    (0..n)
-        .map(|i| {
-            let (r, c) = (i / per_row, i % per_row);
-            let radius = pitch * (0.15 + 0.15 * rng.next());
-            let cx = (c as f64 + 0.5) * pitch + (rng.next() - 0.5) * (pitch - 2.0 * radius) * 0.8;
-            let cy = (r as f64 + 0.5) * pitch + (rng.next() - 0.5) * (pitch - 2.0 * radius) * 0.8;
-            let rot = rng.next();
-            let ring: Vec<Coord<f64>> = (0..8)
-                .map(|k| {
-                    let t = (k as f64 + rot) * std::f64::consts::TAU / 8.0;
-                    Coord {
-                        x: cx + radius * t.cos(),
-                        y: cy + radius * t.sin(),
-                    }
-                })
-                .collect();
-            Polygon::new(ring.into(), vec![])
-        })
-        .collect()
-}
 
 /// The survey request: ROI and NFZs in lon/lat, 64 UAVs spread along the
 /// ROI's south edge, 30 m outside it.
