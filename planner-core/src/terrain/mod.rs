@@ -8,7 +8,7 @@
 
 mod asc;
 mod crs;
-mod dilate;
+pub(crate) mod dilate;
 mod follow;
 mod geotiff;
 mod hgt;

@@ -1,0 +1,328 @@
+//! Surface normals by PCA (thesis §3.3, SPEC §4.2 step 2): for each cell,
+//! the eigenvector of the smallest eigenvalue of the covariance of the
+//! cells within a radius; Zcomp = |n_z| = cos(slope). The smallest
+//! eigenvalue is the variance of the cells' distances from their fitted
+//! plane, so its square root is the roughness (seed 000).
+//!
+//! Coordinates are taken relative to the centre cell (its x, y and
+//! height), never as raw UTM values or heights, which would cost the
+//! covariance most of its digits. The eigenpair comes from the closed
+//! form for symmetric 3 × 3 matrices; where the two smallest eigenvalues
+//! are too close for it to separate the vectors, nalgebra's
+//! `SymmetricEigen` decides — and, since that returns them unsorted, the
+//! smallest is picked explicitly.
+
+use nalgebra::{Matrix3, SymmetricEigen};
+use rayon::prelude::*;
+
+use super::CostmapError;
+use super::pipeline::Ticker;
+
+/// A cell's neighbourhood within `radius_m`, cells `sx`×`sy` metres:
+/// (column offset, row offset, x metres, y metres), the centre excluded.
+pub fn neighbourhood(radius_m: f64, sx: f64, sy: f64) -> Vec<(isize, isize, f64, f64)> {
+    let rx = (radius_m / sx).floor() as isize;
+    let ry = (radius_m / sy).floor() as isize;
+    let mut out = Vec::new();
+    for dr in -ry..=ry {
+        for dc in -rx..=rx {
+            let (x, y) = (dc as f64 * sx, -(dr as f64) * sy);
+            if (dc, dr) != (0, 0) && x * x + y * y <= radius_m * radius_m * (1.0 + 1e-12) {
+                out.push((dc, dr, x, y));
+            }
+        }
+    }
+    out
+}
+
+/// Zcomp (and roughness, metres, when asked) of every cell of the
+/// `width`×`height` heights `z` (NaN = unknown). Cells with no valid
+/// neighbour are NaN. With fewer than 3 valid neighbours, or neighbours
+/// all on one line, no plane is defined: Zcomp is then the cosine of the
+/// steepest slope from the centre to a neighbour (a conservative bound)
+/// and the roughness 0.
+pub fn normals(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    row_size_m: &[[f64; 2]],
+    radius_m: f64,
+    want_roughness: bool,
+    ticker: &Ticker,
+) -> Result<(Vec<f32>, Option<Vec<f32>>), CostmapError> {
+    let mut zcomp = vec![f32::NAN; width * height];
+    let mut rough = want_roughness.then(|| vec![f32::NAN; width * height]);
+    let row_job = |r: usize, zc_row: &mut [f32], rough_row: Option<&mut [f32]>| {
+        if !ticker.tick() {
+            return;
+        }
+        let [sx, sy] = row_size_m[r];
+        let hood = neighbourhood(radius_m, sx, sy);
+        let mut rough_row = rough_row;
+        for c in 0..width {
+            let zc = z[r * width + c];
+            if zc.is_nan() {
+                continue;
+            }
+            if let Some((n, rms)) = cell_normal(z, width, height, r, c, zc, &hood) {
+                zc_row[c] = n as f32;
+                if let Some(rr) = rough_row.as_deref_mut() {
+                    rr[c] = rms as f32;
+                }
+            }
+        }
+    };
+    match rough.as_mut() {
+        Some(rough) => zcomp
+            .par_chunks_mut(width)
+            .zip(rough.par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(r, (a, b))| row_job(r, a, Some(b))),
+        None => zcomp
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(r, a)| row_job(r, a, None)),
+    }
+    if ticker.cancelled() {
+        return Err(CostmapError::Cancelled);
+    }
+    Ok((zcomp, rough))
+}
+
+/// (Zcomp, roughness) of cell (r, c) with height `zc`.
+fn cell_normal(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    r: usize,
+    c: usize,
+    zc: f64,
+    hood: &[(isize, isize, f64, f64)],
+) -> Option<(f64, f64)> {
+    // Sums over the centre (all zero) and its valid neighbours.
+    let (mut n, mut sx, mut sy, mut sz) = (1.0f64, 0.0, 0.0, 0.0);
+    let (mut sxx, mut syy, mut szz, mut sxy, mut sxz, mut syz) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut steepest: f64 = 0.0;
+    let mut neighbours = 0usize;
+    for &(dc, dr, x, y) in hood {
+        let (rr, cc) = (r as isize + dr, c as isize + dc);
+        if rr < 0 || cc < 0 || rr >= height as isize || cc >= width as isize {
+            continue;
+        }
+        let v = z[rr as usize * width + cc as usize];
+        if v.is_nan() {
+            continue;
+        }
+        let h = v - zc;
+        neighbours += 1;
+        n += 1.0;
+        sx += x;
+        sy += y;
+        sz += h;
+        sxx += x * x;
+        syy += y * y;
+        szz += h * h;
+        sxy += x * y;
+        sxz += x * h;
+        syz += y * h;
+        steepest = steepest.max(h.abs() / x.hypot(y));
+    }
+    if neighbours == 0 {
+        return None;
+    }
+    let (mx, my, mz) = (sx / n, sy / n, sz / n);
+    let cxx = sxx / n - mx * mx;
+    let cyy = syy / n - my * my;
+    let cxy = sxy / n - mx * my;
+    let fallback = Some((1.0 / steepest.hypot(1.0), 0.0));
+    // A plane needs 3 neighbours not on one line (xy covariance of full rank).
+    if neighbours < 3 || cxx * cyy - cxy * cxy <= 1e-9 * (cxx + cyy) * (cxx + cyy) {
+        return fallback;
+    }
+    let cov = [
+        [cxx, cxy, sxz / n - mx * mz],
+        [cxy, cyy, syz / n - my * mz],
+        [sxz / n - mx * mz, syz / n - my * mz, szz / n - mz * mz],
+    ];
+    let (lambda, normal) = smallest_eigenpair(&cov);
+    Some((normal[2].abs().min(1.0), lambda.max(0.0).sqrt()))
+}
+
+/// The smallest eigenvalue of the symmetric matrix `a` and a unit
+/// eigenvector of it.
+pub fn smallest_eigenpair(a: &[[f64; 3]; 3]) -> (f64, [f64; 3]) {
+    let p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+    let p2 = (a[0][0] - q).powi(2) + (a[1][1] - q).powi(2) + (a[2][2] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if p > 0.0 && p.is_finite() {
+        // Closed form (Smith 1961): eigenvalues q + 2p·cos(φ + 2πk/3).
+        let b = |i: usize, j: usize| (a[i][j] - if i == j { q } else { 0.0 }) / p;
+        let det = b(0, 0) * (b(1, 1) * b(2, 2) - b(1, 2) * b(2, 1))
+            - b(0, 1) * (b(1, 0) * b(2, 2) - b(1, 2) * b(2, 0))
+            + b(0, 2) * (b(1, 0) * b(2, 1) - b(1, 1) * b(2, 0));
+        let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+        let lambda = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+        // The eigenvector is orthogonal to the rows of A − λI: the largest
+        // cross product of two rows.
+        let row = |i: usize| {
+            let mut v = a[i];
+            v[i] -= lambda;
+            v
+        };
+        let (r0, r1, r2) = (row(0), row(1), row(2));
+        let mut best = [0.0; 3];
+        let mut best_norm = 0.0;
+        for v in [cross(r0, r1), cross(r0, r2), cross(r1, r2)] {
+            let norm = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if norm > best_norm {
+                best = v;
+                best_norm = norm;
+            }
+        }
+        // Well separated from the middle eigenvalue: the cross product is
+        // of the order of p²; near a double eigenvalue it vanishes.
+        if best_norm > 1e-12 * p2 * p2 {
+            let s = best_norm.sqrt();
+            return (lambda, [best[0] / s, best[1] / s, best[2] / s]);
+        }
+    }
+    let m = Matrix3::from_fn(|i, j| a[i][j]);
+    let eig = SymmetricEigen::new(m);
+    let (k, &lambda) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|x, y| x.1.total_cmp(y.1))
+        .expect("three eigenvalues");
+    let v = eig.eigenvectors.column(k);
+    (lambda, [v[0], v[1], v[2]])
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::pipeline::Ticker;
+    use crate::costmap::{Progress, Stage};
+
+    fn quiet() -> impl Progress {
+        |_: Stage, _: f64| true
+    }
+
+    /// z = x·tan(slope) along `azimuth` on a `w`×`h` grid of `cell` m.
+    fn tilted(w: usize, h: usize, cell: f64, slope_deg: f64, azimuth_deg: f64) -> Vec<f64> {
+        let g = slope_deg.to_radians().tan();
+        let (ux, uy) = (
+            azimuth_deg.to_radians().sin(),
+            azimuth_deg.to_radians().cos(),
+        );
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64 * cell, -((i / w) as f64) * cell);
+                1500.0 + g * (x * ux + y * uy)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tilted_planes_give_cos_slope_exactly() {
+        let p = quiet();
+        for &(slope, az, cell, radius) in &[
+            (0.0, 0.0, 1.0, 1.5),
+            (10.0, 30.0, 0.1, 0.15),
+            (24.99, 200.0, 5.0, 7.5),
+            (25.01, 95.0, 2.0, 5.0),
+            (45.0, 0.0, 1.0, 3.0),
+            (70.0, 310.0, 0.5, 0.75),
+        ] {
+            let (w, h) = (9, 8);
+            let z = tilted(w, h, cell, slope, az);
+            let t = Ticker::new(&p, Stage::Normals, h);
+            let (zc, rough) = normals(&z, w, h, &vec![[cell, cell]; h], radius, true, &t).unwrap();
+            let want = f64::to_radians(slope).cos();
+            for (i, (&got, &rms)) in zc.iter().zip(rough.as_ref().unwrap()).enumerate() {
+                assert!(
+                    (f64::from(got) - want).abs() < 1e-6,
+                    "slope {slope} cell {i}: {got} vs {want}"
+                );
+                assert!(rms < 1e-4, "{rms}");
+            }
+        }
+    }
+
+    #[test]
+    fn eigenpairs_match_nalgebra_on_random_matrices() {
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for _ in 0..2000 {
+            let m = [
+                [rnd(), rnd(), rnd()],
+                [0.0, rnd(), rnd()],
+                [0.0, 0.0, rnd()],
+            ];
+            let a = [
+                [m[0][0], m[0][1], m[0][2]],
+                [m[0][1], m[1][1], m[1][2]],
+                [m[0][2], m[1][2], m[2][2]],
+            ];
+            let (lambda, v) = smallest_eigenpair(&a);
+            let eig = SymmetricEigen::new(Matrix3::from_fn(|i, j| a[i][j]));
+            let want = eig.eigenvalues.min();
+            assert!((lambda - want).abs() < 1e-9, "{lambda} vs {want}");
+            // A·v = λ·v.
+            for (i, row) in a.iter().enumerate() {
+                let av = row[0] * v[0] + row[1] * v[1] + row[2] * v[2];
+                assert!((av - lambda * v[i]).abs() < 1e-6, "{a:?}");
+            }
+        }
+        // Repeated eigenvalues go to nalgebra and still give the smallest.
+        let (lambda, v) = smallest_eigenpair(&[[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+        assert_eq!(lambda, 1.0);
+        assert!(v[0].abs() < 1e-12);
+    }
+
+    #[test]
+    fn few_neighbours_fall_back_to_the_steepest_slope() {
+        let p = quiet();
+        // A 3×3 grid with only the centre, one east neighbour (rise 1 m in
+        // 1 m: 45°) and one north neighbour (flat) valid.
+        let n = f64::NAN;
+        #[rustfmt::skip]
+        let z = vec![
+            n, 5.0, n,
+            n, 5.0, 6.0,
+            n, n, n,
+        ];
+        let t = Ticker::new(&p, Stage::Normals, 3);
+        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, false, &t).unwrap();
+        assert!((f64::from(zc[4]) - 45f64.to_radians().cos()).abs() < 1e-6);
+        // A lone cell has no normal.
+        let z = vec![n, n, n, n, 1.0, n, n, n, n];
+        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, false, &t).unwrap();
+        assert!(zc[4].is_nan());
+    }
+
+    #[test]
+    fn neighbourhoods_are_disks_in_metres() {
+        assert_eq!(neighbourhood(1.5, 1.0, 1.0).len(), 8);
+        assert_eq!(neighbourhood(1.0, 1.0, 1.0).len(), 4);
+        assert_eq!(neighbourhood(2.0, 1.0, 1.0).len(), 12);
+        // Rectangular cells: 2 m wide, 1 m tall, radius 2 m.
+        let h = neighbourhood(2.0, 2.0, 1.0);
+        assert!(h.iter().all(|&(_, _, x, y)| x * x + y * y <= 4.0 + 1e-9));
+        assert_eq!(h.len(), 6);
+    }
+}

@@ -1,0 +1,860 @@
+//! The whole costmap pipeline (SPEC §4.2 steps 1–8), from a DEM to costs
+//! and classes, with progress and cancellation.
+
+use std::borrow::Cow;
+use std::io::{Seek, Write};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+
+use super::grid::{resample_factor, work_grid};
+use super::inflate::inflation;
+use super::landcover::landcover_costs;
+use super::normals::normals;
+use super::regions::fill_enclosed;
+use super::smooth::gaussian_smooth;
+use super::stats::costmap_stats;
+use super::steps::{depth_below_plane, step_heights};
+use super::{
+    Class, Costmap, CostmapError, CostmapOptions, Layer, MAX_RADIUS_CELLS, Progress,
+    ResolvedParams, Stage, StepMode, Vehicle,
+};
+use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
+use crate::geo::Issue;
+use crate::terrain::Dem;
+
+/// Slope costs span [1, SLOPE_COST_MAX] (thesis §3.6.3: Zcomp remapped
+/// from [cos(max_slope), 1] to [10, 1]).
+pub const SLOPE_COST_MAX: f64 = 10.0;
+
+/// Counts the rows a stage has done and reports progress now and then,
+/// from any thread; remembers a cancellation.
+pub struct Ticker<'a> {
+    progress: &'a dyn Progress,
+    stage: Stage,
+    total: usize,
+    every: usize,
+    done: AtomicUsize,
+    cancelled: AtomicBool,
+}
+
+impl<'a> Ticker<'a> {
+    /// A stage of `total` rows; reports its start.
+    pub fn new(progress: &'a dyn Progress, stage: Stage, total: usize) -> Ticker<'a> {
+        let t = Ticker {
+            progress,
+            stage,
+            total: total.max(1),
+            every: (total / 50).max(1),
+            done: AtomicUsize::new(0),
+            cancelled: AtomicBool::new(false),
+        };
+        if !progress.report(stage, stage.span().0) {
+            t.cancelled.store(true, Ordering::Relaxed);
+        }
+        t
+    }
+
+    /// One more row done; false once the run is cancelled.
+    pub fn tick(&self) -> bool {
+        if self.cancelled.load(Ordering::Relaxed) {
+            return false;
+        }
+        let n = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_multiple_of(self.every) {
+            let (start, len) = self.stage.span();
+            let done = start + len * (n.min(self.total) as f64 / self.total as f64);
+            if !self.progress.report(self.stage, done) {
+                self.cancelled.store(true, Ordering::Relaxed);
+                return false;
+            }
+        }
+        true
+    }
+
+    pub fn cancelled(&self) -> bool {
+        self.cancelled.load(Ordering::Relaxed)
+    }
+
+    /// `Err(Cancelled)` if the run was cancelled.
+    fn check(&self) -> Result<(), CostmapError> {
+        if self.cancelled() {
+            Err(CostmapError::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Everything `options` leaves open, filled in for `dem` and `vehicle`.
+fn resolve(dem: &Dem, vehicle: &Vehicle, options: &CostmapOptions) -> ResolvedParams {
+    let res = dem.resolution_m();
+    let factor = options
+        .resolution_m
+        .map_or([1, 1], |r| resample_factor(res, r));
+    let cell = [res[0] * factor[0] as f64, res[1] * factor[1] as f64];
+    let (small, large) = (cell[0].min(cell[1]), cell[0].max(cell[1]));
+    let longer = vehicle.width_m.max(vehicle.length_m);
+    ResolvedParams {
+        resolution_m: cell,
+        resample_factor: factor,
+        smoothing_sigma_m: options.smoothing_sigma_m.unwrap_or(0.5 * small),
+        pca_radius_m: options.pca_radius_m.unwrap_or(1.5 * large),
+        step_mode: options.step_mode,
+        inflation: options.inflation,
+        inflation_sigma_m: options
+            .inflation_sigma_m
+            .unwrap_or((longer / 2.0).max(large)),
+        min_region_area_m2: options
+            .min_region_area_m2
+            .unwrap_or(10.0 * vehicle.width_m * vehicle.length_m),
+    }
+}
+
+/// Checks of `options` that need the DEM (pointers under `prefix`): a
+/// working resolution finer than the DEM, neighbourhoods of too many
+/// cells, a grid too small to judge.
+pub fn check_against_dem(
+    dem: &Dem,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    prefix: &str,
+) -> Vec<Issue> {
+    let mut issues = Vec::new();
+    let res = dem.resolution_m();
+    let finest = res[0].min(res[1]);
+    if let Some(r) = options.resolution_m {
+        // Half a cell of slack: the factor is rounded.
+        if r < finest * 0.5 || !r.is_finite() {
+            issues.push(Issue::new(
+                &format!("{prefix}/resolution_m"),
+                &format!(
+                    "{r} m is finer than the DEM's {:.4} × {:.4} m cells; the working \
+                     resolution can only be coarser (cells are averaged, never invented)",
+                    res[0], res[1]
+                ),
+            ));
+            return issues;
+        }
+    }
+    let p = resolve(dem, vehicle, options);
+    let cell = p.resolution_m[0].min(p.resolution_m[1]);
+    let (w, h) = (
+        dem.width / p.resample_factor[0],
+        dem.height / p.resample_factor[1],
+    );
+    if w < 3 || h < 3 {
+        issues.push(Issue::new(
+            &format!("{prefix}/resolution_m"),
+            &format!(
+                "the working grid would be {w} × {h} cells; at least 3 × 3 are needed \
+                 (the DEM is {} × {})",
+                dem.width, dem.height
+            ),
+        ));
+    }
+    if p.pca_radius_m / cell > MAX_RADIUS_CELLS {
+        issues.push(Issue::new(
+            &format!("{prefix}/pca_radius_m"),
+            &format!(
+                "{} m spans {:.0} cells of {cell:.3} m; at most {MAX_RADIUS_CELLS} are allowed",
+                p.pca_radius_m,
+                p.pca_radius_m / cell
+            ),
+        ));
+    }
+    if p.pca_radius_m < cell {
+        issues.push(Issue::new(
+            &format!("{prefix}/pca_radius_m"),
+            &format!(
+                "{} m reaches no neighbour of the {cell:.3} m cells; a plane needs at least \
+                 the 4 nearest",
+                p.pca_radius_m
+            ),
+        ));
+    }
+    if let Some(n) = &options.negative_steps {
+        let r = negative_radius(vehicle, n.radius_m);
+        if r / cell > MAX_NEGATIVE_RADIUS_CELLS || r < cell {
+            issues.push(Issue::new(
+                &format!("{prefix}/negative_steps/radius_m"),
+                &format!(
+                    "{r} m spans {:.1} cells of {cell:.3} m; give 1 to \
+                     {MAX_NEGATIVE_RADIUS_CELLS} cells",
+                    r / cell
+                ),
+            ));
+        }
+    }
+    if p.smoothing_sigma_m / cell > MAX_RADIUS_CELLS {
+        issues.push(Issue::new(
+            &format!("{prefix}/smoothing_sigma_m"),
+            &format!("spans more than {MAX_RADIUS_CELLS} cells of {cell:.3} m"),
+        ));
+    }
+    issues
+}
+
+/// Most cells the negative-step plane's radius may span (each cell fits
+/// a plane to every cell within it).
+pub const MAX_NEGATIVE_RADIUS_CELLS: f64 = 25.0;
+
+fn negative_radius(vehicle: &Vehicle, given: Option<f64>) -> f64 {
+    given.unwrap_or(1.5 * vehicle.width_m.max(vehicle.length_m))
+}
+
+/// Builds the costmap of `dem` for `vehicle`. `landcover`: the class
+/// raster when `options.landcover` is set.
+pub fn build_costmap(
+    dem: &Dem,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<&Dem>,
+    progress: &dyn Progress,
+) -> Result<Costmap, CostmapError> {
+    run(Cow::Borrowed(dem), vehicle, options, landcover, progress)
+}
+
+/// [`build_costmap`] taking the DEM by value, so its heights become the
+/// working grid without a copy (for the largest DEMs).
+pub fn build_costmap_owned(
+    dem: Dem,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<&Dem>,
+    progress: &dyn Progress,
+) -> Result<Costmap, CostmapError> {
+    run(Cow::Owned(dem), vehicle, options, landcover, progress)
+}
+
+fn run(
+    dem: Cow<'_, Dem>,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<&Dem>,
+    progress: &dyn Progress,
+) -> Result<Costmap, CostmapError> {
+    let mut issues = options.validate("/options");
+    if issues.is_empty() {
+        issues = check_against_dem(&dem, vehicle, options, "/options");
+    }
+    if options.landcover.is_some() && landcover.is_none() {
+        issues.push(Issue::new(
+            "/options/landcover/source",
+            "no land-cover raster was given",
+        ));
+    }
+    if !issues.is_empty() {
+        return Err(CostmapError::Invalid(issues));
+    }
+    let params = resolve(&dem, vehicle, options);
+    let crs = dem.crs.clone();
+    let mut warnings = Vec::new();
+
+    // 1. Working grid.
+    Ticker::new(progress, Stage::Resample, 1).check()?;
+    let mut grid = work_grid(dem, params.resample_factor);
+    let (w, h) = (grid.width, grid.height);
+    let [sx, sy] = grid.centre_size_m();
+    coarse_warnings(&params, vehicle, [sx, sy], &mut warnings);
+
+    // 4. Steps, on the heights before smoothing (smoothing would shave
+    // them).
+    let ticker = Ticker::new(progress, Stage::Steps, h);
+    let step = step_heights(&grid.z, w, h, params.step_mode, &ticker)?;
+    let negative = match &options.negative_steps {
+        Some(n) => {
+            let ticker = Ticker::new(progress, Stage::Layers, h);
+            let r = negative_radius(vehicle, n.radius_m);
+            Some((
+                depth_below_plane(&grid.z, w, h, &grid.row_size_m, r, &ticker)?,
+                n.max_depth_m.unwrap_or(vehicle.max_step_m),
+            ))
+        }
+        None => None,
+    };
+    let unknown_height: Vec<bool> = grid.z.par_iter().map(|v| v.is_nan()).collect();
+
+    // 2. Smoothing and PCA normals.
+    let ticker = Ticker::new(progress, Stage::Smooth, 1);
+    if params.smoothing_sigma_m > 0.0 {
+        gaussian_smooth(
+            &mut grid.z,
+            w,
+            h,
+            params.smoothing_sigma_m / sx,
+            params.smoothing_sigma_m / sy,
+        );
+    }
+    ticker.check()?;
+    let ticker = Ticker::new(progress, Stage::Normals, h);
+    let (zcomp, roughness) = normals(
+        &grid.z,
+        w,
+        h,
+        &grid.row_size_m,
+        params.pca_radius_m,
+        options.roughness.is_some(),
+        &ticker,
+    )?;
+    let transform = grid.transform;
+    drop(grid);
+
+    let landcover_cost = match (&options.landcover, landcover) {
+        (Some(table), Some(raster)) => {
+            Ticker::new(progress, Stage::Layers, 1).check()?;
+            Some(landcover_costs(raster, table, w, h, &transform, crs.epsg)?)
+        }
+        _ => None,
+    };
+
+    // 3–5. Classes.
+    let cos_max = vehicle.max_slope_deg.to_radians().cos();
+    let mut class = vec![Class::Unknown as u8; w * h];
+    class.par_iter_mut().enumerate().for_each(|(i, k)| {
+        let (s, zc) = (step[i], zcomp[i]);
+        if unknown_height[i] || s.is_nan() || zc.is_nan() {
+            return;
+        }
+        let ditch = negative
+            .as_ref()
+            .is_some_and(|(d, max)| f64::from(d[i]) > *max);
+        let rough = match (&roughness, &options.roughness) {
+            (Some(r), Some(o)) => f64::from(r[i]) > o.max_m,
+            _ => false,
+        };
+        let lethal = landcover_cost
+            .as_ref()
+            .is_some_and(|l| l[i] == f32::INFINITY);
+        *k = if f64::from(s) > vehicle.max_step_m || ditch {
+            Class::Step
+        } else if f64::from(zc) <= cos_max {
+            Class::Slope
+        } else if rough || lethal {
+            Class::Other
+        } else {
+            Class::Traversable
+        } as u8;
+    });
+    let ticker = Ticker::new(progress, Stage::Regions, 1);
+    fill_enclosed(&mut class, w, h, params.min_region_area_m2 / (sx * sy));
+    ticker.check()?;
+
+    // 6. Inflation: from obstacles and from cells without a height
+    // (unknown ground is no safer than an obstacle), not from the border
+    // ring, which is unknown only because it cannot be judged.
+    let ticker = Ticker::new(progress, Stage::Inflate, 1);
+    let obstacle: Vec<bool> = class
+        .par_iter()
+        .zip(&unknown_height)
+        .map(|(&k, &hole)| hole || Class::from_code(k).is_some_and(Class::is_obstacle))
+        .collect();
+    drop(unknown_height);
+    let inflated = inflation(
+        &obstacle,
+        w,
+        h,
+        [sx, sy],
+        params.inflation_sigma_m,
+        params.inflation,
+    );
+    drop(obstacle);
+    ticker.check()?;
+
+    // 7–8. Costs.
+    let ticker = Ticker::new(progress, Stage::Cost, 1);
+    let slope_span = 1.0 - cos_max;
+    let rough_opts = options.roughness.as_ref();
+    let mut cost = vec![f32::NAN; w * h];
+    cost.par_iter_mut().enumerate().for_each(|(i, c)| {
+        if class[i] != Class::Traversable as u8 {
+            return;
+        }
+        let zc = f64::from(zcomp[i]);
+        let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
+        let mut v = vehicle.w_infl * f64::from(inflated[i]) + vehicle.w_slope * slope_cost;
+        if let (Some(r), Some(o)) = (&roughness, rough_opts) {
+            v += o.weight * (f64::from(r[i]) / o.max_m).min(1.0);
+        }
+        if let Some(l) = &landcover_cost {
+            let lc = l[i];
+            if lc.is_finite() {
+                v += f64::from(lc);
+            }
+        }
+        *c = v as f32;
+    });
+    ticker.check()?;
+
+    let mut cost_hi = vehicle.w_infl + vehicle.w_slope * SLOPE_COST_MAX;
+    if let Some(o) = rough_opts {
+        cost_hi += o.weight;
+    }
+    if let Some(l) = &options.landcover {
+        let most = l.classes.iter().filter(|c| !c.lethal).map(|c| c.cost).fold(
+            if l.unlisted_lethal {
+                0.0
+            } else {
+                l.unlisted_cost
+            },
+            f64::max,
+        );
+        cost_hi += most;
+    }
+    let stats = costmap_stats(w, h, &cost, &class, sx * sy, [vehicle.w_slope, cost_hi]);
+    if stats.class_fractions.traversable == 0.0 {
+        warnings.push(
+            "no cell is traversable for this vehicle: every cell is an obstacle or unknown"
+                .to_string(),
+        );
+    }
+
+    // Per-layer rasters asked for, in Layer::ALL order.
+    let wanted = |l: Layer| options.layers.contains(&l);
+    let mut layers = Vec::new();
+    for layer in Layer::ALL {
+        if !wanted(layer) {
+            continue;
+        }
+        let data = match layer {
+            Layer::Slope => zcomp
+                .par_iter()
+                .map(|&z| f64::from(z).min(1.0).acos().to_degrees() as f32)
+                .collect(),
+            Layer::Zcomp => zcomp.clone(),
+            Layer::Step => step.clone(),
+            Layer::Inflation => inflated.clone(),
+            Layer::Roughness => roughness.clone().unwrap_or_default(),
+            Layer::NegativeStep => negative.as_ref().map(|n| n.0.clone()).unwrap_or_default(),
+            Layer::Landcover => landcover_cost
+                .as_ref()
+                .map(|l| {
+                    l.iter()
+                        .map(|&v| if v.is_finite() { v } else { f32::NAN })
+                        .collect()
+                })
+                .unwrap_or_default(),
+        };
+        layers.push((layer, data));
+    }
+    Ok(Costmap {
+        width: w,
+        height: h,
+        transform,
+        crs,
+        vehicle: vehicle.clone(),
+        params,
+        cost,
+        class,
+        layers,
+        stats,
+        warnings,
+    })
+}
+
+/// Warnings for a DEM too coarse to judge the vehicle on.
+fn coarse_warnings(
+    p: &ResolvedParams,
+    vehicle: &Vehicle,
+    [sx, sy]: [f64; 2],
+    out: &mut Vec<String>,
+) {
+    let diagonal = sx.hypot(sy);
+    let tan_max = vehicle.max_slope_deg.to_radians().tan();
+    if p.step_mode == StepMode::Neighbours && diagonal * tan_max > vehicle.max_step_m {
+        let limit = (vehicle.max_step_m / diagonal).atan().to_degrees();
+        out.push(format!(
+            "with step_mode neighbours on {sx:.3} × {sy:.3} m cells, every slope steeper than \
+             {limit:.1}° (of the {}° allowed) is marked as a step: diagonal neighbours differ \
+             by more than max_step {} m. step_mode residual judges steps against the local \
+             slope instead",
+            vehicle.max_slope_deg, vehicle.max_step_m
+        ));
+    }
+    let size = vehicle.width_m.min(vehicle.length_m);
+    if sx.max(sy) > size {
+        out.push(format!(
+            "the cells ({sx:.3} × {sy:.3} m) are larger than the vehicle ({} × {} m): \
+             obstacles smaller than a cell are not seen, steps are heights {:.3} m apart \
+             and slopes are averaged over {:.3} m; resample a finer DEM for a reliable map",
+            vehicle.width_m,
+            vehicle.length_m,
+            sx.min(sy),
+            2.0 * p.pca_radius_m
+        ));
+    }
+}
+
+impl Costmap {
+    /// The costmap as a Float32 GeoTIFF in the DEM's CRS: band 1 the cost
+    /// (NaN = nodata on obstacles and unknown cells), band 2 the class.
+    pub fn write_geotiff<W: Write + Seek>(&self, out: W) -> std::io::Result<()> {
+        write_geotiff_f32(
+            out,
+            self.width,
+            self.height,
+            &self.transform,
+            &self.crs,
+            &[
+                Band {
+                    description: "cost",
+                    data: BandData::F32(&self.cost),
+                },
+                Band {
+                    description: "class",
+                    data: BandData::U8(&self.class),
+                },
+            ],
+            Some(f64::NAN),
+        )
+    }
+
+    /// One kept layer as a single-band Float32 GeoTIFF; `Ok(false)` (and
+    /// nothing written) when that layer was not kept.
+    pub fn write_layer_geotiff<W: Write + Seek>(
+        &self,
+        layer: Layer,
+        out: W,
+    ) -> std::io::Result<bool> {
+        let Some((_, data)) = self.layers.iter().find(|(l, _)| *l == layer) else {
+            return Ok(false);
+        };
+        write_geotiff_f32(
+            out,
+            self.width,
+            self.height,
+            &self.transform,
+            &self.crs,
+            &[Band {
+                description: layer.name(),
+                data: BandData::F32(data),
+            }],
+            Some(f64::NAN),
+        )?;
+        Ok(true)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::{InflationMode, VehiclePreset};
+    use crate::terrain::test_support::{dem, north_up};
+
+    fn quiet() -> impl Progress {
+        |_: Stage, _: f64| true
+    }
+
+    fn ugo() -> Vehicle {
+        VehiclePreset::UGo.vehicle()
+    }
+
+    /// A `w`×`h` DEM of `cell` m cells in UTM with heights `f(x, y)`
+    /// (metres east and north of the top-left cell centre).
+    fn surface(w: usize, h: usize, cell: f64, f: impl Fn(f64, f64) -> f64) -> Dem {
+        let values = (0..w * h)
+            .map(|i| f((i % w) as f64 * cell, -((i / w) as f64) * cell))
+            .collect();
+        dem(
+            w,
+            h,
+            values,
+            north_up(400_000.0, 4_500_000.0, cell, cell),
+            false,
+        )
+    }
+
+    fn build(d: &Dem, v: &Vehicle, o: &CostmapOptions) -> Costmap {
+        build_costmap(d, v, o, None, &quiet()).unwrap()
+    }
+
+    fn class_at(m: &Costmap, c: usize, r: usize) -> Class {
+        Class::from_code(m.class[r * m.width + c]).unwrap()
+    }
+
+    /// Cells away from the border ring and the smoothing's reach.
+    fn interior(m: &Costmap, margin: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+        (margin..m.height - margin)
+            .flat_map(move |r| (margin..m.width - margin).map(move |c| (c, r)))
+    }
+
+    #[test]
+    fn tilted_planes_on_both_sides_of_the_slope_limit() {
+        let options = CostmapOptions {
+            layers: vec![Layer::Zcomp, Layer::Slope],
+            ..Default::default()
+        };
+        for (slope, want) in [
+            (24.9, Class::Traversable),
+            (25.1, Class::Slope),
+            (5.0, Class::Traversable),
+        ] {
+            let g = f64::to_radians(slope).tan();
+            let d = surface(16, 14, 0.5, |x, y| 300.0 + g * (0.6 * x + 0.8 * y));
+            let m = build(&d, &ugo(), &options);
+            let zc = &m.layers.iter().find(|l| l.0 == Layer::Zcomp).unwrap().1;
+            for (c, r) in interior(&m, 3) {
+                let i = r * m.width + c;
+                assert!((f64::from(zc[i]) - f64::to_radians(slope).cos()).abs() < 1e-6);
+                assert_eq!(class_at(&m, c, r), want, "{slope}° at {c},{r}");
+            }
+            // Border ring unknown.
+            assert_eq!(class_at(&m, 0, 5), Class::Unknown);
+            if want == Class::Traversable {
+                // Slope cost: Zcomp remapped from [cos 25°, 1] to [10, 1];
+                // no obstacle anywhere, so no inflation.
+                let zc = f64::to_radians(slope).cos();
+                let cos_max = f64::to_radians(25.0).cos();
+                let expect = 10.0 - 9.0 * (zc - cos_max) / (1.0 - cos_max);
+                let got = f64::from(m.cost[7 * m.width + 8]);
+                assert!((got - expect).abs() < 1e-4, "{got} vs {expect}");
+            } else {
+                assert!(m.cost[7 * m.width + 8].is_nan());
+            }
+        }
+    }
+
+    #[test]
+    fn a_step_is_an_obstacle_only_above_max_step() {
+        for (rise, is_step) in [(0.14, false), (0.16, true)] {
+            let d = surface(20, 12, 0.1, |x, y| {
+                50.0 + 0.05 * y + if x > 0.95 { rise } else { 0.0 }
+            });
+            let m = build(&d, &ugo(), &CostmapOptions::default());
+            for r in 2..10 {
+                let classes: Vec<Class> = (1..19).map(|c| class_at(&m, c, r)).collect();
+                let steps = classes.iter().filter(|&&k| k == Class::Step).count();
+                assert_eq!(
+                    steps,
+                    if is_step { 2 } else { 0 },
+                    "rise {rise}: {classes:?}"
+                );
+                if is_step {
+                    assert_eq!(class_at(&m, 9, r), Class::Step);
+                    assert_eq!(class_at(&m, 10, r), Class::Step);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_pit_is_a_step_obstacle_and_inflates_its_surroundings() {
+        let d = surface(21, 21, 0.1, |x, y| {
+            if (x - 1.0).abs() < 0.01 && (y + 1.0).abs() < 0.01 {
+                9.5
+            } else {
+                10.0
+            }
+        });
+        let m = build(&d, &ugo(), &CostmapOptions::default());
+        assert_eq!(class_at(&m, 10, 10), Class::Step);
+        assert_eq!(class_at(&m, 9, 10), Class::Step);
+        assert_eq!(class_at(&m, 12, 10), Class::Traversable);
+        // Inflation falls with the distance: nearer is dearer.
+        let c = |col: usize| m.cost[10 * m.width + col];
+        assert!(
+            c(12) > c(14) && c(14) > c(17),
+            "{} {} {}",
+            c(12),
+            c(14),
+            c(17)
+        );
+    }
+
+    #[test]
+    fn a_one_cell_wall_costs_like_a_thick_one_in_distance_mode_only() {
+        let thin = surface(40, 15, 0.1, |x, _| {
+            if (x - 2.0).abs() < 0.01 { 11.0 } else { 10.0 }
+        });
+        // Thick: five cells of alternating height, so every one is a step
+        // (a flat-topped wall would be traversable on top).
+        let thick = surface(40, 15, 0.1, |x, _| {
+            let col = (x / 0.1).round() as usize;
+            if (16..=20).contains(&col) {
+                11.0 + 0.5 * (col % 2) as f64
+            } else {
+                10.0
+            }
+        });
+        for mode in [InflationMode::Distance, InflationMode::Blur] {
+            let o = CostmapOptions {
+                inflation: mode,
+                smoothing_sigma_m: Some(0.0),
+                ..Default::default()
+            };
+            let (a, b) = (build(&thin, &ugo(), &o), build(&thick, &ugo(), &o));
+            // Wall (and step cells beside it) end at column 21; compare
+            // traversable cells beyond.
+            for col in 23..35 {
+                let (x, y) = (a.cost[7 * 40 + col], b.cost[7 * 40 + col]);
+                if mode == InflationMode::Distance {
+                    assert!((x - y).abs() < 1e-5, "{mode:?} col {col}: {x} vs {y}");
+                } else if col < 28 {
+                    assert!(x < y - 0.1, "{mode:?} col {col}: {x} vs {y}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn enclosed_plateaus_below_the_minimum_area_become_obstacles() {
+        // A plateau 1 m high whose rim cells are steps; its inner 4 × 4 or
+        // 12 × 12 cells of 0.5 m (4 m², 36 m²) are enclosed.
+        for (side, min_area, want) in [
+            (6, 10.0, Class::Enclosed),
+            (14, 10.0, Class::Traversable),
+            (6, 3.0, Class::Traversable),
+        ] {
+            let d = surface(30, 30, 0.5, |x, y| {
+                let (c, r) = ((x / 0.5).round() as usize, (-y / 0.5).round() as usize);
+                if (8..8 + side).contains(&c) && (8..8 + side).contains(&r) {
+                    21.0
+                } else {
+                    20.0
+                }
+            });
+            let o = CostmapOptions {
+                min_region_area_m2: Some(min_area),
+                ..Default::default()
+            };
+            let m = build(&d, &ugo(), &o);
+            let mid = 8 + side / 2;
+            assert_eq!(class_at(&m, mid, mid), want, "side {side}, min {min_area}");
+            assert_eq!(class_at(&m, 8, mid), Class::Step);
+            assert_eq!(class_at(&m, 3, 3), Class::Traversable);
+        }
+    }
+
+    #[test]
+    fn a_20_degree_plane_has_no_steps_at_any_resolution_in_residual_mode() {
+        for cell in [0.1, 1.0, 5.0] {
+            let g = f64::to_radians(20.0).tan();
+            let d = surface(15, 15, cell, |x, y| 100.0 + g * (0.8 * x - 0.6 * y));
+            let m = build(&d, &ugo(), &CostmapOptions::default());
+            assert_eq!(m.stats.class_fractions.step, 0.0, "{cell} m");
+            assert!(m.stats.class_fractions.traversable > 0.7, "{cell} m");
+            // The literal test turns the whole plane into steps beyond
+            // 0.15 / (cell·√2·tan 20°) … i.e. from ~0.3 m cells, and warns.
+            let literal = CostmapOptions {
+                step_mode: StepMode::Neighbours,
+                ..Default::default()
+            };
+            let n = build(&d, &ugo(), &literal);
+            if cell >= 1.0 {
+                assert!(n.stats.class_fractions.step > 0.7);
+                assert!(
+                    n.warnings
+                        .iter()
+                        .any(|w| w.contains("step_mode neighbours"))
+                );
+            } else {
+                assert_eq!(n.stats.class_fractions.step, 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn geographic_dems_are_judged_in_metres() {
+        // A plane rising 20 m per 92.6 m northwards (≈ 12.2°) on 3″ cells
+        // at 45° N, where a degree of latitude is ≈ 111 132 m.
+        let s = 3.0 / 3600.0;
+        let (w, h) = (12, 12);
+        let values = (0..w * h).map(|i| 1000.0 - 20.0 * (i / w) as f64).collect();
+        let d = dem(w, h, values, north_up(6.0, 45.005, s, s), true);
+        let o = CostmapOptions {
+            layers: vec![Layer::Slope],
+            smoothing_sigma_m: Some(0.0),
+            ..Default::default()
+        };
+        let m = build(&d, &VehiclePreset::LargeSkidSteer.vehicle(), &o);
+        let slope = &m.layers[0].1;
+        let dy = m.params.resolution_m[1];
+        let want = (20.0 / dy).atan().to_degrees();
+        assert!(
+            (f64::from(slope[6 * w + 6]) - want).abs() < 0.05,
+            "{} vs {want}",
+            slope[6 * w + 6]
+        );
+        assert!((want - 12.2).abs() < 0.1);
+    }
+
+    #[test]
+    fn resampling_averages_blocks_and_keeps_the_georeferencing() {
+        let d = surface(40, 30, 0.1, |x, _| 5.0 + 0.1 * x);
+        let o = CostmapOptions {
+            resolution_m: Some(0.5),
+            ..Default::default()
+        };
+        let m = build(&d, &ugo(), &o);
+        assert_eq!((m.width, m.height), (8, 6));
+        assert_eq!(m.params.resample_factor, [5, 5]);
+        assert!((m.transform.pixel_width - 0.5).abs() < 1e-12);
+        assert_eq!(m.transform.origin_x, d.transform.origin_x);
+        // Finer than the DEM is refused, naming the option.
+        let bad = CostmapOptions {
+            resolution_m: Some(0.01),
+            ..Default::default()
+        };
+        match build_costmap(&d, &ugo(), &bad, None, &quiet()) {
+            Err(CostmapError::Invalid(issues)) => {
+                assert_eq!(issues[0].pointer, "/options/resolution_m");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn progress_rises_and_cancelling_stops_the_run() {
+        let d = surface(30, 30, 0.2, |x, y| x * 0.1 + y * 0.05);
+        let last = std::sync::Mutex::new(Vec::new());
+        let record = |stage: Stage, done: f64| {
+            last.lock().unwrap().push((stage, done));
+            true
+        };
+        build_costmap(&d, &ugo(), &CostmapOptions::default(), None, &record).unwrap();
+        let seen = last.into_inner().unwrap();
+        assert!(seen.iter().all(|&(_, f)| (0.0..=1.0).contains(&f)));
+        assert!(seen.iter().any(|&(s, _)| s == Stage::Cost));
+        let stop = |stage: Stage, _: f64| stage != Stage::Normals;
+        assert!(matches!(
+            build_costmap(&d, &ugo(), &CostmapOptions::default(), None, &stop),
+            Err(CostmapError::Cancelled)
+        ));
+    }
+
+    #[test]
+    fn writes_a_two_band_geotiff_our_reader_reads_back() {
+        let d = surface(12, 10, 1.0, |x, _| if x > 5.5 { 3.0 } else { 1.0 });
+        let m = build(
+            &d,
+            &ugo(),
+            &CostmapOptions {
+                layers: vec![Layer::Step],
+                ..Default::default()
+            },
+        );
+        let mut buf = std::io::Cursor::new(Vec::new());
+        m.write_geotiff(&mut buf).unwrap();
+        assert!(buf.get_ref().len() > 2 * 12 * 10 * 4);
+        // terraplan's DEM reader takes single-band files: read a layer.
+        let mut layer = std::io::Cursor::new(Vec::new());
+        assert!(m.write_layer_geotiff(Layer::Step, &mut layer).unwrap());
+        let back =
+            crate::terrain::read_dem(layer.get_ref(), Some("s.tif"), None, &Default::default())
+                .unwrap();
+        assert_eq!((back.width, back.height), (12, 10));
+        assert_eq!(back.transform, d.transform);
+        assert_eq!(back.crs.epsg, 32633);
+        let step = &m.layers[0].1;
+        for (a, b) in back.values.iter().zip(step) {
+            assert!(a.is_nan() == b.is_nan() && (a.is_nan() || (*a - f64::from(*b)).abs() < 1e-6));
+        }
+        assert!(
+            !m.write_layer_geotiff(Layer::Slope, std::io::Cursor::new(Vec::new()))
+                .unwrap()
+        );
+        let png = super::super::preview_png(&m, 8);
+        assert_eq!(&png[1..4], b"PNG");
+        assert!(super::super::legend_svg(&m).contains("step"));
+    }
+}

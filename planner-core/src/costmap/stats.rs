@@ -1,0 +1,146 @@
+//! Statistics of a finished costmap: how much of it is of each class, and
+//! how the costs of the traversable cells are spread.
+
+use serde::{Deserialize, Serialize};
+
+use super::Class;
+
+/// Bins of the cost histogram.
+pub const HISTOGRAM_BINS: usize = 20;
+
+/// Fractions of all cells, [0, 1], summing to 1.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ClassFractions {
+    pub unknown: f64,
+    pub traversable: f64,
+    pub slope: f64,
+    pub step: f64,
+    pub enclosed: f64,
+    pub other: f64,
+}
+
+/// Counts of traversable cells by cost, in equal bins from `min` to `max`.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CostHistogram {
+    /// `HISTOGRAM_BINS + 1` bin edges, ascending.
+    pub edges: Vec<f64>,
+    pub counts: Vec<u64>,
+}
+
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CostmapStats {
+    pub width: usize,
+    pub height: usize,
+    pub cells: u64,
+    pub class_fractions: ClassFractions,
+    /// Traversable cells' area, m².
+    pub traversable_area_m2: f64,
+    /// Cost over the traversable cells; `None` when there is none.
+    pub cost_min: Option<f64>,
+    pub cost_max: Option<f64>,
+    pub cost_mean: Option<f64>,
+    /// The range the weights allow: [w_slope, w_infl + w_slope (+ layer
+    /// weights)]; the histogram spans it.
+    pub cost_range: [f64; 2],
+    pub histogram: CostHistogram,
+}
+
+/// Statistics of `cost` / `class` (same length). `cell_area_m2`: area of
+/// one cell; `cost_range`: the range the weights allow.
+pub fn costmap_stats(
+    width: usize,
+    height: usize,
+    cost: &[f32],
+    class: &[u8],
+    cell_area_m2: f64,
+    cost_range: [f64; 2],
+) -> CostmapStats {
+    let mut counts = [0u64; 6];
+    for &c in class {
+        counts[usize::from(c.min(5))] += 1;
+    }
+    let cells = class.len() as u64;
+    let frac = |c: Class| {
+        if cells == 0 {
+            0.0
+        } else {
+            counts[c as usize] as f64 / cells as f64
+        }
+    };
+    let [lo, hi] = cost_range;
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let mut bins = vec![0u64; HISTOGRAM_BINS];
+    let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64);
+    for (&c, &k) in cost.iter().zip(class) {
+        if k != Class::Traversable as u8 || !c.is_finite() {
+            continue;
+        }
+        let c = f64::from(c);
+        min = min.min(c);
+        max = max.max(c);
+        sum += c;
+        n += 1;
+        let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
+        bins[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+    }
+    let edges = (0..=HISTOGRAM_BINS)
+        .map(|i| lo + span * i as f64 / HISTOGRAM_BINS as f64)
+        .collect();
+    CostmapStats {
+        width,
+        height,
+        cells,
+        class_fractions: ClassFractions {
+            unknown: frac(Class::Unknown),
+            traversable: frac(Class::Traversable),
+            slope: frac(Class::Slope),
+            step: frac(Class::Step),
+            enclosed: frac(Class::Enclosed),
+            other: frac(Class::Other),
+        },
+        traversable_area_m2: counts[Class::Traversable as usize] as f64 * cell_area_m2,
+        cost_min: (n > 0).then_some(min),
+        cost_max: (n > 0).then_some(max),
+        cost_mean: (n > 0).then(|| sum / n as f64),
+        cost_range,
+        histogram: CostHistogram {
+            edges,
+            counts: bins,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fractions_and_histogram_count_every_cell_once() {
+        let class = [1u8, 1, 1, 2, 3, 0, 4, 5];
+        let cost = [
+            1.0f32,
+            10.5,
+            20.0,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+        ];
+        let s = costmap_stats(4, 2, &cost, &class, 2.0, [1.0, 20.0]);
+        let f = &s.class_fractions;
+        assert_eq!(f.traversable, 3.0 / 8.0);
+        let total = f.unknown + f.traversable + f.slope + f.step + f.enclosed + f.other;
+        assert!((total - 1.0).abs() < 1e-12);
+        assert_eq!(s.histogram.counts.iter().sum::<u64>(), 3);
+        assert_eq!(s.histogram.counts[0], 1);
+        assert_eq!(s.histogram.counts[HISTOGRAM_BINS - 1], 1);
+        assert_eq!(s.cost_min, Some(1.0));
+        assert_eq!(s.cost_max, Some(20.0));
+        assert_eq!(s.traversable_area_m2, 6.0);
+        assert_eq!(s.histogram.edges.len(), HISTOGRAM_BINS + 1);
+    }
+}

@@ -1,0 +1,269 @@
+//! Height discontinuities (thesis §3.4, SPEC §4.2 step 4), and ditches.
+//!
+//! `neighbours` is the thesis' test: a cell is a step when any of its 8
+//! neighbours differs from it by more than max_step. On an even slope
+//! neighbours differ by cell·tan(slope), so at coarse resolution every
+//! allowed slope trips it (at 1 m and 25°, anything steeper than ~6°).
+//!
+//! `residual` measures each neighbour's difference against the local
+//! surface instead: along the line through the cell and the neighbour, the
+//! surface on the cell's side (the cell and the one behind it) and on the
+//! neighbour's side (the neighbour and the one beyond) each predict the
+//! difference by continuing their own plane. The step is what neither
+//! side's plane explains — the smaller of the two residuals. An even slope
+//! or a change of slope leaves no residual at any resolution; a step of
+//! height h leaves h on both cells beside it, on any slope; a one-cell
+//! wall or pit of height h leaves h.
+//!
+//! Cells on the border ring, or next to unknown heights, cannot be judged
+//! and are unknown.
+
+use rayon::prelude::*;
+
+use super::pipeline::Ticker;
+use super::{CostmapError, StepMode};
+
+/// The 8 neighbour offsets (column, row).
+const DIRECTIONS: [(isize, isize); 8] = [
+    (1, 0),
+    (-1, 0),
+    (0, 1),
+    (0, -1),
+    (1, 1),
+    (-1, -1),
+    (1, -1),
+    (-1, 1),
+];
+
+/// Largest step (m) from each cell to its neighbours, by `mode`; NaN where
+/// the cell cannot be judged.
+pub fn step_heights(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    mode: StepMode,
+    ticker: &Ticker,
+) -> Result<Vec<f32>, CostmapError> {
+    let mut out = vec![f32::NAN; width * height];
+    let at = |c: isize, r: isize| -> f64 {
+        if c < 0 || r < 0 || c >= width as isize || r >= height as isize {
+            f64::NAN
+        } else {
+            z[r as usize * width + c as usize]
+        }
+    };
+    out.par_chunks_mut(width.max(1))
+        .enumerate()
+        .for_each(|(r, row)| {
+            if !ticker.tick() || r == 0 || r + 1 >= height {
+                return;
+            }
+            let r = r as isize;
+            for c in 1..width.saturating_sub(1) {
+                let ci = c as isize;
+                let zc = z[r as usize * width + c];
+                if zc.is_nan() {
+                    continue;
+                }
+                let mut worst = 0.0f64;
+                let mut known = true;
+                for (dc, dr) in DIRECTIONS {
+                    let zn = at(ci + dc, r + dr);
+                    if zn.is_nan() {
+                        known = false;
+                        break;
+                    }
+                    let d0 = zn - zc;
+                    let s = match mode {
+                        StepMode::Neighbours => d0.abs(),
+                        StepMode::Residual => {
+                            let behind = zc - at(ci - dc, r - dr);
+                            let beyond = at(ci + 2 * dc, r + 2 * dr) - zn;
+                            let a = (d0 - behind).abs();
+                            let b = (d0 - beyond).abs();
+                            // NaN (no cell there) never wins a min.
+                            match (a.is_nan(), b.is_nan()) {
+                                (false, false) => a.min(b),
+                                (false, true) => a,
+                                (true, false) => b,
+                                (true, true) => d0.abs(),
+                            }
+                        }
+                    };
+                    worst = worst.max(s);
+                }
+                if known {
+                    row[c] = worst as f32;
+                }
+            }
+        });
+    if ticker.cancelled() {
+        return Err(CostmapError::Cancelled);
+    }
+    Ok(out)
+}
+
+/// Depth (m) of each cell below the least-squares plane through the valid
+/// cells within `radius_m` around it (the cell itself left out, so a hole
+/// does not pull its own plane down); negative above it, NaN where fewer
+/// than 3 cells not on one line surround it.
+pub fn depth_below_plane(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    row_size_m: &[[f64; 2]],
+    radius_m: f64,
+    ticker: &Ticker,
+) -> Result<Vec<f32>, CostmapError> {
+    let mut out = vec![f32::NAN; width * height];
+    out.par_chunks_mut(width.max(1))
+        .enumerate()
+        .for_each(|(r, row)| {
+            if !ticker.tick() {
+                return;
+            }
+            let [sx, sy] = row_size_m[r];
+            let hood = super::normals::neighbourhood(radius_m, sx, sy);
+            for (c, o) in row.iter_mut().enumerate() {
+                let zc = z[r * width + c];
+                if zc.is_nan() {
+                    continue;
+                }
+                // Normal equations of h = a + b·x + c·y, h relative to zc.
+                let mut m = [[0.0f64; 3]; 3];
+                let mut v = [0.0f64; 3];
+                for &(dc, dr, x, y) in &hood {
+                    let (rr, cc) = (r as isize + dr, c as isize + dc);
+                    if rr < 0 || cc < 0 || rr >= height as isize || cc >= width as isize {
+                        continue;
+                    }
+                    let h = z[rr as usize * width + cc as usize] - zc;
+                    if h.is_nan() {
+                        continue;
+                    }
+                    let p = [1.0, x, y];
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            m[i][j] += p[i] * p[j];
+                        }
+                        v[i] += p[i] * h;
+                    }
+                }
+                if let Some(a) = solve3(m, v) {
+                    *o = a as f32;
+                }
+            }
+        });
+    if ticker.cancelled() {
+        return Err(CostmapError::Cancelled);
+    }
+    Ok(out)
+}
+
+/// First unknown of the symmetric system m·x = v (Cramer's rule); `None`
+/// when it is (nearly) singular.
+fn solve3(m: [[f64; 3]; 3], v: [f64; 3]) -> Option<f64> {
+    let det3 = |a: [[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det3(m);
+    let scale = m[0][0] * m[1][1] * m[2][2];
+    if m[0][0] < 3.0 || d.is_nan() || d.abs() <= 1e-9 * scale.abs() {
+        return None;
+    }
+    let mut a = m;
+    for (row, &vi) in a.iter_mut().zip(&v) {
+        row[0] = vi;
+    }
+    Some(det3(a) / d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::{Progress, Stage};
+
+    fn run(z: &[f64], w: usize, h: usize, mode: StepMode) -> Vec<f32> {
+        let p = |_: Stage, _: f64| true;
+        let t = Ticker::new(&p as &dyn Progress, Stage::Steps, h);
+        step_heights(z, w, h, mode, &t).unwrap()
+    }
+
+    fn plane(w: usize, h: usize, cell: f64, slope_deg: f64) -> Vec<f64> {
+        let g = slope_deg.to_radians().tan();
+        (0..w * h)
+            .map(|i| 700.0 + g * cell * ((i % w) as f64 + 0.3 * (i / w) as f64))
+            .collect()
+    }
+
+    #[test]
+    fn an_even_slope_is_never_a_step_in_residual_mode() {
+        for cell in [0.1, 1.0, 5.0] {
+            let z = plane(12, 10, cell, 20.0);
+            let s = run(&z, 12, 10, StepMode::Residual);
+            assert!(
+                s.iter().filter(|v| !v.is_nan()).all(|&v| v < 1e-6),
+                "{cell}"
+            );
+            // The literal test sees cell·tan(20°)·… everywhere.
+            let n = run(&z, 12, 10, StepMode::Neighbours);
+            let want = 20f64.to_radians().tan() * cell * 1.3;
+            assert!((f64::from(n[5 * 12 + 5]) - want).abs() < 1e-4, "{cell}");
+        }
+    }
+
+    #[test]
+    fn a_step_on_a_slope_is_its_own_height_on_both_sides() {
+        let (w, h) = (14, 8);
+        let mut z = plane(w, h, 1.0, 10.0);
+        for (i, v) in z.iter_mut().enumerate() {
+            if i % w >= 7 {
+                *v += 0.2;
+            }
+        }
+        let s = run(&z, w, h, StepMode::Residual);
+        for r in 1..h - 1 {
+            for c in 1..w - 1 {
+                let v = f64::from(s[r * w + c]);
+                if c == 6 || c == 7 {
+                    assert!((v - 0.2).abs() < 1e-5, "{r} {c}: {v}");
+                } else {
+                    assert!(v < 1e-5, "{r} {c}: {v}");
+                }
+            }
+        }
+        // Border ring unknown.
+        assert!(s[0].is_nan() && s[w - 1].is_nan() && s[(h - 1) * w + 3].is_nan());
+    }
+
+    #[test]
+    fn walls_and_pits_of_one_cell() {
+        let (w, h) = (9, 9);
+        for height in [0.5, -0.5] {
+            let mut z = vec![10.0; w * h];
+            z[4 * w + 4] += height;
+            let s = run(&z, w, h, StepMode::Residual);
+            assert!((f64::from(s[4 * w + 4]) - 0.5).abs() < 1e-6);
+            assert!((f64::from(s[4 * w + 3]) - 0.5).abs() < 1e-6);
+            assert!((f64::from(s[3 * w + 3]) - 0.5).abs() < 1e-6);
+            assert_eq!(s[2 * w + 2], 0.0);
+        }
+    }
+
+    #[test]
+    fn ditches_lie_below_their_surroundings_plane() {
+        let (w, h) = (15, 15);
+        let mut z = plane(w, h, 0.5, 15.0);
+        for r in 0..h {
+            z[r * w + 7] -= 0.4;
+        }
+        let p = |_: Stage, _: f64| true;
+        let t = Ticker::new(&p as &dyn Progress, Stage::Layers, h);
+        let d = depth_below_plane(&z, w, h, &vec![[0.5, 0.5]; h], 1.6, &t).unwrap();
+        let bottom = f64::from(d[7 * w + 7]);
+        assert!(bottom > 0.25 && bottom < 0.4, "{bottom}");
+        assert!(f64::from(d[7 * w + 2]).abs() < 1e-6);
+    }
+}
