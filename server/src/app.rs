@@ -24,8 +24,9 @@ use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::api::{dems, health, surveys};
+use crate::api::{costmaps, dems, health, surveys};
 use crate::config::ServeConfig;
+use crate::costmap_jobs::CostmapJobs;
 use crate::db::Db;
 use crate::error::ApiError;
 
@@ -41,6 +42,8 @@ pub struct AppState {
     pub planner: Arc<Semaphore>,
     /// DEM limits and the cache of parsed DEMs.
     pub dems: Arc<DemStore>,
+    /// The costmap jobs this process holds, and their live progress.
+    pub costmaps: Arc<CostmapJobs>,
 }
 
 /// DEM upload limits and the parsed DEMs kept ready for sampling.
@@ -221,6 +224,7 @@ impl AppState {
     tags(
         (name = "surveys", description = "Photo-survey planning: decomposition, lawnmower paths, missions"),
         (name = "dems", description = "Digital elevation models: upload (GeoTIFF, ESRI ASCII grid, SRTM .hgt), metadata, hillshade preview, heights at points"),
+        (name = "costmaps", description = "Traversability costmaps of a DEM for a ground vehicle: background jobs with progress events, GeoTIFF, preview and per-layer files"),
         (name = "service", description = "Health"),
     ),
     components(schemas(crate::error::Problem, crate::error::IssueSchema))
@@ -243,6 +247,13 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .routes(routes!(dems::get_dem, dems::delete_dem))
         .routes(routes!(dems::hillshade))
         .routes(routes!(dems::elevation, dems::elevations))
+        .routes(routes!(costmaps::create_costmap, costmaps::list_costmaps))
+        .routes(routes!(costmaps::get_costmap, costmaps::delete_costmap))
+        .routes(routes!(costmaps::costmap_events))
+        .routes(routes!(costmaps::costmap_tif))
+        .routes(routes!(costmaps::preview))
+        .routes(routes!(costmaps::legend))
+        .routes(routes!(costmaps::layer))
         .split_for_parts();
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();

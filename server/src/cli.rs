@@ -1,7 +1,9 @@
-//! Command-line interface: `terraplan survey` runs the same planner as the
-//! service on files; `terraplan dem-info` reads a DEM as the service does. Exit status: 0 success, 2 invalid input (the message
-//! names the fault), 1 any other failure.
+//! Command-line interface: `terraplan survey` and `terraplan costmap` run
+//! the same planner as the service on files; `terraplan dem-info` reads a
+//! DEM as the service does. Exit status: 0 success, 2 invalid input (the
+//! message names the fault), 1 any other failure.
 
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -36,6 +38,10 @@ enum Command {
     /// Read a DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) and print its
     /// metadata as JSON: size, resolution, CRS, bounds, height range.
     DemInfo(DemInfoArgs),
+    /// Build the traversability costmap of a DEM for a ground vehicle and
+    /// write costmap.tif (band 1 cost, band 2 class), preview.png,
+    /// legend.svg, stats.json and layers/<name>.tif.
+    Costmap(CostmapArgs),
     /// Reproducible experiments on embedded real data.
     #[command(subcommand)]
     Experiment(ExperimentCommand),
@@ -75,6 +81,41 @@ struct DemFileInfo<'a> {
     size_bytes: u64,
     #[serde(flatten)]
     info: &'a DemInfo,
+}
+
+#[derive(clap::Args)]
+struct CostmapArgs {
+    /// The DEM file (GeoTIFF, ESRI ASCII grid, SRTM .hgt).
+    #[arg(value_name = "DEM")]
+    dem: PathBuf,
+    /// The vehicle: a preset (u-go, small-wheeled, large-skid-steer) or a
+    /// JSON file with the fields of the API's `vehicle` (a preset and any
+    /// numbers overridden). Default u-go.
+    #[arg(long, value_name = "FILE.json|PRESET")]
+    vehicle: Option<String>,
+    /// Pipeline options as JSON (the API's `options`). A land-cover
+    /// `source` is a raster file, relative to the options file.
+    #[arg(long, value_name = "FILE.json")]
+    options: Option<PathBuf>,
+    /// Horizontal CRS of the DEM (`EPSG:32633` or `32633`): needed when
+    /// the file does not say; overrides the file's.
+    #[arg(long, value_name = "EPSG:CODE")]
+    crs: Option<String>,
+    /// Horizontal CRS of the options' land-cover raster, when the file
+    /// does not say.
+    #[arg(long, value_name = "EPSG:CODE")]
+    landcover_crs: Option<String>,
+    /// Layers to write as well, comma-separated: slope, zcomp, step,
+    /// inflation, roughness, negative_step, landcover (added to the
+    /// options' `layers`).
+    #[arg(long, value_name = "NAME,...", value_delimiter = ',')]
+    layers: Vec<String>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Most pixels (width × height) accepted.
+    #[arg(long, default_value_t = DemLimits::default().max_pixels)]
+    max_pixels: u64,
 }
 
 #[derive(clap::Args)]
@@ -137,6 +178,7 @@ pub fn run() -> ExitCode {
         Command::Serve(config) => serve(config),
         Command::Survey(args) => survey(&args),
         Command::DemInfo(args) => dem_info(&args),
+        Command::Costmap(args) => costmap(&args),
         Command::Experiment(ExperimentCommand::Flock { out }) => experiment_flock(out.as_deref()),
     };
     match result {
@@ -164,9 +206,11 @@ fn serve(config: ServeConfig) -> Result<(), Failure> {
         .enable_all()
         .build()
         .map_err(|e| Failure::other(format!("cannot start the async runtime: {e}")))?;
-    runtime
-        .block_on(crate::serve::serve(config))
-        .map_err(Failure::other)
+    let result = runtime.block_on(crate::serve::serve(config));
+    // A costmap run the shutdown cancelled may still be finishing a stage
+    // on a blocking thread: do not wait for it.
+    runtime.shutdown_timeout(std::time::Duration::from_secs(1));
+    result.map_err(Failure::other)
 }
 
 fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
@@ -291,6 +335,261 @@ fn dem_info(args: &DemInfoArgs) -> Result<(), Failure> {
     };
     let text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
     println!("{text}");
+    Ok(())
+}
+
+/// Where the vehicle of `terraplan costmap` came from.
+enum VehicleSource<'a> {
+    Default,
+    Preset(&'a str),
+    File(&'a Path),
+}
+
+/// Issues of `terraplan costmap` with their pointers translated to the
+/// file or flag they came from.
+fn describe_costmap_issues(
+    issues: &[Issue],
+    vehicle: &VehicleSource<'_>,
+    options: Option<&Path>,
+) -> String {
+    let locate = |ptr: &str| -> String {
+        if let Some(rest) = ptr.strip_prefix("/vehicle") {
+            return match vehicle {
+                VehicleSource::File(p) => format!("{}#{rest}", p.display()),
+                VehicleSource::Preset(name) => format!("--vehicle {name}{rest}"),
+                VehicleSource::Default => format!("vehicle{rest}"),
+            };
+        }
+        let rest = ptr.strip_prefix("/options").unwrap_or(ptr);
+        if rest.starts_with("/layers") && options.is_none() {
+            return "--layers".to_string();
+        }
+        match options {
+            Some(p) => format!("{}#{rest}", p.display()),
+            None => format!("options{rest}"),
+        }
+    };
+    let lines: Vec<String> = issues
+        .iter()
+        .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
+        .collect();
+    if lines.len() == 1 {
+        format!("invalid input: {}", lines[0])
+    } else {
+        format!("invalid input:\n  {}", lines.join("\n  "))
+    }
+}
+
+fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
+    use planner_core::costmap::pipeline::{build_costmap_owned, check_against_dem};
+    use planner_core::costmap::{
+        CostmapError, CostmapOptions, Layer, Stage, VehiclePreset, VehicleSpec, legend_svg,
+        preview_png,
+    };
+
+    let started = std::time::Instant::now();
+    let presets = || {
+        VehiclePreset::ALL
+            .iter()
+            .map(|p| p.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    // The vehicle: a preset's name, or a file.
+    let (source, spec) = match args.vehicle.as_deref() {
+        None => (VehicleSource::Default, VehicleSpec::default()),
+        Some(name) if VehiclePreset::ALL.iter().any(|p| p.name() == name) => {
+            let preset = VehiclePreset::ALL.into_iter().find(|p| p.name() == name);
+            (
+                VehicleSource::Preset(name),
+                VehicleSpec {
+                    preset,
+                    ..VehicleSpec::default()
+                },
+            )
+        }
+        Some(file) => {
+            let path = Path::new(file);
+            if !path.exists() {
+                return Err(Failure::input(format!(
+                    "--vehicle {file}: no such file, and not a preset ({})",
+                    presets()
+                )));
+            }
+            let doc = read_json(path, "vehicle")?;
+            let spec = crate::api::costmaps::deserialize_at::<VehicleSpec>(&doc, "/vehicle")
+                .map_err(|i| {
+                    Failure::input(describe_costmap_issues(
+                        &[i],
+                        &VehicleSource::File(path),
+                        None,
+                    ))
+                })?;
+            (VehicleSource::File(path), spec)
+        }
+    };
+    let describe =
+        |issues: &[Issue]| describe_costmap_issues(issues, &source, args.options.as_deref());
+    let vehicle = spec
+        .resolve("/vehicle")
+        .map_err(|issues| Failure::input(describe(&issues)))?;
+
+    let mut options = match &args.options {
+        None => CostmapOptions::default(),
+        Some(path) => {
+            let doc = read_json(path, "options")?;
+            crate::api::costmaps::deserialize_at::<CostmapOptions>(&doc, "/options")
+                .map_err(|i| Failure::input(describe(&[i])))?
+        }
+    };
+    for name in args
+        .layers
+        .iter()
+        .map(|n| n.trim())
+        .filter(|n| !n.is_empty())
+    {
+        let layer = Layer::from_name(name).ok_or_else(|| {
+            Failure::input(format!(
+                "--layers: unknown layer {name:?}: expected {}",
+                Layer::ALL.map(Layer::name).join(", ")
+            ))
+        })?;
+        if !options.layers.contains(&layer) {
+            options.layers.push(layer);
+        }
+    }
+    let issues = options.validate("/options");
+    if !issues.is_empty() {
+        return Err(Failure::input(describe(&issues)));
+    }
+
+    let limits = DemLimits {
+        max_pixels: args.max_pixels,
+        ..DemLimits::default()
+    };
+    let (dem, _, _) = read_dem_file(&args.dem, args.crs.as_deref(), "--crs", limits.clone())?;
+    // A land-cover source is a raster file, relative to the options file.
+    let landcover = match &options.landcover {
+        None => None,
+        Some(l) => {
+            let given = Path::new(&l.source);
+            let path = match args.options.as_deref().and_then(Path::parent) {
+                Some(dir) if given.is_relative() => dir.join(given),
+                _ => given.to_path_buf(),
+            };
+            let crs = args.landcover_crs.as_deref();
+            Some(read_dem_file(&path, crs, "--landcover-crs", limits)?.0)
+        }
+    };
+    let issues = check_against_dem(&dem, &vehicle, &options, "/options");
+    if !issues.is_empty() {
+        return Err(Failure::input(describe(&issues)));
+    }
+    let (dem_w, dem_h) = (dem.width, dem.height);
+
+    let show_progress = std::io::stderr().is_terminal();
+    let last_stage = std::sync::Mutex::new(None::<Stage>);
+    let progress = |stage: Stage, _done: f64| -> bool {
+        if show_progress {
+            let mut last = last_stage.lock().unwrap_or_else(|p| p.into_inner());
+            if *last != Some(stage) {
+                *last = Some(stage);
+                eprintln!("{}…", crate::costmap_jobs::stage_name(stage));
+            }
+        }
+        true
+    };
+    let map = build_costmap_owned(dem, &vehicle, &options, landcover.as_ref(), &progress).map_err(
+        |e| match e {
+            CostmapError::Invalid(issues) => Failure::input(describe(&issues)),
+            CostmapError::Cancelled => Failure::other("the costmap was cancelled"),
+        },
+    )?;
+
+    let out = &args.out;
+    let layers_dir = out.join("layers");
+    std::fs::create_dir_all(out)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", out.display())))?;
+    let write = |path: &Path, content: &[u8]| {
+        std::fs::write(path, content)
+            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+    };
+    let tiff = |f: &dyn Fn(&mut std::io::Cursor<Vec<u8>>) -> std::io::Result<bool>| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        f(&mut buf)
+            .map(|kept| kept.then(|| buf.into_inner()))
+            .map_err(|e| Failure::other(format!("cannot encode a GeoTIFF: {e}")))
+    };
+    if let Some(data) = tiff(&|w| map.write_geotiff(w).map(|()| true))? {
+        write(&out.join("costmap.tif"), &data)?;
+    }
+    write(
+        &out.join("preview.png"),
+        &preview_png(&map, crate::costmap_jobs::PREVIEW_MAX_SIDE),
+    )?;
+    write(&out.join("legend.svg"), legend_svg(&map).as_bytes())?;
+    let mut kept = Vec::new();
+    for (layer, _) in &map.layers {
+        if let Some(data) = tiff(&|w| map.write_layer_geotiff(*layer, w))? {
+            if kept.is_empty() {
+                std::fs::create_dir_all(&layers_dir).map_err(|e| {
+                    Failure::other(format!("cannot create {}: {e}", layers_dir.display()))
+                })?;
+            }
+            write(&layers_dir.join(format!("{}.tif", layer.name())), &data)?;
+            kept.push(*layer);
+        }
+    }
+    let doc = json!({
+        "vehicle": map.vehicle,
+        "params": map.params,
+        "stats": map.stats,
+        "warnings": map.warnings,
+        "width": map.width,
+        "height": map.height,
+        "crs": map.crs,
+        "layers": kept,
+    });
+    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
+    text.push('\n');
+    write(&out.join("stats.json"), text.as_bytes())?;
+
+    let s = &map.stats;
+    let f = &s.class_fractions;
+    let pct = |x: f64| format!("{:.1} %", x * 100.0);
+    println!(
+        "costmap {}×{} cells of {:.3} × {:.3} m (DEM {dem_w}×{dem_h}), vehicle {}",
+        map.width,
+        map.height,
+        map.params.resolution_m[0],
+        map.params.resolution_m[1],
+        map.vehicle.name
+    );
+    println!(
+        "classes: traversable {}, slope {}, step {}, enclosed {}, other {}, unknown {}",
+        pct(f.traversable),
+        pct(f.slope),
+        pct(f.step),
+        pct(f.enclosed),
+        pct(f.other),
+        pct(f.unknown)
+    );
+    match (s.cost_min, s.cost_max, s.cost_mean) {
+        (Some(lo), Some(hi), Some(mean)) => println!(
+            "cost {lo:.2} to {hi:.2} (mean {mean:.2}) on traversable cells; the weights allow \
+             {} to {}",
+            s.cost_range[0], s.cost_range[1]
+        ),
+        _ => println!("no traversable cell"),
+    }
+    println!(
+        "built in {:.2} s -> {}",
+        started.elapsed().as_secs_f64(),
+        out.display()
+    );
+    for w in &map.warnings {
+        eprintln!("warning: {w}");
+    }
     Ok(())
 }
 

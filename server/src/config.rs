@@ -50,6 +50,9 @@ pub struct ServeConfig {
     /// Plans computed at once; further requests wait their turn.
     #[arg(long, env = "TERRAPLAN_PLANNER_THREADS", default_value_t = default_threads())]
     pub planner_threads: usize,
+    /// Costmaps built at once; further jobs wait, queued.
+    #[arg(long, env = "TERRAPLAN_COSTMAP_JOBS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
+    pub costmap_jobs: u64,
     /// Allowed CORS origin (repeatable; `*` allows any). None: no CORS headers.
     #[arg(
         long = "cors-origin",

@@ -9,6 +9,7 @@ use tracing_subscriber::EnvFilter;
 
 use crate::app::{AppState, router};
 use crate::config::{LogFormat, ServeConfig};
+use crate::costmap_jobs::CostmapJobs;
 use crate::db::Db;
 
 pub fn init_tracing(format: LogFormat) {
@@ -40,12 +41,22 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         .map_err(|e| format!("cannot open the database: {e}"))?;
     tracing::info!(backend = db.backend(), data_dir = %config.data_dir.display(), "database ready, migrations applied");
 
+    let jobs = Arc::new(CostmapJobs::new(
+        usize::try_from(config.costmap_jobs).unwrap_or(usize::MAX),
+    ));
     let state = AppState {
         db: db.clone(),
         limits: config.limits(),
         planner: Arc::new(Semaphore::new(config.planner_threads)),
         dems: Arc::new(crate::app::DemStore::from_config(&config)),
+        costmaps: jobs.clone(),
     };
+    // Jobs a previous server left queued or running are queued again.
+    let recovered = jobs.recover(&state).await;
+    if recovered > 0 {
+        tracing::info!(jobs = recovered, "unfinished costmap jobs queued again");
+    }
+    jobs.start_maintenance(&state);
     let app = router(state, &config.cors_origins, config.max_body_bytes);
     let listener = TcpListener::bind((config.host.as_str(), config.port))
         .await
@@ -55,10 +66,19 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     // start the service on port 0.
     println!("listening on http://{addr}");
     tracing::info!(%addr, "terraplan serving");
-    axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown_signal())
+    let stopping = jobs.clone();
+    let served = axum::serve(listener, app)
+        .with_graceful_shutdown(async move {
+            shutdown_signal().await;
+            // Cancel the costmap runs and end the event streams, so that
+            // no request keeps the server from stopping.
+            stopping.begin_shutdown();
+        })
         .await
-        .map_err(|e| format!("server error: {e}"))?;
+        .map_err(|e| format!("server error: {e}"));
+    jobs.begin_shutdown();
+    jobs.finish(&db).await;
+    served?;
     db.close().await;
     tracing::info!("shut down cleanly");
     Ok(())

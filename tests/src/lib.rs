@@ -124,6 +124,15 @@ impl Server {
         self.terminate().expect("server was running")
     }
 
+    /// Kill the process with SIGKILL (no shutdown at all, as in a crash)
+    /// and wait for it to be gone.
+    pub fn kill(mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
     fn terminate(&mut self) -> Option<std::process::ExitStatus> {
         let mut child = self.child.take()?;
         let _ = Command::new("kill")
@@ -198,6 +207,40 @@ fn reply(res: Result<ureq::http::Response<ureq::Body>, ureq::Error>) -> Reply {
         headers,
         body,
     }
+}
+
+/// GET whose whole exchange (a stream included) must end within `timeout`.
+pub fn get_with_timeout(url: &str, timeout: std::time::Duration) -> Reply {
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(timeout))
+        .build()
+        .into();
+    reply(agent.get(url).call())
+}
+
+/// The events of a `text/event-stream` body: (event name, data parsed as
+/// JSON), comments and keep-alives skipped.
+pub fn sse_events(body: &str) -> Vec<(String, serde_json::Value)> {
+    let mut out = Vec::new();
+    for block in body.replace("\r\n", "\n").split("\n\n") {
+        let mut event = String::from("message");
+        let mut data = Vec::new();
+        for line in block.lines() {
+            if let Some(v) = line.strip_prefix("event:") {
+                event = v.trim().to_string();
+            } else if let Some(v) = line.strip_prefix("data:") {
+                data.push(v.strip_prefix(' ').unwrap_or(v).to_string());
+            }
+        }
+        if !data.is_empty() {
+            let text = data.join("\n");
+            let value = serde_json::from_str(&text)
+                .unwrap_or_else(|e| panic!("event data is not JSON ({e}): {text}"));
+            out.push((event, value));
+        }
+    }
+    out
 }
 
 pub fn get(url: &str) -> Reply {

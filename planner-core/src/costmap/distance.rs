@@ -46,13 +46,13 @@ pub fn squared_distance_f32(
     sq
 }
 
-/// Columns per block of the column pass: read and written row by row, so
-/// the pass walks memory in order.
+/// Columns per block of the column pass: read row by row, so the pass
+/// walks memory in order, and blocks run in parallel.
 const COLUMN_BLOCK: usize = 16;
 
 /// The two 1D passes over squared distances (0 at obstacles, ∞ elsewhere):
 /// columns (spacing dy), then rows (spacing dx).
-fn passes<T: Copy + Send>(
+fn passes<T: Copy + Send + Sync>(
     sq: &mut [T],
     width: usize,
     height: usize,
@@ -66,30 +66,41 @@ fn passes<T: Copy + Send>(
     if width == 0 || height == 0 {
         return;
     }
-    let mut scratch = Scratch::new(height);
-    let mut lines = vec![vec![0.0; height]; COLUMN_BLOCK];
-    for x0 in (0..width).step_by(COLUMN_BLOCK) {
-        let n = COLUMN_BLOCK.min(width - x0);
-        for y in 0..height {
-            for (k, line) in lines.iter_mut().enumerate().take(n) {
-                line[y] = to_f64(sq[y * width + x0 + k]);
+    // Column pass, blocks of columns in parallel; each block's result is
+    // kept block-major (row by row, COLUMN_BLOCK wide) for the row pass.
+    let src: &[T] = sq;
+    let blocks: Vec<Vec<T>> = (0..width)
+        .step_by(COLUMN_BLOCK)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|x0| {
+            let n = COLUMN_BLOCK.min(width - x0);
+            let mut scratch = Scratch::new(height);
+            let mut lines = vec![vec![0.0; height]; n];
+            for y in 0..height {
+                for (k, line) in lines.iter_mut().enumerate() {
+                    line[y] = to_f64(src[y * width + x0 + k]);
+                }
             }
-        }
-        for line in lines.iter_mut().take(n) {
-            scratch.transform(line, dy);
-            line.copy_from_slice(&scratch.out[..height]);
-        }
-        for y in 0..height {
-            for (k, line) in lines.iter().enumerate().take(n) {
-                sq[y * width + x0 + k] = from_f64(line[y]);
+            for line in lines.iter_mut() {
+                scratch.transform(line, dy);
+                line.copy_from_slice(&scratch.out[..height]);
             }
-        }
-    }
-    sq.par_chunks_mut(width).for_each_init(
+            let mut block = Vec::with_capacity(n * height);
+            for y in 0..height {
+                block.extend(lines.iter().map(|line| from_f64(line[y])));
+            }
+            block
+        })
+        .collect();
+    sq.par_chunks_mut(width).enumerate().for_each_init(
         || (Scratch::new(width), vec![0.0; width]),
-        |(scratch, line), row| {
-            for (l, &v) in line.iter_mut().zip(row.iter()) {
-                *l = to_f64(v);
+        |(scratch, line), (y, row)| {
+            for (b, block) in blocks.iter().enumerate() {
+                let n = block.len() / height;
+                for (k, &v) in block[y * n..(y + 1) * n].iter().enumerate() {
+                    line[b * COLUMN_BLOCK + k] = to_f64(v);
+                }
             }
             scratch.transform(line, dx);
             for (v, &o) in row.iter_mut().zip(&scratch.out[..width]) {

@@ -58,13 +58,19 @@ pub fn normals(
         }
         let [sx, sy] = row_size_m[r];
         let hood = neighbourhood(radius_m, sx, sy);
+        let full = FullWindow::new(&hood, width);
         let mut rough_row = rough_row;
+        let inner_rows = r >= full.reach_rows && r + full.reach_rows < height;
         for c in 0..width {
-            let zc = z[r * width + c];
+            let i = r * width + c;
+            let zc = z[i];
             if zc.is_nan() {
                 continue;
             }
-            if let Some((n, rms)) = cell_normal(z, width, height, r, c, zc, &hood) {
+            let inner = inner_rows && c >= full.reach_cols && c + full.reach_cols < width;
+            let fast = if inner { full.normal(z, i, zc) } else { None };
+            if let Some((n, rms)) = fast.or_else(|| cell_normal(z, width, height, r, c, zc, &hood))
+            {
                 zc_row[c] = n as f32;
                 if let Some(rr) = rough_row.as_deref_mut() {
                     rr[c] = rms as f32;
@@ -87,6 +93,107 @@ pub fn normals(
         return Err(CostmapError::Cancelled);
     }
     Ok((zcomp, rough))
+}
+
+/// A complete neighbourhood, all of whose cells are inside the grid: its
+/// offsets are symmetric about the centre, so Σx = Σy = Σxy = 0 and the
+/// covariance is the "arrow" matrix [[a, 0, p], [0, b, q], [p, q, c]].
+/// Its smallest eigenvalue is the root below min(a, b) of the secular
+/// equation c − λ − p²/(a − λ) − q²/(b − λ) = 0, found by safeguarded
+/// Newton steps from λ = 0 (exact for a plane), and the normal is
+/// (p/(λ − a), q/(λ − b), 1) normalised. About 4× quicker than the
+/// general eigensolver, which takes over where this is ill-conditioned.
+struct FullWindow {
+    /// Index offsets of the neighbours and their x, y (m).
+    offsets: Vec<isize>,
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    /// Points including the centre.
+    n: f64,
+    /// Σx²/n and Σy²/n.
+    a: f64,
+    b: f64,
+    reach_cols: usize,
+    reach_rows: usize,
+}
+
+impl FullWindow {
+    fn new(hood: &[(isize, isize, f64, f64)], width: usize) -> FullWindow {
+        let n = (hood.len() + 1) as f64;
+        FullWindow {
+            offsets: hood
+                .iter()
+                .map(|&(dc, dr, _, _)| dr * width as isize + dc)
+                .collect(),
+            xs: hood.iter().map(|h| h.2).collect(),
+            ys: hood.iter().map(|h| h.3).collect(),
+            n,
+            a: hood.iter().map(|h| h.2 * h.2).sum::<f64>() / n,
+            b: hood.iter().map(|h| h.3 * h.3).sum::<f64>() / n,
+            reach_cols: hood.iter().map(|h| h.0.unsigned_abs()).max().unwrap_or(0),
+            reach_rows: hood.iter().map(|h| h.1.unsigned_abs()).max().unwrap_or(0),
+        }
+    }
+
+    /// (Zcomp, roughness) of the inner cell `i`; `None` when a neighbour
+    /// is unknown or the secular equation is ill-conditioned.
+    #[inline]
+    fn normal(&self, z: &[f64], i: usize, zc: f64) -> Option<(f64, f64)> {
+        if self.offsets.len() < 4 {
+            return None;
+        }
+        let (mut sz, mut szz, mut sxz, mut syz) = (0.0, 0.0, 0.0, 0.0);
+        for ((&o, &x), &y) in self.offsets.iter().zip(&self.xs).zip(&self.ys) {
+            let h = z[(i as isize + o) as usize] - zc;
+            sz += h;
+            szz += h * h;
+            sxz += x * h;
+            syz += y * h;
+        }
+        if !(sz + szz).is_finite() {
+            return None;
+        }
+        let (a, b, n) = (self.a, self.b, self.n);
+        let mz = sz / n;
+        let (p, q) = (sxz / n, syz / n);
+        let c = szz / n - mz * mz;
+        let f = |l: f64| c - l - p * p / (a - l) - q * q / (b - l);
+        let fd = |l: f64| -1.0 - p * p / ((a - l) * (a - l)) - q * q / ((b - l) * (b - l));
+        let hi0 = a.min(b);
+        let (mut lo, mut hi) = (0.0, hi0);
+        let mut l = 0.0;
+        let mut fl = f(0.0);
+        let scale = a + b + c.abs();
+        if fl > 1e-15 * scale {
+            let mut converged = false;
+            for _ in 0..30 {
+                let mut next = l - fl / fd(l);
+                if !(next > lo && next < hi) {
+                    next = 0.5 * (lo + hi);
+                }
+                let step = (next - l).abs();
+                l = next;
+                fl = f(l);
+                if fl > 0.0 {
+                    lo = l;
+                } else {
+                    hi = l;
+                }
+                if step <= 1e-11 * scale || fl == 0.0 {
+                    converged = true;
+                    break;
+                }
+            }
+            if !converged || hi0 - l < 1e-6 * hi0 {
+                return None;
+            }
+        } else {
+            l = 0.0;
+        }
+        let gx = p / (a - l);
+        let gy = q / (b - l);
+        Some((1.0 / (1.0 + gx * gx + gy * gy).sqrt(), l.max(0.0).sqrt()))
+    }
 }
 
 /// (Zcomp, roughness) of cell (r, c) with height `zc`.
@@ -292,6 +399,45 @@ mod tests {
         let (lambda, v) = smallest_eigenpair(&[[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
         assert_eq!(lambda, 1.0);
         assert!(v[0].abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_fast_window_agrees_with_the_general_eigensolver() {
+        let mut s = 99u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (w, h) = (9, 9);
+        for case in 0..500 {
+            let roughness = [0.0, 0.01, 0.3, 3.0][case % 4];
+            let (gx, gy) = (rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0);
+            let z: Vec<f64> = (0..w * h)
+                .map(|i| gx * (i % w) as f64 + gy * (i / w) as f64 + roughness * rnd())
+                .collect();
+            let radius = [1.5, 1.3, 2.3][case % 3];
+            let hood = neighbourhood(radius, 1.0, 1.2);
+            let full = FullWindow::new(&hood, w);
+            let i = 4 * w + 4;
+            let general = cell_normal(&z, w, h, 4, 4, z[i], &hood).unwrap();
+            if let Some(fast) = full.normal(&z, i, z[i]) {
+                assert!(
+                    (fast.0 - general.0).abs() < 1e-9,
+                    "{case}: {fast:?} {general:?}"
+                );
+                assert!(
+                    (fast.1 - general.1).abs() < 1e-7,
+                    "{case}: {fast:?} {general:?}"
+                );
+            } else {
+                assert!(
+                    roughness >= 0.3,
+                    "{case}: the fast path gave up on a smooth window"
+                );
+            }
+        }
     }
 
     #[test]

@@ -3,7 +3,23 @@
 
 use serde::{Deserialize, Serialize};
 
+use rayon::prelude::*;
+
 use super::Class;
+
+/// Class counts, cost bins, min, max, sum and count of traversable costs.
+type Tally = ([u64; 6], [u64; HISTOGRAM_BINS], f64, f64, f64, u64);
+
+fn empty_tally() -> Tally {
+    (
+        [0; 6],
+        [0; HISTOGRAM_BINS],
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        0.0,
+        0,
+    )
+}
 
 /// Bins of the cost histogram.
 pub const HISTOGRAM_BINS: usize = 20;
@@ -58,10 +74,31 @@ pub fn costmap_stats(
     cell_area_m2: f64,
     cost_range: [f64; 2],
 ) -> CostmapStats {
-    let mut counts = [0u64; 6];
-    for &c in class {
-        counts[usize::from(c.min(5))] += 1;
-    }
+    let [lo, hi] = cost_range;
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    // One parallel pass: class counts, and min / max / sum / bins of the
+    // traversable costs.
+    let (counts, bins, min, max, sum, n) = cost
+        .par_iter()
+        .zip(class)
+        .fold(empty_tally, |mut t, (&c, &k)| {
+            t.0[usize::from(k.min(5))] += 1;
+            if k == Class::Traversable as u8 && c.is_finite() {
+                let c = f64::from(c);
+                t.2 = t.2.min(c);
+                t.3 = t.3.max(c);
+                t.4 += c;
+                t.5 += 1;
+                let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
+                t.1[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+            }
+            t
+        })
+        .reduce(empty_tally, |mut a, b| {
+            a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
+            a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
+            (a.0, a.1, a.2.min(b.2), a.3.max(b.3), a.4 + b.4, a.5 + b.5)
+        });
     let cells = class.len() as u64;
     let frac = |c: Class| {
         if cells == 0 {
@@ -70,22 +107,6 @@ pub fn costmap_stats(
             counts[c as usize] as f64 / cells as f64
         }
     };
-    let [lo, hi] = cost_range;
-    let span = (hi - lo).max(f64::MIN_POSITIVE);
-    let mut bins = vec![0u64; HISTOGRAM_BINS];
-    let (mut min, mut max, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0u64);
-    for (&c, &k) in cost.iter().zip(class) {
-        if k != Class::Traversable as u8 || !c.is_finite() {
-            continue;
-        }
-        let c = f64::from(c);
-        min = min.min(c);
-        max = max.max(c);
-        sum += c;
-        n += 1;
-        let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
-        bins[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
-    }
     let edges = (0..=HISTOGRAM_BINS)
         .map(|i| lo + span * i as f64 / HISTOGRAM_BINS as f64)
         .collect();
@@ -108,7 +129,7 @@ pub fn costmap_stats(
         cost_range,
         histogram: CostHistogram {
             edges,
-            counts: bins,
+            counts: bins.to_vec(),
         },
     }
 }

@@ -52,23 +52,37 @@ pub fn step_heights(
             z[r as usize * width + c as usize]
         }
     };
+    let w = width as isize;
+    let offsets: Vec<isize> = DIRECTIONS.iter().map(|&(dc, dr)| dr * w + dc).collect();
     out.par_chunks_mut(width.max(1))
         .enumerate()
         .for_each(|(r, row)| {
             if !ticker.tick() || r == 0 || r + 1 >= height {
                 return;
             }
-            let r = r as isize;
-            for c in 1..width.saturating_sub(1) {
-                let ci = c as isize;
-                let zc = z[r as usize * width + c];
+            // Rows and columns 2 cells in, where every cell the residual
+            // looks at exists: no bounds checks.
+            let inner_row = r >= 2 && r + 2 < height;
+            let ri = r as isize;
+            let last = width.saturating_sub(1);
+            for (c, out) in row.iter_mut().enumerate().take(last).skip(1) {
+                let i = r * width + c;
+                let zc = z[i];
                 if zc.is_nan() {
                     continue;
                 }
+                if inner_row && c >= 2 && c + 2 < width {
+                    let worst = inner_step(z, i, zc, &offsets, mode);
+                    if !worst.is_nan() {
+                        *out = worst as f32;
+                    }
+                    continue;
+                }
+                let ci = c as isize;
                 let mut worst = 0.0f64;
                 let mut known = true;
                 for (dc, dr) in DIRECTIONS {
-                    let zn = at(ci + dc, r + dr);
+                    let zn = at(ci + dc, ri + dr);
                     if zn.is_nan() {
                         known = false;
                         break;
@@ -76,24 +90,16 @@ pub fn step_heights(
                     let d0 = zn - zc;
                     let s = match mode {
                         StepMode::Neighbours => d0.abs(),
-                        StepMode::Residual => {
-                            let behind = zc - at(ci - dc, r - dr);
-                            let beyond = at(ci + 2 * dc, r + 2 * dr) - zn;
-                            let a = (d0 - behind).abs();
-                            let b = (d0 - beyond).abs();
-                            // NaN (no cell there) never wins a min.
-                            match (a.is_nan(), b.is_nan()) {
-                                (false, false) => a.min(b),
-                                (false, true) => a,
-                                (true, false) => b,
-                                (true, true) => d0.abs(),
-                            }
-                        }
+                        StepMode::Residual => residual(
+                            d0,
+                            zc - at(ci - dc, ri - dr),
+                            at(ci + 2 * dc, ri + 2 * dr) - zn,
+                        ),
                     };
                     worst = worst.max(s);
                 }
                 if known {
-                    row[c] = worst as f32;
+                    *out = worst as f32;
                 }
             }
         });
@@ -101,6 +107,47 @@ pub fn step_heights(
         return Err(CostmapError::Cancelled);
     }
     Ok(out)
+}
+
+/// The step between a cell and a neighbour whose height differs by `d0`,
+/// given the differences `behind` (the cell minus the one behind it) and
+/// `beyond` (the one beyond the neighbour minus the neighbour): the
+/// smaller residual of the two sides' continuations. NaN sides (no cell
+/// there) never win; with neither, the raw difference.
+#[inline]
+fn residual(d0: f64, behind: f64, beyond: f64) -> f64 {
+    let a = (d0 - behind).abs();
+    let b = (d0 - beyond).abs();
+    match (a.is_nan(), b.is_nan()) {
+        (false, false) => a.min(b),
+        (false, true) => a,
+        (true, false) => b,
+        (true, true) => d0.abs(),
+    }
+}
+
+/// Largest step of inner cell `i` (2 cells from every edge); NaN when a
+/// neighbour is unknown.
+#[inline]
+fn inner_step(z: &[f64], i: usize, zc: f64, offsets: &[isize], mode: StepMode) -> f64 {
+    let mut worst = 0.0f64;
+    for &o in offsets {
+        let zn = z[(i as isize + o) as usize];
+        if zn.is_nan() {
+            return f64::NAN;
+        }
+        let d0 = zn - zc;
+        let s = match mode {
+            StepMode::Neighbours => d0.abs(),
+            StepMode::Residual => residual(
+                d0,
+                zc - z[(i as isize - o) as usize],
+                z[(i as isize + 2 * o) as usize] - zn,
+            ),
+        };
+        worst = worst.max(s);
+    }
+    worst
 }
 
 /// Depth (m) of each cell below the least-squares plane through the valid

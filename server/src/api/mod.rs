@@ -1,5 +1,6 @@
 //! HTTP API, one module per resource.
 
+pub mod costmaps;
 pub mod dems;
 pub mod health;
 pub mod json_body;
