@@ -631,6 +631,70 @@ fn progress_events_conflicts_cancel_and_failure() {
 
 /// Faults of a costmap request are 422s naming each by JSON pointer,
 /// including those that depend on the DEM; malformed bodies are 400/415.
+/// A land-cover raster uploaded like a DEM (an ESRI ASCII grid of class
+/// codes in the DTM's CRS, two 283 m columns): its table's cost is added
+/// on grass, water is lethal (class 5), and the `landcover` layer holds
+/// the per-cell cost, as GDAL reads them back.
+#[test]
+fn landcover_raster_costs_and_lethal_classes() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("data"), &[]);
+    let dem_id = upload(&server, &dtm());
+    let grid = "ncols 2\nnrows 2\nxllcorner 321498\nyllcorner 4297500\ncellsize 283\n\
+                NODATA_value -9999\n1 9\n1 9\n";
+    let r = post(
+        &server.url("/api/v1/dems?crs=EPSG:26918&file_name=classes.asc&name=landcover"),
+        "text/plain",
+        grid.as_bytes(),
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    let classes_id = r.json()["id"].as_str().unwrap().to_string();
+    let job = create(
+        &server,
+        &json!({"dem_id": dem_id, "options": {
+            "landcover": {"source": classes_id, "classes": [
+                {"code": 1, "cost": 3.0, "name": "grass"},
+                {"code": 9, "lethal": true, "name": "water"}
+            ]},
+            "layers": ["landcover"]
+        }}),
+    );
+    let id = job["id"].as_str().unwrap();
+    let done = wait_done(&server, id);
+    assert!(
+        done["stats"]["class_fractions"]["other"].as_f64().unwrap() > 0.3,
+        "{done}"
+    );
+    let tif = save(
+        dir.path(),
+        "c.tif",
+        &file(&server, &format!("/api/v1/costmaps/{id}/costmap.tif")),
+    );
+    let layer = save(
+        dir.path(),
+        "l.tif",
+        &file(
+            &server,
+            &format!("/api/v1/costmaps/{id}/layers/landcover.tif"),
+        ),
+    );
+    let (class, lc) = (band_values(&tif, 2), band_values(&layer, 1));
+    let width = 283;
+    let (mut grass, mut water) = (0, 0);
+    for (i, (&k, &v)) in class.iter().zip(&lc).enumerate() {
+        let col = i % width;
+        if col <= 139 {
+            assert!(v == 3.0, "cell {i}: land-cover cost {v}");
+            grass += usize::from(k == 1.0);
+        } else if col >= 143 {
+            assert!(v.is_nan(), "cell {i}: lethal water has no cost, got {v}");
+            assert!(k != 1.0, "cell {i}: water is never traversable");
+            water += usize::from(k == 5.0);
+        }
+    }
+    assert!(grass > 20_000 && water > 20_000, "{grass} {water}");
+}
+
 #[test]
 fn costmap_request_faults() {
     let dir = tempfile::tempdir().unwrap();

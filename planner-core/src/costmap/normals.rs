@@ -115,6 +115,9 @@ struct FullWindow {
     b: f64,
     reach_cols: usize,
     reach_rows: usize,
+    /// Cell size [x, y] when the window is exactly the 8 neighbours.
+    three_by_three: Option<[f64; 2]>,
+    width: usize,
 }
 
 impl FullWindow {
@@ -132,6 +135,20 @@ impl FullWindow {
             b: hood.iter().map(|h| h.3 * h.3).sum::<f64>() / n,
             reach_cols: hood.iter().map(|h| h.0.unsigned_abs()).max().unwrap_or(0),
             reach_rows: hood.iter().map(|h| h.1.unsigned_abs()).max().unwrap_or(0),
+            three_by_three: (hood.len() == 8
+                && hood.iter().all(|h| h.0.abs() <= 1 && h.1.abs() <= 1))
+            .then(|| {
+                let east = hood
+                    .iter()
+                    .find(|h| (h.0, h.1) == (1, 0))
+                    .map_or(0.0, |h| h.2);
+                let north = hood
+                    .iter()
+                    .find(|h| (h.0, h.1) == (0, -1))
+                    .map_or(0.0, |h| h.3);
+                [east, north]
+            }),
+            width,
         }
     }
 
@@ -139,17 +156,32 @@ impl FullWindow {
     /// is unknown or the secular equation is ill-conditioned.
     #[inline]
     fn normal(&self, z: &[f64], i: usize, zc: f64) -> Option<(f64, f64)> {
-        if self.offsets.len() < 4 {
-            return None;
-        }
-        let (mut sz, mut szz, mut sxz, mut syz) = (0.0, 0.0, 0.0, 0.0);
-        for ((&o, &x), &y) in self.offsets.iter().zip(&self.xs).zip(&self.ys) {
-            let h = z[(i as isize + o) as usize] - zc;
-            sz += h;
-            szz += h * h;
-            sxz += x * h;
-            syz += y * h;
-        }
+        let (sz, szz, sxz, syz) = if let Some([sx, sy]) = self.three_by_three {
+            // The default 3 × 3 window, unrolled.
+            let w = self.width;
+            let (nw, n, ne) = (z[i - w - 1] - zc, z[i - w] - zc, z[i - w + 1] - zc);
+            let (we, ea) = (z[i - 1] - zc, z[i + 1] - zc);
+            let (sw, s, se) = (z[i + w - 1] - zc, z[i + w] - zc, z[i + w + 1] - zc);
+            (
+                nw + n + ne + we + ea + sw + s + se,
+                nw * nw + n * n + ne * ne + we * we + ea * ea + sw * sw + s * s + se * se,
+                sx * ((ne + ea + se) - (nw + we + sw)),
+                sy * ((nw + n + ne) - (sw + s + se)),
+            )
+        } else {
+            if self.offsets.len() < 4 {
+                return None;
+            }
+            let (mut sz, mut szz, mut sxz, mut syz) = (0.0, 0.0, 0.0, 0.0);
+            for ((&o, &x), &y) in self.offsets.iter().zip(&self.xs).zip(&self.ys) {
+                let h = z[(i as isize + o) as usize] - zc;
+                sz += h;
+                szz += h * h;
+                sxz += x * h;
+                syz += y * h;
+            }
+            (sz, szz, sxz, syz)
+        };
         if !(sz + szz).is_finite() {
             return None;
         }
@@ -417,7 +449,7 @@ mod tests {
             let z: Vec<f64> = (0..w * h)
                 .map(|i| gx * (i % w) as f64 + gy * (i / w) as f64 + roughness * rnd())
                 .collect();
-            let radius = [1.5, 1.3, 2.3][case % 3];
+            let radius = [1.5, 1.3, 2.3, 1.6, 1.7][case % 5];
             let hood = neighbourhood(radius, 1.0, 1.2);
             let full = FullWindow::new(&hood, w);
             let i = 4 * w + 4;

@@ -779,6 +779,123 @@ mod tests {
     }
 
     #[test]
+    fn roughness_adds_cost_and_rejects_rough_ground() {
+        // Flat ground with a patch of ±1 cm (mild) and ±6 cm (rough)
+        // chequerboard noise (the rough one would trip the step test, so
+        // max_step is raised for this test).
+        let d = surface(40, 20, 0.1, |x, y| {
+            let (c, r) = ((x / 0.1).round() as i64, (-y / 0.1).round() as i64);
+            let sign = if (c + r) % 2 == 0 { 1.0 } else { -1.0 };
+            match c {
+                5..=14 => 10.0 + 0.01 * sign,
+                25..=34 => 10.0 + 0.06 * sign,
+                _ => 10.0,
+            }
+        });
+        let mut v = ugo();
+        v.max_step_m = 1.0;
+        let o = CostmapOptions {
+            roughness: Some(crate::costmap::RoughnessOptions {
+                max_m: 0.03,
+                weight: 5.0,
+            }),
+            smoothing_sigma_m: Some(0.0),
+            layers: vec![Layer::Roughness],
+            ..Default::default()
+        };
+        let m = build(&d, &v, &o);
+        assert_eq!(class_at(&m, 30, 10), Class::Other, "rough patch");
+        assert_eq!(class_at(&m, 10, 10), Class::Traversable, "mild patch");
+        let rough = &m.layers[0].1;
+        let mild = f64::from(rough[10 * 40 + 10]);
+        assert!(mild > 0.005 && mild < 0.03, "{mild}");
+        // The mild patch costs more than flat ground far from obstacles
+        // by up to weight × roughness / max_m.
+        let flat_far = f64::from(m.cost[10 * 40 + 2]);
+        let patch = f64::from(m.cost[10 * 40 + 10]);
+        assert!(patch > flat_far + 0.5, "{patch} vs {flat_far}");
+    }
+
+    #[test]
+    fn negative_steps_find_a_ditch_the_step_test_misses() {
+        // A ditch 0.25 m deep with 15° banks (1.9 m wide): no step and no
+        // slope beyond the U-Go's limits, but its bottom lies well below
+        // the plane of its surroundings.
+        let tan15 = f64::to_radians(15.0).tan();
+        let d = surface(40, 12, 0.1, |x, _| {
+            let off = (x - 2.0).abs() * tan15;
+            10.0 - (0.25 - off).clamp(0.0, 0.25)
+        });
+        let base = build(&d, &ugo(), &CostmapOptions::default());
+        assert_eq!(base.stats.class_fractions.step, 0.0);
+        assert_eq!(base.stats.class_fractions.slope, 0.0);
+        let o = CostmapOptions {
+            negative_steps: Some(crate::costmap::NegativeStepOptions {
+                max_depth_m: Some(0.1),
+                radius_m: Some(1.5),
+            }),
+            layers: vec![Layer::NegativeStep],
+            ..Default::default()
+        };
+        let m = build(&d, &ugo(), &o);
+        assert_eq!(class_at(&m, 20, 6), Class::Step, "ditch bottom");
+        assert_eq!(class_at(&m, 5, 6), Class::Traversable);
+        assert!(f64::from(m.layers[0].1[6 * 40 + 20]) > 0.1);
+    }
+
+    #[test]
+    fn landcover_costs_and_lethal_classes() {
+        use crate::costmap::{LandcoverClass, LandcoverOptions};
+        let d = surface(20, 10, 1.0, |_, _| 5.0);
+        // Class raster in the same CRS: left half 1 (grass, +2), right
+        // half 7 (water, lethal), 2 m cells.
+        let raster = dem(
+            10,
+            5,
+            (0..50)
+                .map(|i| if i % 10 < 5 { 1.0 } else { 7.0 })
+                .collect(),
+            north_up(400_000.0, 4_500_000.0, 2.0, 2.0),
+            false,
+        );
+        let o = CostmapOptions {
+            landcover: Some(LandcoverOptions {
+                source: "classes.tif".into(),
+                classes: vec![
+                    LandcoverClass {
+                        code: 1,
+                        cost: 2.0,
+                        lethal: false,
+                        name: Some("grass".into()),
+                    },
+                    LandcoverClass {
+                        code: 7,
+                        cost: 0.0,
+                        lethal: true,
+                        name: Some("water".into()),
+                    },
+                ],
+                unlisted_cost: 0.0,
+                unlisted_lethal: false,
+            }),
+            layers: vec![Layer::Landcover],
+            ..Default::default()
+        };
+        let m = build_costmap(&d, &ugo(), &o, Some(&raster), &quiet()).unwrap();
+        assert_eq!(class_at(&m, 15, 5), Class::Other);
+        assert_eq!(class_at(&m, 3, 5), Class::Traversable);
+        let plain = build(&d, &ugo(), &CostmapOptions::default());
+        let extra = m.cost[5 * 20 + 3] - plain.cost[5 * 20 + 3];
+        assert!((extra - 2.0).abs() < 1e-4, "{extra}");
+        assert_eq!(m.layers[0].1[5 * 20 + 3], 2.0);
+        // Without the raster the run is refused, naming the source.
+        match build_costmap(&d, &ugo(), &o, None, &quiet()) {
+            Err(CostmapError::Invalid(i)) => assert_eq!(i[0].pointer, "/options/landcover/source"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
     fn resampling_averages_blocks_and_keeps_the_georeferencing() {
         let d = surface(40, 30, 0.1, |x, _| 5.0 + 0.1 * x);
         let o = CostmapOptions {
