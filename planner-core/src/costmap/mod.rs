@@ -188,7 +188,7 @@ pub struct NegativeStepOptions {
     pub max_depth_m: Option<f64>,
     /// Radius of the surroundings the plane is fitted to, metres; default
     /// 1.5 × the vehicle's longer side (a ditch narrower than that is
-    /// seen). At most 100 cells.
+    /// seen). 1 to 25 cells.
     pub radius_m: Option<f64>,
 }
 
@@ -430,8 +430,8 @@ pub struct Costmap {
     pub crs: Crs,
     pub vehicle: Vehicle,
     pub params: ResolvedParams,
-    /// Row-major traversing cost ≥ 1 (range [1, 20] with the defaults);
-    /// `NaN` on obstacles and unknown cells.
+    /// Row-major traversing cost ≥ w_slope > 0 (range [1, 20] with the
+    /// defaults); `NaN` on obstacles and unknown cells.
     pub cost: Vec<f32>,
     /// Row-major [`Class`] codes.
     pub class: Vec<u8>,

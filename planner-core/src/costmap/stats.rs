@@ -58,8 +58,9 @@ pub struct CostmapStats {
     pub cost_min: Option<f64>,
     pub cost_max: Option<f64>,
     pub cost_mean: Option<f64>,
-    /// The range the weights allow: [w_slope, w_infl + w_slope (+ layer
-    /// weights)]; the histogram spans it.
+    /// The range the weights allow: [w_slope, w_infl + 10·w_slope (+ the
+    /// roughness weight and the dearest non-lethal land-cover cost)]; the
+    /// histogram spans it.
     pub cost_range: [f64; 2],
     pub histogram: CostHistogram,
 }

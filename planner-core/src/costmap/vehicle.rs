@@ -38,8 +38,8 @@ pub enum VehiclePreset {
     UGo,
     /// A small wheeled robot of the Clearpath Jackal class (508 × 430 mm,
     /// 20 cm wheels, 65 mm ground clearance): steps up to 5 cm, slopes up
-    /// to 20°; wheels slip before tracks, so slope weighs as much as
-    /// proximity.
+    /// to 20°; wheels slip before tracks, so slope weighs 1.5× as much as
+    /// for the U-Go.
     SmallWheeled,
     /// A large skid-steer of the Clearpath Warthog class (1.52 × 1.38 m,
     /// 0.6 m tyres, 0.25 m clearance): steps up to 25 cm, slopes up to 30°.
