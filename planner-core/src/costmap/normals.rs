@@ -21,8 +21,11 @@ use super::pipeline::Ticker;
 /// A cell's neighbourhood within `radius_m`, cells `sx`×`sy` metres:
 /// (column offset, row offset, x metres, y metres), the centre excluded.
 pub fn neighbourhood(radius_m: f64, sx: f64, sy: f64) -> Vec<(isize, isize, f64, f64)> {
-    let rx = (radius_m / sx).floor() as isize;
-    let ry = (radius_m / sy).floor() as isize;
+    // Bounded whatever the cells (the checks keep radii far below this;
+    // it guards against degenerate cells, e.g. at a pole).
+    const MOST: f64 = 4.0 * super::MAX_RADIUS_CELLS;
+    let rx = (radius_m / sx).floor().min(MOST) as isize;
+    let ry = (radius_m / sy).floor().min(MOST) as isize;
     let mut out = Vec::new();
     for dr in -ry..=ry {
         for dc in -rx..=rx {

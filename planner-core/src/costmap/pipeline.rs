@@ -16,7 +16,7 @@ use super::smooth::gaussian_smooth;
 use super::stats::costmap_stats;
 use super::steps::{depth_below_plane, step_heights};
 use super::{
-    Class, Costmap, CostmapError, CostmapOptions, Layer, MAX_RADIUS_CELLS, Progress,
+    Class, Costmap, CostmapError, CostmapOptions, InflationMode, Layer, MAX_RADIUS_CELLS, Progress,
     ResolvedParams, Stage, StepMode, Vehicle,
 };
 use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
@@ -123,9 +123,22 @@ pub fn check_against_dem(
     let mut issues = Vec::new();
     let res = dem.resolution_m();
     let finest = res[0].min(res[1]);
+    // A geographic DEM's cells narrow towards the poles; where they are far
+    // longer than wide no neighbourhood in metres makes sense (and at 90°
+    // they have no width at all).
+    let [narrowest, widest] = cell_extremes_m(dem);
+    if narrowest.is_nan() || narrowest <= 0.0 || widest / narrowest > MAX_CELL_ASPECT {
+        issues.push(Issue::new(
+            "/dem_id",
+            &format!(
+                "the DEM's cells range from {narrowest:.3e} to {widest:.3e} m across (it reaches                  too near a pole); costmaps need cells at most {MAX_CELL_ASPECT} times longer                  than wide"
+            ),
+        ));
+        return issues;
+    }
     if let Some(r) = options.resolution_m {
-        // Half a cell of slack: the factor is rounded.
-        if r < finest * 0.5 || !r.is_finite() {
+        // 0.1 % of slack for rounding in the cell size.
+        if r < finest * 0.999 || !r.is_finite() {
             issues.push(Issue::new(
                 &format!("{prefix}/resolution_m"),
                 &format!(
@@ -138,14 +151,20 @@ pub fn check_against_dem(
         }
     }
     let p = resolve(dem, vehicle, options);
-    let cell = p.resolution_m[0].min(p.resolution_m[1]);
+    // Limits in cells count the narrowest row's cells.
+    let cell = narrowest * (p.resample_factor[0].min(p.resample_factor[1]) as f64);
     let (w, h) = (
         dem.width / p.resample_factor[0],
         dem.height / p.resample_factor[1],
     );
     if w < 3 || h < 3 {
+        let pointer = if options.resolution_m.is_some() {
+            format!("{prefix}/resolution_m")
+        } else {
+            "/dem_id".to_string()
+        };
         issues.push(Issue::new(
-            &format!("{prefix}/resolution_m"),
+            &pointer,
             &format!(
                 "the working grid would be {w} × {h} cells; at least 3 × 3 are needed \
                  (the DEM is {} × {})",
@@ -186,6 +205,18 @@ pub fn check_against_dem(
             ));
         }
     }
+    if p.inflation == InflationMode::Blur && p.inflation_sigma_m / cell > MAX_RADIUS_CELLS {
+        // The blur costs a kernel of 4σ cells per cell; the distance mode
+        // is linear whatever σ.
+        issues.push(Issue::new(
+            &format!("{prefix}/inflation_sigma_m"),
+            &format!(
+                "{} m spans {:.0} cells of {cell:.3} m; with inflation blur at most                  {MAX_RADIUS_CELLS} are allowed (inflation distance has no such limit)",
+                p.inflation_sigma_m,
+                p.inflation_sigma_m / cell
+            ),
+        ));
+    }
     if p.smoothing_sigma_m / cell > MAX_RADIUS_CELLS {
         issues.push(Issue::new(
             &format!("{prefix}/smoothing_sigma_m"),
@@ -193,6 +224,31 @@ pub fn check_against_dem(
         ));
     }
     issues
+}
+
+/// Longest a cell may be relative to its width (geographic DEMs near the
+/// poles).
+pub const MAX_CELL_ASPECT: f64 = 20.0;
+
+/// The smallest and largest side, in metres, of the DEM's cells over all
+/// its rows (a geographic DEM's cells narrow towards the poles: the
+/// extremes are on the first, middle or last row).
+fn cell_extremes_m(dem: &Dem) -> [f64; 2] {
+    if !dem.crs.geographic {
+        let r = dem.resolution_m();
+        return [r[0].min(r[1]), r[0].max(r[1])];
+    }
+    let rows = [0.5, dem.height as f64 / 2.0, dem.height as f64 - 0.5];
+    let sizes = rows.map(|r| {
+        crate::terrain::dilate::cell_size_m(&dem.transform, true, dem.width as f64 / 2.0, r)
+    });
+    let lo = sizes
+        .iter()
+        .flatten()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let hi = sizes.iter().flatten().copied().fold(0.0, f64::max);
+    [lo, hi]
 }
 
 /// Most cells the negative-step plane's radius may span (each cell fits
@@ -257,6 +313,16 @@ fn run(
     let (w, h) = (grid.width, grid.height);
     let [sx, sy] = grid.centre_size_m();
     coarse_warnings(&params, vehicle, [sx, sy], &mut warnings);
+    if let Some(r) = options.resolution_m {
+        let [ax, ay] = params.resolution_m;
+        if (ax - r).abs() > 0.01 * r || (ay - r).abs() > 0.01 * r {
+            let [fx, fy] = params.resample_factor;
+            warnings.push(format!(
+                "resolution_m {r} m was taken as {ax:.3} × {ay:.3} m: whole blocks of {fx} × {fy} \
+                 DEM cells are averaged"
+            ));
+        }
+    }
 
     // 4. Steps, on the heights before smoothing (smoothing would shave
     // them).
@@ -918,6 +984,94 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn a_kerb_inside_a_resampled_block_is_still_a_step() {
+        // The thesis' workflow: a 0.1 m DEM resampled to 0.5 m. A 0.3 m
+        // kerb between DEM columns 51 and 52 falls inside block 10, whose
+        // mean is in between: 0, 0.12, 0.3.
+        for kerb_col in [50, 52, 54] {
+            let d = surface(100, 40, 0.1, |x, _| {
+                if (x / 0.1).round() as usize >= kerb_col {
+                    0.3
+                } else {
+                    0.0
+                }
+            });
+            let o = CostmapOptions {
+                resolution_m: Some(0.5),
+                ..Default::default()
+            };
+            let m = build(&d, &ugo(), &o);
+            assert_eq!((m.width, m.height), (20, 8));
+            for r in 2..6 {
+                let steps = (2..18)
+                    .filter(|&c| class_at(&m, c, r) == Class::Step)
+                    .count();
+                assert!(
+                    (1..=3).contains(&steps),
+                    "kerb at {kerb_col}, row {r}: {steps} step cells"
+                );
+                assert_eq!(class_at(&m, 3, r), Class::Traversable);
+                assert_eq!(class_at(&m, 16, r), Class::Traversable);
+            }
+        }
+    }
+
+    #[test]
+    fn dem_faults_name_the_dem_or_the_option() {
+        let p = quiet();
+        // Too small: the DEM itself, or the resolution that shrank it.
+        let tiny = surface(2, 2, 1.0, |_, _| 0.0);
+        match build_costmap(&tiny, &ugo(), &CostmapOptions::default(), None, &p) {
+            Err(CostmapError::Invalid(i)) => assert_eq!(i[0].pointer, "/dem_id"),
+            other => panic!("{other:?}"),
+        }
+        let small = surface(8, 8, 1.0, |_, _| 0.0);
+        let coarse = CostmapOptions {
+            resolution_m: Some(4.0),
+            ..Default::default()
+        };
+        match build_costmap(&small, &ugo(), &coarse, None, &p) {
+            Err(CostmapError::Invalid(i)) => assert_eq!(i[0].pointer, "/options/resolution_m"),
+            other => panic!("{other:?}"),
+        }
+        // A geographic DEM reaching the pole: cells without width.
+        let pole = dem(20, 11, vec![0.0; 220], north_up(0.0, 91.0, 1.0, 1.0), true);
+        match build_costmap(&pole, &ugo(), &CostmapOptions::default(), None, &p) {
+            Err(CostmapError::Invalid(i)) => {
+                assert_eq!(i[0].pointer, "/dem_id");
+                assert!(i[0].message.contains("pole"), "{}", i[0].message);
+            }
+            other => panic!("{other:?}"),
+        }
+        // A blur wider than 50 cells is refused; the distance mode is not.
+        let flat = surface(10, 10, 1.0, |_, _| 0.0);
+        let wide = |inflation| CostmapOptions {
+            inflation,
+            inflation_sigma_m: Some(500.0),
+            ..Default::default()
+        };
+        match build_costmap(&flat, &ugo(), &wide(InflationMode::Blur), None, &p) {
+            Err(CostmapError::Invalid(i)) => assert_eq!(i[0].pointer, "/options/inflation_sigma_m"),
+            other => panic!("{other:?}"),
+        }
+        assert!(build_costmap(&flat, &ugo(), &wide(InflationMode::Distance), None, &p).is_ok());
+        // A resolution rounded to whole blocks is said so.
+        let m = build(
+            &small,
+            &ugo(),
+            &CostmapOptions {
+                resolution_m: Some(1.4),
+                ..Default::default()
+            },
+        );
+        assert!(
+            m.warnings.iter().any(|w| w.contains("was taken as 1.000")),
+            "{:?}",
+            m.warnings
+        );
     }
 
     #[test]

@@ -7,13 +7,18 @@
 //!
 //! `residual` measures each neighbour's difference against the local
 //! surface instead: along the line through the cell and the neighbour, the
-//! surface on the cell's side (the cell and the one behind it) and on the
-//! neighbour's side (the neighbour and the one beyond) each predict the
-//! difference by continuing their own plane. The step is what neither
-//! side's plane explains — the smaller of the two residuals. An even slope
-//! or a change of slope leaves no residual at any resolution; a step of
-//! height h leaves h on both cells beside it, on any slope; a one-cell
-//! wall or pit of height h leaves h.
+//! slope on the cell's side (the cell minus the one behind it) and on the
+//! neighbour's side (the one beyond minus the neighbour) bound what a
+//! continuous surface can do in between — a slope between the two, if it
+//! bends there. The step is how far the difference falls outside those
+//! bounds. The same is measured across two cells, centred on the cell,
+//! against twice the outer slopes: a step that falls inside a cell (or is
+//! averaged into one by resampling) leaves an intermediate height, 0, a,
+//! h, which no one-cell difference shows but the two-cell one does. So an
+//! even slope or a change of slope leaves nothing at any resolution; a
+//! step of height h leaves h on the cells beside it (on the cell it
+//! splits, if it splits one), on any slope; a one-cell wall or pit of
+//! height h leaves h.
 //!
 //! Cells on the border ring, or next to unknown heights, cannot be judged
 //! and are unknown.
@@ -109,20 +114,24 @@ pub fn step_heights(
     Ok(out)
 }
 
-/// The step between a cell and a neighbour whose height differs by `d0`,
-/// given the differences `behind` (the cell minus the one behind it) and
-/// `beyond` (the one beyond the neighbour minus the neighbour): the
-/// smaller residual of the two sides' continuations. NaN sides (no cell
-/// there) never win; with neither, the raw difference.
+/// The step in a height difference `d0` given the slopes on either side
+/// over the same distance, `behind` and `beyond`: how far `d0` lies
+/// outside the range between them. A side that is NaN (no cell there)
+/// drops out; with neither, the raw difference.
 #[inline]
 fn residual(d0: f64, behind: f64, beyond: f64) -> f64 {
-    let a = (d0 - behind).abs();
-    let b = (d0 - beyond).abs();
-    match (a.is_nan(), b.is_nan()) {
-        (false, false) => a.min(b),
-        (false, true) => a,
-        (true, false) => b,
-        (true, true) => d0.abs(),
+    let (lo, hi) = match (behind.is_nan(), beyond.is_nan()) {
+        (false, false) => (behind.min(beyond), behind.max(beyond)),
+        (false, true) => (behind, behind),
+        (true, false) => (beyond, beyond),
+        (true, true) => (0.0, 0.0),
+    };
+    if d0 < lo {
+        lo - d0
+    } else if d0 > hi {
+        d0 - hi
+    } else {
+        0.0
     }
 }
 
@@ -131,6 +140,24 @@ fn residual(d0: f64, behind: f64, beyond: f64) -> f64 {
 #[inline]
 fn inner_step(z: &[f64], i: usize, zc: f64, offsets: &[isize], mode: StepMode) -> f64 {
     let mut worst = 0.0f64;
+    if mode == StepMode::Residual {
+        // Across two cells centred here, one direction per line (the
+        // offsets come in opposite pairs). Cells one in from the unknown
+        // border ring only get the one-cell test.
+        for &o in offsets.iter().step_by(2) {
+            let at = |k: isize| z[(i as isize + k * o) as usize];
+            let (before, after) = (at(-1), at(1));
+            if before.is_nan() || after.is_nan() {
+                return f64::NAN;
+            }
+            let s = residual(
+                after - before,
+                2.0 * (before - at(-2)),
+                2.0 * (at(2) - after),
+            );
+            worst = worst.max(s);
+        }
+    }
     for &o in offsets {
         let zn = z[(i as isize + o) as usize];
         if zn.is_nan() {
@@ -283,6 +310,52 @@ mod tests {
         }
         // Border ring unknown.
         assert!(s[0].is_nan() && s[w - 1].is_nan() && s[(h - 1) * w + 3].is_nan());
+    }
+
+    #[test]
+    fn a_step_inside_a_cell_is_seen_on_the_cell_it_splits() {
+        // 0, a, h along the rows: the step falls inside column 7, whose
+        // height is somewhere between (as a DEM cell or a resampled block
+        // straddling a kerb has). Every one-cell difference (a and h − a)
+        // may be below max_step; the two-cell one is h.
+        let (w, h) = (16, 8);
+        for (slope, a) in [(0.0, 0.2), (0.0, 0.5), (12.0, 0.3), (12.0, 0.05)] {
+            let mut z = plane(w, h, 1.0, slope);
+            let rise = 0.4;
+            for (i, v) in z.iter_mut().enumerate() {
+                match i % w {
+                    7 => *v += a * rise,
+                    c if c > 7 => *v += rise,
+                    _ => {}
+                }
+            }
+            let s = run(&z, w, h, StepMode::Residual);
+            for r in 2..h - 2 {
+                let mid = f64::from(s[r * w + 7]);
+                assert!((mid - rise).abs() < 1e-5, "{slope}° a={a}: {mid}");
+                for c in (2..5).chain(10..w - 2) {
+                    assert!(f64::from(s[r * w + c]) < 1e-5, "{slope}° a={a} col {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn curved_ground_is_not_a_step() {
+        // A valley z = k·x² (curvature, no discontinuity) of 2 m cells:
+        // slopes change by 4k per cell, yet nothing is a step.
+        let (w, h) = (30, 8);
+        let z: Vec<f64> = (0..w * h)
+            .map(|i| 0.01 * ((i % w) as f64 * 2.0 - 30.0).powi(2))
+            .collect();
+        let s = run(&z, w, h, StepMode::Residual);
+        // Inner cells: next to the unknown border only one side's slope is
+        // known, and its straight continuation misses the curvature.
+        for r in 2..h - 2 {
+            for c in 2..w - 2 {
+                assert!(s[r * w + c] < 1e-9, "{c}: {}", s[r * w + c]);
+            }
+        }
     }
 
     #[test]
