@@ -16,24 +16,14 @@ fn kernel(sigma_cells: f64, reach: f64) -> Vec<f64> {
         .collect()
 }
 
-/// One 1D pass over `src` (stride `stride` between taps, `n` taps along
-/// the line starting at `start`) into `out`.
+/// One 1D pass over the line `src` into `out`, for the cells in `cells`.
 #[inline]
-fn pass_line(
-    src: &[f64],
-    start: usize,
-    stride: usize,
-    n: usize,
-    k: &[f64],
-    out: &mut [f64],
-    cells: std::ops::Range<usize>,
-) {
+fn pass_line(src: &[f64], k: &[f64], out: &mut [f64], cells: std::ops::Range<usize>) {
+    let n = src.len();
     let r = (k.len() / 2) as isize;
-    for (i, o) in out.iter_mut().enumerate().take(n) {
-        if !cells.contains(&i) {
-            continue;
-        }
-        let centre = src[start + i * stride];
+    for i in cells {
+        let o = &mut out[i];
+        let centre = src[i];
         if centre.is_nan() {
             *o = f64::NAN;
             continue;
@@ -42,7 +32,7 @@ fn pass_line(
         let lo = (i as isize - r).max(0);
         let hi = (i as isize + r).min(n as isize - 1);
         for j in lo..=hi {
-            let v = src[start + j as usize * stride];
+            let v = src[j as usize];
             if !v.is_nan() {
                 let kw = k[(j - i as isize + r) as usize];
                 s += kw * v;
@@ -76,39 +66,48 @@ fn smooth(z: &mut [f64], width: usize, height: usize, sigma_x: f64, sigma_y: f64
     if width == 0 || height == 0 {
         return;
     }
+    if sigma_x <= 0.0 && sigma_y <= 0.0 {
+        return;
+    }
+    // Rows from `z` into a second buffer, then columns from it back into
+    // `z` (or the rows copied back when only they are smoothed).
+    let mut src = vec![0.0; z.len()];
     if sigma_x > 0.0 {
         let k = kernel(sigma_x, reach);
-        z.par_chunks_mut(width).for_each_init(
-            || vec![0.0; width],
-            |buf, row| {
-                buf.copy_from_slice(row);
-                let r = k.len() / 2;
-                if width > 2 * r && !buf.iter().any(|v| v.is_nan()) {
+        let r = k.len() / 2;
+        let norm: f64 = k.iter().sum();
+        let kn: Vec<f64> = k.iter().map(|w| w / norm).collect();
+        src.par_chunks_mut(width)
+            .zip(z.par_chunks(width))
+            .for_each(|(out, row)| {
+                if width > 2 * r && !row.iter().any(|v| v.is_nan()) {
                     // No NaN: the edges with renormalised weights, the
                     // cells whose kernel lies inside the row without checks.
-                    pass_line(buf, 0, 1, width, &k, row, 0..r);
-                    pass_line(buf, 0, 1, width, &k, row, width - r..width);
-                    let norm: f64 = k.iter().sum();
-                    let kn: Vec<f64> = k.iter().map(|w| w / norm).collect();
-                    for (o, window) in row[r..width - r].iter_mut().zip(buf.windows(k.len())) {
+                    pass_line(row, &k, out, 0..r);
+                    pass_line(row, &k, out, width - r..width);
+                    for (o, window) in out[r..width - r].iter_mut().zip(row.windows(k.len())) {
                         *o = window.iter().zip(&kn).map(|(v, w)| v * w).sum();
                     }
                 } else {
-                    pass_line(buf, 0, 1, width, &k, row, 0..width);
+                    pass_line(row, &k, out, 0..width);
                 }
-            },
-        );
+            });
+    } else {
+        src.copy_from_slice(z);
     }
-    if sigma_y > 0.0 {
+    if sigma_y <= 0.0 {
+        z.copy_from_slice(&src);
+        return;
+    }
+    {
         let k = kernel(sigma_y, reach);
-        let src = z.to_vec();
         let row_has_nan: Vec<bool> = src
             .par_chunks(width)
             .map(|row| row.iter().any(|v| v.is_nan()))
             .collect();
         let norm: f64 = k.iter().sum();
         let kn: Vec<f64> = k.iter().map(|w| w / norm).collect();
-        // Each output row reads the rows above and below from a copy.
+        // Each output row reads the rows above and below from `src`.
         z.par_chunks_mut(width).enumerate().for_each(|(row, out)| {
             let r = (k.len() / 2) as isize;
             let (lo, hi) = (row as isize - r, row as isize + r);
