@@ -9,7 +9,12 @@
 //! once. A run writes its stage to the database when it changes; live
 //! progress lives in memory, one [`watch`] channel per job, for `GET` and
 //! the event stream. A result is stored with its files in one transaction
-//! (never half-written); a failure stores its reason. On shutdown the
+//! (never half-written); a failure stores its reason. A run left without
+//! an outcome by a storage error (the job could not be started, or its
+//! result or failure could not be recorded) lets the job go, queued with
+//! no owner, to be taken over and run again; only the jobs a process
+//! actually has in hand have their leases renewed, so a job it let go of
+//! any other way is taken over once its lease runs out. On shutdown the
 //! runs are cancelled and their jobs given back, queued, for the next
 //! server.
 
@@ -308,6 +313,11 @@ impl CostmapJobs {
             if self.is_shutting_down() {
                 break;
             }
+            // Still in hand here (its lease lapsed while the database was
+            // unreachable): the run goes on and the next renewal covers it.
+            if self.lock().contains_key(&id) {
+                continue;
+            }
             let now = now_millis();
             match state
                 .db
@@ -341,6 +351,28 @@ impl CostmapJobs {
         self.adopt_orphans(state, expired_before).await
     }
 
+    /// The jobs this process has in hand, queued or running.
+    fn held(&self) -> Vec<String> {
+        self.lock().keys().cloned().collect()
+    }
+
+    /// Renew the leases of the jobs this process has in hand. A job it
+    /// owns in the database but no longer has in hand (its run ended
+    /// without recording an outcome) is left to run out its lease and be
+    /// taken over.
+    async fn renew_leases(&self, db: &Db) {
+        let held = self.held();
+        if held.is_empty() {
+            return;
+        }
+        if let Err(e) = db
+            .renew_costmap_leases(&self.instance, &held, now_millis() + LEASE_MS)
+            .await
+        {
+            tracing::warn!(error = %e, "cannot renew the costmap job leases");
+        }
+    }
+
     /// Renew this process' leases and take over orphaned jobs, every few
     /// seconds until shutdown.
     pub fn start_maintenance(&self, state: &AppState) {
@@ -353,13 +385,7 @@ impl CostmapJobs {
                 tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
                 loop {
                     tick.tick().await;
-                    if let Err(e) = state
-                        .db
-                        .renew_costmap_leases(&jobs.instance, now_millis() + LEASE_MS)
-                        .await
-                    {
-                        tracing::warn!(error = %e, "cannot renew the costmap job leases");
-                    }
+                    jobs.renew_leases(&state.db).await;
                     jobs.adopt_orphans(&state, now_millis()).await;
                 }
             };
@@ -410,6 +436,7 @@ async fn run_job(state: &AppState, id: &str, handle: &Arc<JobHandle>) {
         Ok(None) => return,
         Err(e) => {
             tracing::error!(costmap = %id, error = %e, "cannot start a costmap job");
+            release_after_error(state, id, &format!("the job could not be started: {e}")).await;
             return;
         }
     };
@@ -472,6 +499,47 @@ async fn fail(state: &AppState, id: &str, message: &str) {
         .await
     {
         tracing::error!(costmap = %id, error = %e, "cannot record a costmap job's failure");
+        release_after_error(
+            state,
+            id,
+            &format!("{message} (and the failure could not be recorded: {e})"),
+        )
+        .await;
+    }
+}
+
+/// After a storage error left a run without a recorded outcome: let the
+/// job go, queued with no owner, so that the maintenance loop (here or on
+/// another server) takes it over and runs it again within a few seconds;
+/// once [`MAX_ATTEMPTS`] runs have started it is failed with `error`
+/// instead. Should this fail too (the database is unreachable), the job
+/// is no longer in hand here, so its lease is not renewed and it is taken
+/// over once the lease runs out.
+async fn release_after_error(state: &AppState, id: &str, error: &str) {
+    let give_up = format!("{error}; given up after {MAX_ATTEMPTS} attempts");
+    match state
+        .db
+        .release_costmap_after_error(
+            id,
+            &state.costmaps.instance,
+            now_millis(),
+            MAX_ATTEMPTS,
+            &give_up,
+        )
+        .await
+    {
+        Ok(Some(status)) if status == JobStatus::Failed.as_str() => {
+            tracing::warn!(costmap = %id, "costmap job failed: {give_up}")
+        }
+        Ok(Some(_)) => {
+            tracing::info!(costmap = %id, "costmap job let go after a storage error: it is run again")
+        }
+        Ok(None) => {}
+        Err(e) => tracing::warn!(
+            costmap = %id,
+            error = %e,
+            "cannot let go of a costmap job: it is taken over once its lease runs out"
+        ),
     }
 }
 
@@ -689,5 +757,301 @@ mod tests {
     #[test]
     fn layer_files() {
         assert_eq!(layer_file(Layer::NegativeStep), "layers/negative_step.tif");
+    }
+
+    // The storage errors below are caused in the database itself, by
+    // SQLite triggers that refuse one kind of update (`RAISE(ABORT)`, an
+    // ordinary database error to the server), so the production code runs
+    // unchanged, with no test hook; no maintenance loop runs, so every
+    // renewal and take-over happens when the test asks for it.
+
+    use std::path::PathBuf;
+
+    use planner_core::costmap::VehicleSpec;
+    use planner_core::terrain::DemLimits;
+
+    use crate::app::DemStore;
+    use crate::db::DemMetaRow;
+
+    /// A server's state on a SQLite database of its own, removed on drop.
+    struct TestServer {
+        state: AppState,
+        dir: PathBuf,
+    }
+
+    impl Drop for TestServer {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+
+    impl TestServer {
+        async fn start() -> TestServer {
+            let dir = std::env::temp_dir()
+                .join(format!("terraplan-costmap-jobs-{}", uuid::Uuid::new_v4()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let db = Db::connect(None, &dir).await.unwrap();
+            let limits = DemLimits {
+                max_pixels: u64::MAX,
+                max_side: u32::MAX,
+            };
+            let state = AppState {
+                db,
+                limits: Default::default(),
+                planner: Arc::new(Semaphore::new(1)),
+                dems: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
+                costmaps: Arc::new(CostmapJobs::new(1)),
+            };
+            TestServer { state, dir }
+        }
+
+        fn jobs(&self) -> &CostmapJobs {
+            &self.state.costmaps
+        }
+
+        fn pool(&self) -> &sqlx::SqlitePool {
+            match &self.state.db {
+                Db::Sqlite(pool) => pool,
+                Db::Postgres(_) => unreachable!("the tests run on SQLite"),
+            }
+        }
+
+        async fn sql(&self, sql: &'static str) {
+            sqlx::query(sql).execute(self.pool()).await.unwrap();
+        }
+
+        /// A 40 × 40 DEM of 0.5 m cells, a gentle ramp, in UTM 33N.
+        async fn dem(&self) -> String {
+            let mut asc = String::from(
+                "ncols 40\nnrows 40\nxllcorner 500000\nyllcorner 5000000\ncellsize 0.5\n\
+                 NODATA_value -9999\n",
+            );
+            for r in 0..40 {
+                let row: Vec<String> = (0..40)
+                    .map(|c| format!("{}", 0.01 * (c + r) as f64))
+                    .collect();
+                asc.push_str(&row.join(" "));
+                asc.push('\n');
+            }
+            let id = uuid::Uuid::now_v7().to_string();
+            let meta = DemMetaRow {
+                id: id.clone(),
+                name: None,
+                created_at: now_millis(),
+                file_name: Some("ramp.asc".into()),
+                crs_override: Some(32633),
+                info: "{}".into(),
+                size_bytes: asc.len() as i64,
+            };
+            self.state
+                .db
+                .insert_dem(&meta, asc.as_bytes())
+                .await
+                .unwrap();
+            id
+        }
+
+        /// A job for `dem_id` stored queued and held by this server, as
+        /// `POST /api/v1/costmaps` stores it (not queued here yet).
+        async fn job(&self, dem_id: &str) -> String {
+            let now = now_millis();
+            let request = StoredRequest {
+                vehicle: serde_json::Value::Null,
+                options: CostmapOptions::default(),
+            };
+            let vehicle = VehicleSpec::default().resolve("/vehicle").unwrap();
+            let row = CostmapRow {
+                id: uuid::Uuid::now_v7().to_string(),
+                name: None,
+                dem_id: dem_id.to_string(),
+                created_at: now,
+                updated_at: now,
+                request: serde_json::to_string(&request).unwrap(),
+                vehicle: serde_json::to_string(&vehicle).unwrap(),
+                status: JobStatus::Queued.as_str().to_string(),
+                progress: 0.0,
+                stage: None,
+                result: None,
+                error: None,
+                attempts: 0,
+            };
+            self.state
+                .db
+                .insert_costmap(&row, self.jobs().instance(), now + LEASE_MS)
+                .await
+                .unwrap();
+            row.id
+        }
+
+        /// Until every job task here has ended.
+        async fn settle(&self) {
+            let mut active = self.jobs().active.subscribe();
+            tokio::time::timeout(Duration::from_secs(120), active.wait_for(|n| *n == 0))
+                .await
+                .expect("the job tasks end")
+                .unwrap();
+        }
+
+        async fn row(&self, id: &str) -> CostmapRow {
+            self.state.db.get_costmap(id).await.unwrap().unwrap()
+        }
+
+        /// The job's holder and lease.
+        async fn holder(&self, id: &str) -> (Option<String>, i64) {
+            sqlx::query_as("SELECT owner, lease_until FROM costmaps WHERE id = $1")
+                .bind(id)
+                .fetch_one(self.pool())
+                .await
+                .unwrap()
+        }
+
+        /// Take over the orphaned jobs (as the maintenance loop does) and
+        /// let them run.
+        async fn adopt(&self, expired_before: i64) -> usize {
+            let n = self.jobs().adopt_orphans(&self.state, expired_before).await;
+            self.settle().await;
+            n
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn claim_error_lets_the_job_go_to_be_run_again() {
+        let t = TestServer::start().await;
+        let dem = t.dem().await;
+        let id = t.job(&dem).await;
+        t.sql(
+            "CREATE TRIGGER refuse_claim BEFORE UPDATE OF status ON costmaps \
+             WHEN NEW.status = 'running' BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
+        )
+        .await;
+        t.jobs().enqueue(&t.state, &id);
+        t.settle().await;
+        // Not started (no attempt counted), no longer held: any server's
+        // maintenance takes it over at once, and its events follow the
+        // stored row meanwhile.
+        let row = t.row(&id).await;
+        assert_eq!((row.status.as_str(), row.attempts), ("queued", 0));
+        assert_eq!(t.holder(&id).await, (None, 0));
+        assert!(t.jobs().live(&id).is_none());
+        assert_eq!(
+            t.state.db.orphaned_costmaps(now_millis()).await.unwrap(),
+            std::slice::from_ref(&id)
+        );
+
+        // While the database refuses, it is tried again (and let go again).
+        assert_eq!(t.adopt(now_millis()).await, 1);
+        assert_eq!(t.holder(&id).await, (None, 0));
+
+        t.sql("DROP TRIGGER refuse_claim").await;
+        assert_eq!(t.adopt(now_millis()).await, 1);
+        let row = t.row(&id).await;
+        assert_eq!(row.status, "done", "{:?}", row.error);
+        assert_eq!(row.attempts, 1);
+        assert!(
+            t.state
+                .db
+                .get_costmap_file(&id, COSTMAP_TIF)
+                .await
+                .unwrap()
+                .is_some()
+        );
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn unrecorded_failure_lets_the_job_go_then_gives_up() {
+        let t = TestServer::start().await;
+        // Its DEM does not exist: every run fails, saying so.
+        let id = t.job("no-such-dem").await;
+        // Refuse the run's own failure, not the release's final one.
+        t.sql(
+            "CREATE TRIGGER refuse_failure BEFORE UPDATE OF status ON costmaps \
+             WHEN NEW.status = 'failed' AND NEW.error NOT LIKE '%given up after%' \
+             BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
+        )
+        .await;
+        t.jobs().enqueue(&t.state, &id);
+        t.settle().await;
+        for attempt in 1..MAX_ATTEMPTS {
+            let row = t.row(&id).await;
+            assert_eq!((row.status.as_str(), row.attempts), ("queued", attempt));
+            assert_eq!(t.holder(&id).await, (None, 0));
+            assert_eq!(t.adopt(now_millis()).await, 1);
+        }
+        let row = t.row(&id).await;
+        assert_eq!(
+            (row.status.as_str(), row.attempts),
+            ("failed", MAX_ATTEMPTS)
+        );
+        let error = row.error.unwrap();
+        assert!(
+            error.contains("deleted")
+                && error.contains("could not be recorded")
+                && error.contains("given up after 3 attempts"),
+            "{error}"
+        );
+        assert_eq!(t.holder(&id).await, (None, 0));
+        assert!(
+            t.state
+                .db
+                .orphaned_costmaps(i64::MAX)
+                .await
+                .unwrap()
+                .is_empty()
+        );
+
+        // Once the database records failures again, one is stored at once.
+        t.sql("DROP TRIGGER refuse_failure").await;
+        let id = t.job("no-such-dem").await;
+        t.jobs().enqueue(&t.state, &id);
+        t.settle().await;
+        let row = t.row(&id).await;
+        assert_eq!((row.status.as_str(), row.attempts), ("failed", 1));
+        assert!(row.error.unwrap().contains("deleted"));
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn only_jobs_in_hand_keep_their_lease() {
+        let t = TestServer::start().await;
+        let dem = t.dem().await;
+        // A job this server still owns in the database but no longer has
+        // in hand (its run ended and even letting it go failed), with its
+        // lease about to end; and one queued here behind a busy slot.
+        let stray = t.job(&dem).await;
+        let queued = t.job(&dem).await;
+        let busy = t.jobs().slots.clone().acquire_owned().await.unwrap();
+        t.jobs().enqueue(&t.state, &queued);
+        let lease = now_millis() + 100;
+        sqlx::query("UPDATE costmaps SET lease_until = $1")
+            .bind(lease)
+            .execute(t.pool())
+            .await
+            .unwrap();
+
+        t.jobs().renew_leases(&t.state.db).await;
+        let (owner, stray_lease) = t.holder(&stray).await;
+        assert_eq!(owner.as_deref(), Some(t.jobs().instance()));
+        assert_eq!(stray_lease, lease, "a job not in hand is not renewed");
+        let (_, queued_lease) = t.holder(&queued).await;
+        assert!(queued_lease > lease + LEASE_MS / 2, "{queued_lease}");
+
+        // Once its lease has run out the stray job is taken over and run;
+        // the queued one is still in hand, so it is not taken over twice.
+        let later = lease + 1;
+        assert_eq!(
+            t.state.db.orphaned_costmaps(later).await.unwrap(),
+            std::slice::from_ref(&stray)
+        );
+        assert_eq!(t.jobs().adopt_orphans(&t.state, i64::MAX).await, 1);
+        drop(busy);
+        t.settle().await;
+        for id in [&stray, &queued] {
+            let row = t.row(id).await;
+            assert_eq!(
+                (row.status.as_str(), row.attempts),
+                ("done", 1),
+                "{:?}",
+                row.error
+            );
+        }
     }
 }

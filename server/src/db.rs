@@ -315,8 +315,10 @@ impl Db {
     }
 
     /// Start a run of a job `owner` holds: status running, progress 0,
-    /// one more attempt. The row as it is then, or `None` when the job is
-    /// no longer this owner's to run (deleted, finished, taken over).
+    /// one more attempt. The row as it is then (updated and read in one
+    /// statement, so a failure leaves either no change or a claimed row),
+    /// or `None` when the job is no longer this owner's to run (deleted,
+    /// finished, taken over).
     pub async fn claim_costmap(
         &self,
         id: &str,
@@ -324,22 +326,19 @@ impl Db {
         now: i64,
         lease_until: i64,
     ) -> Result<Option<CostmapRow>, sqlx::Error> {
-        const SQL: &str = "UPDATE costmaps SET status = 'running', progress = 0, stage = NULL, \
-                           attempts = attempts + 1, updated_at = $3, lease_until = $4 \
-                           WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running')";
-        let claimed = on_pool!(self, pool => sqlx::query(SQL)
+        const SQL: &str = concat!(
+            "UPDATE costmaps SET status = 'running', progress = 0, stage = NULL, \
+             attempts = attempts + 1, updated_at = $3, lease_until = $4 \
+             WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') RETURNING ",
+            costmap_columns!()
+        );
+        on_pool!(self, pool => sqlx::query_as::<_, CostmapRow>(SQL)
             .bind(id)
             .bind(owner)
             .bind(now)
             .bind(lease_until)
-            .execute(pool)
-            .await
-            .map(|r| r.rows_affected() > 0))?;
-        if claimed {
-            self.get_costmap(id).await
-        } else {
-            Ok(None)
-        }
+            .fetch_optional(pool)
+            .await)
     }
 
     /// Record a running job's stage; false when the job is no longer
@@ -432,20 +431,42 @@ impl Db {
             .map(|r| r.rows_affected() > 0))
     }
 
-    /// Extend the lease of every unfinished job `owner` holds.
+    /// Extend the lease of the unfinished jobs among `ids` that `owner`
+    /// holds. Only the jobs the holder actually has in hand are passed: a
+    /// job it still owns in the database but no longer runs or queues (its
+    /// run ended on a storage error) lets its lease run out, so that it is
+    /// taken over and run again.
     pub async fn renew_costmap_leases(
         &self,
         owner: &str,
+        ids: &[String],
         lease_until: i64,
     ) -> Result<u64, sqlx::Error> {
-        const SQL: &str = "UPDATE costmaps SET lease_until = $2 \
-                           WHERE owner = $1 AND status IN ('queued', 'running')";
-        on_pool!(self, pool => sqlx::query(SQL)
-            .bind(owner)
-            .bind(lease_until)
-            .execute(pool)
-            .await
-            .map(|r| r.rows_affected()))
+        /// Ids per statement, well below either backend's limit on
+        /// parameters.
+        const CHUNK: usize = 500;
+        let mut renewed = 0;
+        for chunk in ids.chunks(CHUNK) {
+            // Only placeholders are spliced in, never a value.
+            let placeholders = (0..chunk.len())
+                .map(|i| format!("${}", i + 3))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let sql = format!(
+                "UPDATE costmaps SET lease_until = $2 \
+                 WHERE owner = $1 AND status IN ('queued', 'running') AND id IN ({placeholders})"
+            );
+            renewed += on_pool!(self, pool => {
+                let mut q = sqlx::query(sqlx::AssertSqlSafe(sql.as_str()))
+                    .bind(owner)
+                    .bind(lease_until);
+                for id in chunk {
+                    q = q.bind(id);
+                }
+                q.execute(pool).await.map(|r| r.rows_affected())
+            })?;
+        }
+        Ok(renewed)
     }
 
     /// Unfinished jobs nobody holds: no owner, or a lease ended before
@@ -483,6 +504,38 @@ impl Db {
             .execute(pool)
             .await
             .map(|r| r.rows_affected() > 0))
+    }
+
+    /// Let go of a job `owner` holds after a storage error left its run
+    /// without an outcome (it could not be started, or its result or
+    /// failure could not be recorded): queued again with no owner, so that
+    /// it is taken over (by this server or another) and run again. The run
+    /// still counts as an attempt; once `max_attempts` runs have started
+    /// the job is failed with `give_up` instead. The status it is left in,
+    /// or `None` when it is no longer `owner`'s.
+    pub async fn release_costmap_after_error(
+        &self,
+        id: &str,
+        owner: &str,
+        now: i64,
+        max_attempts: i64,
+        give_up: &str,
+    ) -> Result<Option<String>, sqlx::Error> {
+        const SQL: &str = "UPDATE costmaps SET owner = NULL, lease_until = 0, progress = 0, \
+                           stage = NULL, updated_at = $3, \
+                           status = CASE WHEN attempts >= $4 THEN 'failed' ELSE 'queued' END, \
+                           error = CASE WHEN attempts >= $4 THEN $5 ELSE error END \
+                           WHERE id = $1 AND owner = $2 AND status IN ('queued', 'running') \
+                           RETURNING status";
+        on_pool!(self, pool => sqlx::query_as::<_, (String,)>(SQL)
+            .bind(id)
+            .bind(owner)
+            .bind(now)
+            .bind(max_attempts)
+            .bind(give_up)
+            .fetch_optional(pool)
+            .await
+            .map(|r| r.map(|(status,)| status)))
     }
 
     /// Give back the unfinished jobs `owner` holds (all, or just `id`),

@@ -693,6 +693,24 @@ fn landcover_raster_costs_and_lethal_classes() {
         }
     }
     assert!(grass > 20_000 && water > 20_000, "{grass} {water}");
+
+    // A raster in another CRS PROJ relates to the DEM's (WGS 84 / UTM 18N
+    // against NAD83 / UTM 18N) passes the CRS check made at once.
+    let r = post(
+        &server.url("/api/v1/dems?crs=EPSG:32618&file_name=classes.asc&name=landcover-wgs84"),
+        "text/plain",
+        grid.as_bytes(),
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    let wgs84_id = r.json()["id"].as_str().unwrap().to_string();
+    let job = create(
+        &server,
+        &json!({"dem_id": dem_id, "options": {
+            "landcover": {"source": wgs84_id, "classes": [{"code": 1, "cost": 3.0}]}
+        }}),
+    );
+    let url = server.url(job["urls"]["self"].as_str().unwrap());
+    assert_eq!(delete(&url).status, 204);
 }
 
 #[test]
@@ -775,6 +793,18 @@ fn costmap_request_faults() {
         "/options/landcover/source",
         "no-such-raster",
     );
+    // A fault of the DEM itself is named at /dem_id, not under /options.
+    let tiny = post(
+        &server.url("/api/v1/dems?crs=EPSG:26918&file_name=tiny.asc&name=tiny"),
+        "text/plain",
+        b"ncols 2\nnrows 2\nxllcorner 321498\nyllcorner 4297500\ncellsize 2\n1 2\n3 4\n",
+    );
+    assert_eq!(tiny.status, 201, "{}", tiny.text());
+    let tiny_id = tiny.json()["id"].as_str().unwrap().to_string();
+    let r = post_json(&url, &json!({"dem_id": tiny_id}));
+    assert_invalid_at(&r, "2 × 2 DEM", "/dem_id", "2 × 2");
+    let p = r.json();
+    assert_eq!(p["errors"].as_array().unwrap().len(), 1, "{p}");
     invalid(
         "name",
         json!({"dem_id": dem_id, "name": "n".repeat(201)}),
@@ -1038,6 +1068,9 @@ fn costmaps_in_the_openapi_document() {
     let post = &paths["/api/v1/costmaps"]["post"];
     assert!(post["responses"]["202"].is_object());
     assert!(post["responses"]["422"].is_object());
+    // Reading a DEM not in memory waits for a planner thread, and gives up
+    // with a 503 when none frees in time.
+    assert!(post["responses"]["503"].is_object());
     assert!(paths["/api/v1/costmaps/{id}/costmap.tif"]["get"]["responses"]["409"].is_object());
     assert!(
         paths["/api/v1/costmaps/{id}/events"]["get"]["responses"]["200"]["content"]

@@ -131,7 +131,9 @@ pub fn check_against_dem(
         issues.push(Issue::new(
             "/dem_id",
             &format!(
-                "the DEM's cells range from {narrowest:.3e} to {widest:.3e} m across (it reaches                  too near a pole); costmaps need cells at most {MAX_CELL_ASPECT} times longer                  than wide"
+                "the DEM's cells range from {narrowest:.3e} to {widest:.3e} m across (it reaches \
+                 too near a pole); costmaps need cells at most {MAX_CELL_ASPECT} times longer \
+                 than wide"
             ),
         ));
         return issues;
@@ -211,7 +213,8 @@ pub fn check_against_dem(
         issues.push(Issue::new(
             &format!("{prefix}/inflation_sigma_m"),
             &format!(
-                "{} m spans {:.0} cells of {cell:.3} m; with inflation blur at most                  {MAX_RADIUS_CELLS} are allowed (inflation distance has no such limit)",
+                "{} m spans {:.0} cells of {cell:.3} m; with inflation blur at most \
+                 {MAX_RADIUS_CELLS} are allowed (inflation distance has no such limit)",
                 p.inflation_sigma_m,
                 p.inflation_sigma_m / cell
             ),

@@ -7,6 +7,7 @@
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Json;
@@ -20,7 +21,7 @@ use planner_core::costmap::{
     CostmapOptions, CostmapStats, Layer, ResolvedParams, Stage, Vehicle, VehicleSpec,
 };
 use planner_core::geo::Issue;
-use planner_core::terrain::Crs;
+use planner_core::terrain::{Crs, Dem, TerrainSampler};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -411,6 +412,35 @@ fn dem_fault(e: ApiError, pointer: &str, id: &str) -> ApiError {
     }
 }
 
+/// A fault at `/options/landcover/source` when PROJ cannot relate the
+/// land-cover raster's CRS to the DEM's (the job samples the raster at
+/// each costmap cell, given in the DEM's CRS).
+async fn landcover_crs_fault(
+    dem: &Arc<Dem>,
+    landcover: Arc<Dem>,
+) -> Result<Option<Issue>, ApiError> {
+    let dem_crs = dem.crs.clone();
+    // Building a PROJ transformation reads PROJ's database: off the
+    // async runtime (and the sampler, holding it, is not `Send`).
+    let fault = tokio::task::spawn_blocking(move || {
+        TerrainSampler::new(&landcover, dem_crs.epsg)
+            .err()
+            .map(|e| (landcover.crs.clone(), e))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(format!("land-cover CRS check failed: {e}")))?;
+    Ok(fault.map(|(landcover_crs, e)| {
+        Issue::new(
+            "/options/landcover/source",
+            &format!(
+                "the land-cover raster's CRS EPSG:{} ({}) cannot be related to the DEM's CRS \
+                 EPSG:{} ({}): {e}; upload the land-cover raster in the DEM's CRS",
+                landcover_crs.epsg, landcover_crs.name, dem.crs.epsg, dem.crs.name
+            ),
+        )
+    }))
+}
+
 /// Ask for a costmap of an uploaded DEM: checked at once (every fault by
 /// JSON pointer, including those that depend on the DEM, such as a
 /// working resolution finer than its cells), then built in the background
@@ -429,7 +459,7 @@ fn dem_fault(e: ApiError, pointer: &str, id: &str) -> ApiError {
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid request (unknown DEM, vehicle or options out of range, options that do not fit the DEM): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The DEM (or land-cover raster) had to be read again from storage and no planner thread became free in time, or the service is shutting down; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn create_costmap(
@@ -442,18 +472,24 @@ pub async fn create_costmap(
         .await
         .map_err(|e| dem_fault(e, "/dem_id", &req.dem_id))?;
     let mut issues = Vec::new();
-    if let Some(l) = &req.options.landcover
-        && state.db.get_dem_meta(&l.source).await?.is_none()
-    {
-        issues.push(Issue::new(
-            "/options/landcover/source",
-            &format!(
-                "no DEM with id {:?}: upload the land-cover raster with POST /api/v1/dems and \
-                 give its id",
-                l.source
-            ),
-        ));
+    if let Some(l) = &req.options.landcover {
+        // Loaded (and cached for the job) to check its CRS against the
+        // DEM's now rather than fail the job later.
+        match state.load_dem(&l.source).await {
+            Ok(landcover) => issues.extend(landcover_crs_fault(&dem, landcover).await?),
+            Err(ApiError::NotFound(_)) => issues.push(Issue::new(
+                "/options/landcover/source",
+                &format!(
+                    "no DEM with id {:?}: upload the land-cover raster with POST /api/v1/dems \
+                     and give its id",
+                    l.source
+                ),
+            )),
+            Err(e) => return Err(e),
+        }
     }
+    // Faults of the DEM itself (too small a grid, cells near a pole) come
+    // named at /dem_id, the rest under /options: passed on as they are.
     issues.extend(check_against_dem(
         &dem,
         &req.vehicle,
@@ -966,6 +1002,59 @@ mod tests {
         let p = pointers(parse_request(&json!({"vehicle": {"preset": "tank"}})));
         assert_eq!(p, ["/dem_id", "/vehicle/preset"]);
         assert_eq!(pointers(parse_request(&json!([1]))), [""]);
+    }
+
+    /// A 2 × 2 raster in `EPSG:epsg` (the CRS is not looked up).
+    fn raster(epsg: u32) -> Arc<Dem> {
+        Arc::new(Dem {
+            width: 2,
+            height: 2,
+            values: vec![1.0; 4],
+            nodata: None,
+            transform: planner_core::terrain::GeoTransform {
+                origin_x: 500_000.0,
+                pixel_width: 1.0,
+                row_rotation: 0.0,
+                origin_y: 5_000_000.0,
+                col_rotation: 0.0,
+                pixel_height: -1.0,
+            },
+            crs: Crs {
+                epsg,
+                name: format!("test CRS {epsg}"),
+                geographic: false,
+            },
+            format: planner_core::terrain::DemFormat::Asc,
+        })
+    }
+
+    // Every pair of CRSs a raster can be uploaded in (PROJ relates each to
+    // WGS84 at upload) is related by PROJ, if only by a ballpark
+    // transformation; so a land-cover raster whose CRS PROJ cannot relate
+    // to the DEM's is made here, with a code PROJ does not know.
+    #[tokio::test]
+    async fn landcover_crs_is_checked_against_the_dem() {
+        let dem = raster(32633);
+        let fault = landcover_crs_fault(&dem, raster(999_999))
+            .await
+            .unwrap()
+            .expect("a fault");
+        assert_eq!(fault.pointer, "/options/landcover/source");
+        let says = fault.to_string();
+        assert!(
+            says.contains("EPSG:999999 (test CRS 999999)")
+                && says.contains("EPSG:32633 (test CRS 32633)"),
+            "{says}"
+        );
+        for related in [32633, 4326, 26918] {
+            assert!(
+                landcover_crs_fault(&dem, raster(related))
+                    .await
+                    .unwrap()
+                    .is_none(),
+                "EPSG:{related}"
+            );
+        }
     }
 
     #[test]
