@@ -7,6 +7,9 @@ use rayon::prelude::*;
 
 use super::Class;
 
+/// Cells per parallel task of the statistics pass.
+const CHUNK: usize = 1 << 16;
+
 /// Class counts, cost bins, min, max, sum and count of traversable costs.
 type Tally = ([u64; 6], [u64; HISTOGRAM_BINS], f64, f64, f64, u64);
 
@@ -80,18 +83,21 @@ pub fn costmap_stats(
     // One parallel pass: class counts, and min / max / sum / bins of the
     // traversable costs.
     let (counts, bins, min, max, sum, n) = cost
-        .par_iter()
-        .zip(class)
-        .fold(empty_tally, |mut t, (&c, &k)| {
-            t.0[usize::from(k.min(5))] += 1;
-            if k == Class::Traversable as u8 && c.is_finite() {
-                let c = f64::from(c);
-                t.2 = t.2.min(c);
-                t.3 = t.3.max(c);
-                t.4 += c;
-                t.5 += 1;
-                let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
-                t.1[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+        .par_chunks(CHUNK)
+        .zip(class.par_chunks(CHUNK))
+        .map(|(costs, classes)| {
+            let mut t = empty_tally();
+            for (&c, &k) in costs.iter().zip(classes) {
+                t.0[usize::from(k.min(5))] += 1;
+                if k == Class::Traversable as u8 && c.is_finite() {
+                    let c = f64::from(c);
+                    t.2 = t.2.min(c);
+                    t.3 = t.3.max(c);
+                    t.4 += c;
+                    t.5 += 1;
+                    let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
+                    t.1[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+                }
             }
             t
         })
