@@ -192,23 +192,27 @@ impl FullWindow {
         let mz = sz / n;
         let (p, q) = (sxz / n, syz / n);
         let c = szz / n - mz * mz;
-        let f = |l: f64| c - l - p * p / (a - l) - q * q / (b - l);
-        let fd = |l: f64| -1.0 - p * p / ((a - l) * (a - l)) - q * q / ((b - l) * (b - l));
+        let (pp, qq) = (p * p, q * q);
+        // f(λ), f′(λ) and the reciprocals 1/(a − λ), 1/(b − λ) they share.
+        let eval = |l: f64| {
+            let (ia, ib) = (1.0 / (a - l), 1.0 / (b - l));
+            (c - l - pp * ia - qq * ib, -1.0 - pp * ia * ia - qq * ib * ib, ia, ib)
+        };
         let hi0 = a.min(b);
         let (mut lo, mut hi) = (0.0, hi0);
         let mut l = 0.0;
-        let mut fl = f(0.0);
+        let (mut fl, mut dl, mut ia, mut ib) = eval(0.0);
         let scale = a + b + c.abs();
         if fl > 1e-15 * scale {
             let mut converged = false;
             for _ in 0..30 {
-                let mut next = l - fl / fd(l);
+                let mut next = l - fl / dl;
                 if !(next > lo && next < hi) {
                     next = 0.5 * (lo + hi);
                 }
                 let step = (next - l).abs();
                 l = next;
-                fl = f(l);
+                (fl, dl, ia, ib) = eval(l);
                 if fl > 0.0 {
                     lo = l;
                 } else {
@@ -222,11 +226,9 @@ impl FullWindow {
             if !converged || hi0 - l < 1e-6 * hi0 {
                 return None;
             }
-        } else {
-            l = 0.0;
         }
-        let gx = p / (a - l);
-        let gy = q / (b - l);
+        let gx = p * ia;
+        let gy = q * ib;
         Some((1.0 / (1.0 + gx * gx + gy * gy).sqrt(), l.max(0.0).sqrt()))
     }
 }
