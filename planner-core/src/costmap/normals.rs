@@ -196,7 +196,12 @@ impl FullWindow {
         // f(λ), f′(λ) and the reciprocals 1/(a − λ), 1/(b − λ) they share.
         let eval = |l: f64| {
             let (ia, ib) = (1.0 / (a - l), 1.0 / (b - l));
-            (c - l - pp * ia - qq * ib, -1.0 - pp * ia * ia - qq * ib * ib, ia, ib)
+            (
+                c - l - pp * ia - qq * ib,
+                -1.0 - pp * ia * ia - qq * ib * ib,
+                ia,
+                ib,
+            )
         };
         let hi0 = a.min(b);
         let (mut lo, mut hi) = (0.0, hi0);
