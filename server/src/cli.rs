@@ -3,7 +3,7 @@
 //! DEM as the service does. Exit status: 0 success, 2 invalid input (the
 //! message names the fault), 1 any other failure.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -514,29 +514,39 @@ fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
         std::fs::write(path, content)
             .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
     };
-    let tiff = |f: &dyn Fn(&mut std::io::Cursor<Vec<u8>>) -> std::io::Result<bool>| {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        f(&mut buf)
-            .map(|kept| kept.then(|| buf.into_inner()))
-            .map_err(|e| Failure::other(format!("cannot encode a GeoTIFF: {e}")))
+    // GeoTIFFs straight to their files: a 4000 × 4000 costmap is 128 MB,
+    // not worth holding in memory a second time.
+    let tiff = |path: &Path,
+                f: &dyn Fn(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<bool>|
+     -> Result<bool, Failure> {
+        let failed =
+            |e: std::io::Error| Failure::other(format!("cannot write {}: {e}", path.display()));
+        let file = std::fs::File::create(path).map_err(failed)?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+        let kept = f(&mut w).map_err(failed)?;
+        w.flush().map_err(failed)?;
+        if !kept {
+            drop(w);
+            let _ = std::fs::remove_file(path);
+        }
+        Ok(kept)
     };
-    if let Some(data) = tiff(&|w| map.write_geotiff(w).map(|()| true))? {
-        write(&out.join("costmap.tif"), &data)?;
-    }
+    tiff(&out.join("costmap.tif"), &|w| {
+        map.write_geotiff(w).map(|()| true)
+    })?;
     write(
         &out.join("preview.png"),
         &preview_png(&map, crate::costmap_jobs::PREVIEW_MAX_SIDE),
     )?;
     write(&out.join("legend.svg"), legend_svg(&map).as_bytes())?;
     let mut kept = Vec::new();
+    if !map.layers.is_empty() {
+        std::fs::create_dir_all(&layers_dir)
+            .map_err(|e| Failure::other(format!("cannot create {}: {e}", layers_dir.display())))?;
+    }
     for (layer, _) in &map.layers {
-        if let Some(data) = tiff(&|w| map.write_layer_geotiff(*layer, w))? {
-            if kept.is_empty() {
-                std::fs::create_dir_all(&layers_dir).map_err(|e| {
-                    Failure::other(format!("cannot create {}: {e}", layers_dir.display()))
-                })?;
-            }
-            write(&layers_dir.join(format!("{}.tif", layer.name())), &data)?;
+        let path = layers_dir.join(format!("{}.tif", layer.name()));
+        if tiff(&path, &|w| map.write_layer_geotiff(*layer, w))? {
             kept.push(*layer);
         }
     }
