@@ -28,8 +28,14 @@ pub fn inflation(
         InflationMode::Distance => {
             let mut v = squared_distance_f32(obstacle, width, height, sx, sy);
             let k = 1.0 / (2.0 * sigma_m * sigma_m);
-            v.par_iter_mut()
-                .for_each(|d2| *d2 = (-(f64::from(*d2)) * k).exp() as f32);
+            v.par_chunks_mut(1 << 16).for_each(|chunk| {
+                for d2 in chunk {
+                    let x = f64::from(*d2) * k;
+                    // exp(−40) ≈ 4e−18: nothing at f32 precision, and most
+                    // cells are that far from any obstacle.
+                    *d2 = if x > 40.0 { 0.0 } else { (-x).exp() as f32 };
+                }
+            });
             v
         }
         InflationMode::Blur => {
