@@ -24,7 +24,7 @@ use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::api::{costmaps, dems, health, surveys};
+use crate::api::{costmaps, dems, health, surveys, vehicles};
 use crate::config::ServeConfig;
 use crate::costmap_jobs::CostmapJobs;
 use crate::db::Db;
@@ -254,6 +254,7 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .routes(routes!(costmaps::preview))
         .routes(routes!(costmaps::legend))
         .routes(routes!(costmaps::layer))
+        .routes(routes!(vehicles::list_vehicles))
         .split_for_parts();
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();

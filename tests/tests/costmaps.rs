@@ -713,6 +713,31 @@ fn landcover_raster_costs_and_lethal_classes() {
     assert_eq!(delete(&url).status, 204);
 }
 
+/// `GET /api/v1/vehicles` lists the presets with their numbers, the
+/// thesis' U-Go first, and each listed name is accepted as a preset.
+#[test]
+fn vehicle_presets_are_listed_and_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("data"), &[]);
+    let r = get(&server.url("/api/v1/vehicles"));
+    assert_eq!(r.status, 200, "{}", r.text());
+    let items = r.json()["items"].as_array().unwrap().clone();
+    let names: Vec<&str> = items.iter().map(|v| v["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["u-go", "small-wheeled", "large-skid-steer"]);
+    assert_eq!(items[0]["max_step_m"], 0.15);
+    assert_eq!(items[0]["max_slope_deg"], 25.0);
+    assert_eq!(items[0]["w_infl"], 10.0);
+    assert_eq!(items[0]["w_slope"], 1.0);
+    let dem_id = upload(&server, &dtm());
+    for name in names {
+        let job = create(
+            &server,
+            &json!({"dem_id": dem_id, "vehicle": {"preset": name}}),
+        );
+        assert_eq!(job["vehicle"]["name"], name);
+    }
+}
+
 #[test]
 fn costmap_request_faults() {
     let dir = tempfile::tempdir().unwrap();
@@ -1055,6 +1080,7 @@ fn costmaps_in_the_openapi_document() {
         ("/api/v1/costmaps/{id}/preview.png", &["get"]),
         ("/api/v1/costmaps/{id}/legend.svg", &["get"]),
         ("/api/v1/costmaps/{id}/layers/{file}", &["get"]),
+        ("/api/v1/vehicles", &["get"]),
     ] {
         for m in methods {
             let op = &paths[path][m];

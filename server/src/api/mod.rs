@@ -6,3 +6,4 @@ pub mod health;
 pub mod json_body;
 pub mod paging;
 pub mod surveys;
+pub mod vehicles;
