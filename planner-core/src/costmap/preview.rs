@@ -7,6 +7,7 @@
 //! the worst obstacle in its block, so one-cell walls stay visible.
 
 use super::{Class, Costmap};
+use crate::export::xml_escape;
 
 /// RGB of each obstacle class and of unknown cells (drawn transparent).
 pub fn class_colour(class: Class) -> [u8; 3] {
@@ -136,11 +137,4 @@ pub fn legend_svg(map: &Costmap) -> String {
         100.0 * f.unknown
     );
     s
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
 }

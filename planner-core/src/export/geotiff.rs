@@ -27,6 +27,7 @@
 use std::io::{self, Seek, Write};
 use std::ops::Range;
 
+use super::xml_escape;
 use crate::terrain::{Crs, GeoTransform};
 
 /// The cells of one band, row-major with row 0 first (the top row of a
@@ -591,25 +592,6 @@ fn gdal_metadata(bands: &[Band<'_>]) -> Option<String> {
     }
     xml.push_str("</GDALMetadata>");
     any.then_some(xml)
-}
-
-/// `text` escaped for XML character data, without the control characters
-/// XML 1.0 forbids (and NUL, which would end the TIFF ASCII value).
-fn xml_escape(text: &str) -> String {
-    let mut s = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => s.push_str("&amp;"),
-            '<' => s.push_str("&lt;"),
-            '>' => s.push_str("&gt;"),
-            '"' => s.push_str("&quot;"),
-            '\'' => s.push_str("&apos;"),
-            '\t' | '\n' | '\r' => s.push(c),
-            c if c.is_control() => {}
-            c => s.push(c),
-        }
-    }
-    s
 }
 
 /// The `GDAL_NODATA` text: `nan`, `inf`, `-inf` as GDAL writes them,

@@ -3,14 +3,7 @@
 use std::fmt::Write;
 
 use super::mission::{AltitudeFrame, Mission};
-
-/// Escape text for XML character data and attribute values.
-fn xml(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
+use super::xml_escape;
 
 /// A KML document with the route of `mission` as a 3D LineString and each
 /// cell ring (lon/lat, closed) as a Polygon. Terrain-frame altitudes are
@@ -26,7 +19,7 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
     let mut out = String::new();
     let _ = writeln!(out, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
     let _ = writeln!(out, r#"<kml xmlns="http://www.opengis.net/kml/2.2">"#);
-    let _ = writeln!(out, "<Document>\n<name>{}</name>", xml(name));
+    let _ = writeln!(out, "<Document>\n<name>{}</name>", xml_escape(name));
     let _ = writeln!(
         out,
         "<Style id=\"route\"><LineStyle><color>ff0000ff</color><width>2</width></LineStyle></Style>"
@@ -55,7 +48,7 @@ pub fn write_kml(name: &str, mission: &Mission, cells: &[(String, Vec<[f64; 2]>)
         let _ = writeln!(
             out,
             "<Placemark>\n<name>{}</name>\n<styleUrl>#cell</styleUrl>",
-            xml(cell_name)
+            xml_escape(cell_name)
         );
         let _ = writeln!(
             out,
