@@ -1,8 +1,9 @@
 //! Helpers for the end-to-end tests in `tests/`: locate the real
 //! `terraplan` binary, the shared test data and the validators' venv.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
@@ -355,4 +356,44 @@ pub fn assert_invalid_at(r: &Reply, what: &str, pointer: &str, detail_has: &str)
         errors.iter().any(|e| e["pointer"] == pointer),
         "{what}: pointer {pointer:?} not in {p}"
     );
+}
+
+/// Runs an external tool (GDAL's command-line tools, mostly) with `input`
+/// on its standard input, asserts it succeeded and returns its output.
+pub fn run_tool(cmd: &str, args: &[&str], input: Option<&str>) -> String {
+    let mut child = Command::new(cmd)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot run {cmd} (GDAL's tools are needed): {e}"));
+    let mut stdin = child.stdin.take().unwrap();
+    let feed = input.unwrap_or("").to_string();
+    let writer = std::thread::spawn(move || {
+        let _ = stdin.write_all(feed.as_bytes());
+    });
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd} {args:?} failed: {}",
+        text(&out.stderr)
+    );
+    text(&out.stdout)
+}
+
+/// The width and height in a PNG's IHDR chunk.
+pub fn png_size(png: &[u8]) -> (u32, u32) {
+    assert!(
+        png.len() > 24 && png.starts_with(b"\x89PNG\r\n\x1a\n") && &png[12..16] == b"IHDR",
+        "not a PNG"
+    );
+    let be = |b: &[u8]| u32::from_be_bytes(b.try_into().unwrap());
+    (be(&png[16..20]), be(&png[20..24]))
+}
+
+/// `a` and `b` within `tol` of each other (absolute).
+pub fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
 }

@@ -8,15 +8,14 @@
 //! and `terraplan costmap`. Runs on SQLite, and on PostgreSQL when the
 //! test command sets `TERRAPLAN_TEST_DATABASE_URL`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_invalid_at, assert_problem, delete, get, get_with_headers,
-    get_with_timeout, post, post_json, shared_data, sse_events, terraplan, text,
+    Reply, Server, assert_invalid_at, assert_problem, close, delete, get, get_with_headers,
+    get_with_timeout, png_size, post, post_json, run_tool, shared_data, sse_events, terraplan,
+    text,
 };
 
 /// Long enough for any job here, on a loaded machine.
@@ -91,50 +90,21 @@ fn file(server: &Server, url: &str) -> Reply {
     get(&server.url(url))
 }
 
-/// The width and height in a PNG's IHDR chunk.
-fn png_size(png: &[u8]) -> (u32, u32) {
-    assert!(
-        png.len() > 24 && png.starts_with(b"\x89PNG\r\n\x1a\n") && &png[12..16] == b"IHDR",
-        "not a PNG"
-    );
-    let be = |b: &[u8]| u32::from_be_bytes(b.try_into().unwrap());
-    (be(&png[16..20]), be(&png[20..24]))
-}
-
 // ---------------------------------------------------------------- GDAL
 
-fn run(cmd: &str, args: &[&str], input: Option<&str>) -> String {
-    let mut child = Command::new(cmd)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("cannot run {cmd} (GDAL's tools are needed): {e}"));
-    let mut stdin = child.stdin.take().unwrap();
-    let feed = input.unwrap_or("").to_string();
-    let writer = std::thread::spawn(move || {
-        let _ = stdin.write_all(feed.as_bytes());
-    });
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd} {args:?} failed: {}",
-        text(&out.stderr)
-    );
-    text(&out.stdout)
-}
-
 fn gdalinfo(path: &Path) -> Value {
-    serde_json::from_str(&run("gdalinfo", &["-json", path.to_str().unwrap()], None))
-        .expect("gdalinfo JSON")
+    serde_json::from_str(&run_tool(
+        "gdalinfo",
+        &["-json", path.to_str().unwrap()],
+        None,
+    ))
+    .expect("gdalinfo JSON")
 }
 
 /// Every value of band `band`, row-major from the top row (NaN for nan).
 fn band_values(path: &Path, band: usize) -> Vec<f64> {
     let b = band.to_string();
-    run(
+    run_tool(
         "gdal_translate",
         &[
             "-q",
@@ -159,7 +129,7 @@ fn band_values(path: &Path, band: usize) -> Vec<f64> {
 fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<f64> {
     let input: String = pixels.iter().map(|(c, r)| format!("{c} {r}\n")).collect();
     let b = band.to_string();
-    let out = run(
+    let out = run_tool(
         "gdallocationinfo",
         &["-valonly", "-b", &b, path.to_str().unwrap()],
         Some(&input),
@@ -174,10 +144,6 @@ fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<f64>
 
 fn epsg_of(info: &Value) -> Option<u64> {
     info["stac"]["proj:epsg"].as_u64()
-}
-
-fn close(a: f64, b: f64, tol: f64) -> bool {
-    (a - b).abs() <= tol
 }
 
 /// Save a download next to the test's files.

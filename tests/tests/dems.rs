@@ -8,13 +8,12 @@
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Part, Reply, Server, assert_problem, delete, get, get_with_headers, multipart_body, post,
-    post_json, post_multipart, shared_data, terraplan, text,
+    Part, Reply, Server, assert_problem, close, delete, get, get_with_headers, multipart_body,
+    png_size, post, post_json, post_multipart, run_tool, shared_data, terraplan, text,
 };
 
 /// A DEM to test with: its file, the CRS to give when the file has none,
@@ -116,34 +115,7 @@ fn created(r: &Reply) -> Value {
     dem
 }
 
-fn close(a: f64, b: f64, tol: f64) -> bool {
-    (a - b).abs() <= tol
-}
-
 // ---------------------------------------------------------------- GDAL
-
-fn run(cmd: &str, args: &[&str], input: Option<&str>) -> String {
-    let mut child = Command::new(cmd)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("cannot run {cmd} (GDAL's tools are needed): {e}"));
-    let mut stdin = child.stdin.take().unwrap();
-    let feed = input.unwrap_or("").to_string();
-    let writer = std::thread::spawn(move || {
-        let _ = stdin.write_all(feed.as_bytes());
-    });
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd} {args:?} failed: {}",
-        text(&out.stderr)
-    );
-    text(&out.stdout)
-}
 
 /// What GDAL says about a raster.
 struct Gdal {
@@ -161,7 +133,7 @@ struct Gdal {
 impl Gdal {
     fn read(path: &Path) -> Gdal {
         let p = path.to_str().unwrap();
-        let info: Value = serde_json::from_str(&run("gdalinfo", &["-json", "-mm", p], None))
+        let info: Value = serde_json::from_str(&run_tool("gdalinfo", &["-json", "-mm", p], None))
             .expect("gdalinfo JSON");
         let band = &info["bands"][0];
         let gt: Vec<f64> = info["geoTransform"]
@@ -170,7 +142,7 @@ impl Gdal {
             .iter()
             .map(|v| v.as_f64().unwrap())
             .collect();
-        let xyz = run(
+        let xyz = run_tool(
             "gdal_translate",
             &["-q", "-of", "XYZ", p, "/vsistdout/"],
             None,
@@ -240,7 +212,7 @@ impl Gdal {
 /// `gdallocationinfo -valonly` of each pixel.
 fn gdal_pixel_values(path: &Path, pixels: &[(usize, usize)]) -> Vec<f64> {
     let input: String = pixels.iter().map(|(c, r)| format!("{c} {r}\n")).collect();
-    let out = run(
+    let out = run_tool(
         "gdallocationinfo",
         &["-valonly", path.to_str().unwrap()],
         Some(&input),
@@ -257,7 +229,7 @@ fn to_wgs84(epsg: u32, points: &[(f64, f64)]) -> Vec<(f64, f64)> {
         .map(|(x, y)| format!("{x:.12} {y:.12}\n"))
         .collect();
     let s_srs = format!("EPSG:{epsg}");
-    let out = run(
+    let out = run_tool(
         "gdaltransform",
         &["-s_srs", &s_srs, "-t_srs", "EPSG:4326"],
         Some(&input),
@@ -271,16 +243,6 @@ fn to_wgs84(epsg: u32, points: &[(f64, f64)]) -> Vec<(f64, f64)> {
         .collect();
     assert_eq!(lonlat.len(), points.len(), "{out}");
     lonlat
-}
-
-/// The width and height in a PNG's IHDR chunk.
-fn png_size(png: &[u8]) -> (u32, u32) {
-    assert!(
-        png.len() > 24 && png.starts_with(b"\x89PNG\r\n\x1a\n") && &png[12..16] == b"IHDR",
-        "not a PNG"
-    );
-    let be = |b: &[u8]| u32::from_be_bytes(b.try_into().unwrap());
-    (be(&png[16..20]), be(&png[20..24]))
 }
 
 /// A synthetic SRTM3 tile (1201×1201 big-endian Int16, extent only in its
