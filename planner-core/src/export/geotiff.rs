@@ -347,15 +347,8 @@ fn validate(r: &Raster<'_>) -> io::Result<()> {
         }
     }
     let t = r.transform;
-    let all = [
-        t.origin_x,
-        t.pixel_width,
-        t.row_rotation,
-        t.origin_y,
-        t.col_rotation,
-        t.pixel_height,
-    ];
-    if all.iter().any(|v| !v.is_finite()) || t.invert(t.origin_x, t.origin_y).is_none() {
+    let all = t.coefficients();
+    if !t.is_regular() {
         return Err(invalid_input(format!(
             "the geotransform {all:?} is not finite and invertible"
         )));

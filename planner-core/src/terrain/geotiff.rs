@@ -837,15 +837,8 @@ fn georeferencing(ifd: &Ifd) -> Result<GeoTransform, TerrainError> {
             ));
         }
     };
-    let all = [
-        t.origin_x,
-        t.pixel_width,
-        t.row_rotation,
-        t.origin_y,
-        t.col_rotation,
-        t.pixel_height,
-    ];
-    if all.iter().any(|v| !v.is_finite()) || t.invert(t.origin_x, t.origin_y).is_none() {
+    let all = t.coefficients();
+    if !t.is_regular() {
         return Err(invalid(format!(
             "the TIFF's georeferencing is degenerate (transform {all:?})"
         )));

@@ -81,6 +81,25 @@ impl GeoTransform {
         )
     }
 
+    /// The six coefficients in GDAL's order.
+    pub fn coefficients(&self) -> [f64; 6] {
+        [
+            self.origin_x,
+            self.pixel_width,
+            self.row_rotation,
+            self.origin_y,
+            self.col_rotation,
+            self.pixel_height,
+        ]
+    }
+
+    /// Every coefficient finite and the transform invertible: a usable
+    /// georeferencing.
+    pub fn is_regular(&self) -> bool {
+        self.coefficients().iter().all(|v| v.is_finite())
+            && self.invert(self.origin_x, self.origin_y).is_some()
+    }
+
     /// Fractional pixel position of CRS coordinates (the inverse of
     /// [`GeoTransform::apply`]); `None` when the transform is singular.
     pub fn invert(&self, x: f64, y: f64) -> Option<(f64, f64)> {
