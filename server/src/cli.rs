@@ -369,15 +369,7 @@ fn describe_costmap_issues(
             None => format!("options{rest}"),
         }
     };
-    let lines: Vec<String> = issues
-        .iter()
-        .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
-        .collect();
-    if lines.len() == 1 {
-        format!("invalid input: {}", lines[0])
-    } else {
-        format!("invalid input:\n  {}", lines.join("\n  "))
-    }
+    list_issues(issues, locate)
 }
 
 fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
@@ -671,6 +663,12 @@ fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
             .map_or("params".to_string(), |p| p.display().to_string());
         format!("{file}#{ptr}")
     };
+    list_issues(issues, locate)
+}
+
+/// "invalid input: …" with each issue on its own line, its pointer turned
+/// into a place the user knows by `locate`.
+fn list_issues(issues: &[Issue], locate: impl Fn(&str) -> String) -> String {
     let lines: Vec<String> = issues
         .iter()
         .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
