@@ -286,6 +286,22 @@ pub fn build_costmap_owned(
     run(Cow::Owned(dem), vehicle, options, landcover, progress)
 }
 
+/// Passes progress on never lower than before: rows finish out of order
+/// on several threads, and the optional ditch stage runs between others.
+struct Monotone<'a> {
+    inner: &'a dyn Progress,
+    best: std::sync::Mutex<f64>,
+}
+
+impl Progress for Monotone<'_> {
+    fn report(&self, stage: Stage, done: f64) -> bool {
+        // Held while reporting, so reports also arrive in order.
+        let mut best = self.best.lock().unwrap_or_else(|p| p.into_inner());
+        *best = best.max(done);
+        self.inner.report(stage, *best)
+    }
+}
+
 fn run(
     dem: Cow<'_, Dem>,
     vehicle: &Vehicle,
@@ -293,6 +309,10 @@ fn run(
     landcover: Option<&Dem>,
     progress: &dyn Progress,
 ) -> Result<Costmap, CostmapError> {
+    let progress = &Monotone {
+        inner: progress,
+        best: std::sync::Mutex::new(0.0),
+    };
     let mut issues = options.validate("/options");
     if issues.is_empty() {
         issues = check_against_dem(&dem, vehicle, options, "/options");
@@ -1085,10 +1105,22 @@ mod tests {
             last.lock().unwrap().push((stage, done));
             true
         };
-        build_costmap(&d, &ugo(), &CostmapOptions::default(), None, &record).unwrap();
-        let seen = last.into_inner().unwrap();
-        assert!(seen.iter().all(|&(_, f)| (0.0..=1.0).contains(&f)));
-        assert!(seen.iter().any(|&(s, _)| s == Stage::Cost));
+        // With the ditch layer too, whose stage runs between the others.
+        let ditches = CostmapOptions {
+            negative_steps: Some(crate::costmap::NegativeStepOptions {
+                max_depth_m: None,
+                radius_m: None,
+            }),
+            ..Default::default()
+        };
+        for options in [CostmapOptions::default(), ditches] {
+            last.lock().unwrap().clear();
+            build_costmap(&d, &ugo(), &options, None, &record).unwrap();
+            let seen = last.lock().unwrap().clone();
+            assert!(seen.iter().all(|&(_, f)| (0.0..=1.0).contains(&f)));
+            assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
+            assert!(seen.iter().any(|&(s, _)| s == Stage::Cost));
+        }
         let stop = |stage: Stage, _: f64| stage != Stage::Normals;
         assert!(matches!(
             build_costmap(&d, &ugo(), &CostmapOptions::default(), None, &stop),
