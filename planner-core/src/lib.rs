@@ -6,6 +6,7 @@
 //! All planning geometry is in metres in a UTM zone (see [`geo::UtmProjection`]);
 //! WGS84 lon/lat only appears at the edges (input parsing and export).
 
+pub mod buffer;
 pub mod costmap;
 pub mod coverage;
 pub mod decompose;

@@ -380,6 +380,7 @@ fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
     };
 
     let started = std::time::Instant::now();
+    planner_core::buffer::keep_freed_grids();
     let presets = || {
         VehiclePreset::ALL
             .iter()
@@ -523,13 +524,18 @@ fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
         }
         Ok(kept)
     };
-    tiff(&out.join("costmap.tif"), &|w| {
-        map.write_geotiff(w).map(|()| true)
-    })?;
-    write(
-        &out.join("preview.png"),
-        &preview_png(&map, crate::costmap_jobs::PREVIEW_MAX_SIDE),
-    )?;
+    // The GeoTIFF is mostly writing, the preview mostly arithmetic: both
+    // at once.
+    let (written, preview) = std::thread::scope(|scope| {
+        let preview = scope.spawn(|| preview_png(&map, crate::costmap_jobs::PREVIEW_MAX_SIDE));
+        let written = tiff(&out.join("costmap.tif"), &|w| {
+            map.write_geotiff(w).map(|()| true)
+        });
+        (written, preview.join())
+    });
+    written?;
+    let preview = preview.map_err(|_| Failure::other("drawing the preview failed"))?;
+    write(&out.join("preview.png"), &preview)?;
     write(&out.join("legend.svg"), legend_svg(&map).as_bytes())?;
     let mut kept = Vec::new();
     if !map.layers.is_empty() {

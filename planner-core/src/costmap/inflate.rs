@@ -9,10 +9,8 @@
 //! d to the nearest obstacle cell, so the cost depends only on how near
 //! the obstacle is, not on how thick it is.
 
-use rayon::prelude::*;
-
 use super::InflationMode;
-use super::distance::squared_distance_f32;
+use super::distance::map_squared_distance_f32;
 use super::smooth::gaussian_smooth_truncated;
 
 /// Inflation of `obstacle` on a grid of `sx`×`sy` m cells with σ in metres.
@@ -26,17 +24,14 @@ pub fn inflation(
 ) -> Vec<f32> {
     match mode {
         InflationMode::Distance => {
-            let mut v = squared_distance_f32(obstacle, width, height, sx, sy);
             let k = 1.0 / (2.0 * sigma_m * sigma_m);
-            v.par_chunks_mut(1 << 16).for_each(|chunk| {
-                for d2 in chunk {
-                    let x = f64::from(*d2) * k;
-                    // exp(−40) ≈ 4e−18: nothing at f32 precision, and most
-                    // cells are that far from any obstacle.
-                    *d2 = if x > 40.0 { 0.0 } else { (-x).exp() as f32 };
-                }
-            });
-            v
+            map_squared_distance_f32(obstacle, width, height, sx, sy, |d2| {
+                let x = f64::from(d2) * k;
+                // exp(−40) ≈ 4e−18: nothing at f32 precision. Cutting it
+                // to 0 there lets the transform skip the cells that far
+                // from any obstacle, which are most.
+                if x > 40.0 { 0.0 } else { (-x).exp() as f32 }
+            })
         }
         InflationMode::Blur => {
             let mut g: Vec<f64> = obstacle.iter().map(|&o| f64::from(u8::from(o))).collect();
@@ -106,5 +101,42 @@ mod tests {
         assert!(thin[4 * w + 16] < 0.7 * thick[4 * w + 16]);
         // The kernel reaches (2·⌈2σ⌉+1) cells: σ = 2 cells → 4 cells out.
         assert!(thin[4 * w + 19] > 0.0 && thin[4 * w + 20] == 0.0);
+    }
+
+    #[test]
+    fn distance_mode_equals_the_gaussian_of_the_brute_force_distance() {
+        let mut state = 0x1f1a7e_u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut sizes = vec![(1, 1), (1, 3), (3, 1), (2, 3), (3, 3)];
+        sizes.extend((0..25).map(|_| (1 + (next() * 30.0) as usize, 1 + (next() * 90.0) as usize)));
+        for (w, h) in sizes {
+            let (sx, sy) = (0.2 + next() * 2.0, 0.2 + next() * 2.0);
+            for density in [0.0, 0.01, 0.1, 0.7, 1.0] {
+                let obstacle: Vec<bool> = (0..w * h).map(|_| next() < density).collect();
+                for sigma in [0.05, 0.52, 2.6, 30.0] {
+                    let got = inflation(&obstacle, w, h, [sx, sy], sigma, InflationMode::Distance);
+                    for (i, g) in got.iter().enumerate() {
+                        let (x, y) = ((i % w) as f64, (i / w) as f64);
+                        let d2 = (0..w * h)
+                            .filter(|&j| obstacle[j])
+                            .map(|j| {
+                                let (ox, oy) = ((j % w) as f64, (j / w) as f64);
+                                ((x - ox) * sx).powi(2) + ((y - oy) * sy).powi(2)
+                            })
+                            .fold(f64::INFINITY, f64::min);
+                        let want = (-d2 / (2.0 * sigma * sigma)).exp();
+                        assert!(
+                            (f64::from(*g) - want).abs() <= 1e-6,
+                            "{w}×{h} σ {sigma} cell {i}: {g} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
     }
 }

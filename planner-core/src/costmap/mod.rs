@@ -449,7 +449,7 @@ pub struct Costmap {
 pub enum Stage {
     Resample,
     Steps,
-    Smooth,
+    /// Smoothing and normals, band by band.
     Normals,
     Layers,
     Regions,
@@ -464,8 +464,7 @@ impl Stage {
         match self {
             Stage::Resample => (0.0, 0.05),
             Stage::Steps => (0.05, 0.15),
-            Stage::Smooth => (0.20, 0.10),
-            Stage::Normals => (0.30, 0.35),
+            Stage::Normals => (0.20, 0.45),
             Stage::Layers => (0.65, 0.05),
             Stage::Regions => (0.70, 0.10),
             Stage::Inflate => (0.80, 0.12),

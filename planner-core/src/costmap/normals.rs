@@ -17,6 +17,7 @@ use rayon::prelude::*;
 
 use super::CostmapError;
 use super::pipeline::Ticker;
+use super::smooth::Smoother;
 
 /// A cell's neighbourhood within `radius_m`, cells `sx`×`sy` metres:
 /// (column offset, row offset, x metres, y metres), the centre excluded.
@@ -38,64 +39,145 @@ pub fn neighbourhood(radius_m: f64, sx: f64, sy: f64) -> Vec<(isize, isize, f64,
     out
 }
 
+/// Rows per parallel task of [`normals`].
+const BAND_ROWS: usize = 32;
+
 /// Zcomp (and roughness, metres, when asked) of every cell of the
-/// `width`×`height` heights `z` (NaN = unknown). Cells with no valid
-/// neighbour are NaN. With fewer than 3 valid neighbours, or neighbours
-/// all on one line, no plane is defined: Zcomp is then the cosine of the
-/// steepest slope from the centre to a neighbour (a conservative bound)
-/// and the roughness 0.
+/// `width`×`height` heights `z` (NaN = unknown), smoothed first by
+/// `smoother` if given — band by band, so the smoothed grid is never held
+/// whole. Cells with no valid neighbour are NaN. With fewer than 3 valid
+/// neighbours, or neighbours all on one line, no plane is defined: Zcomp
+/// is then the cosine of the steepest slope from the centre to a
+/// neighbour (a conservative bound) and the roughness 0.
+#[allow(clippy::too_many_arguments)]
 pub fn normals(
     z: &[f64],
     width: usize,
     height: usize,
     row_size_m: &[[f64; 2]],
     radius_m: f64,
+    smoother: Option<&Smoother>,
     want_roughness: bool,
     ticker: &Ticker,
 ) -> Result<(Vec<f32>, Option<Vec<f32>>), CostmapError> {
-    let mut zcomp = vec![f32::NAN; width * height];
-    let mut rough = want_roughness.then(|| vec![f32::NAN; width * height]);
-    let row_job = |r: usize, zc_row: &mut [f32], rough_row: Option<&mut [f32]>| {
-        if !ticker.tick() {
-            return;
-        }
-        let [sx, sy] = row_size_m[r];
-        let hood = neighbourhood(radius_m, sx, sy);
-        let full = FullWindow::new(&hood, width);
-        let mut rough_row = rough_row;
-        let inner_rows = r >= full.reach_rows && r + full.reach_rows < height;
-        for c in 0..width {
-            let i = r * width + c;
-            let zc = z[i];
-            if zc.is_nan() {
-                continue;
+    let mut zcomp = crate::buffer::filled(width * height, f32::NAN);
+    let mut rough = want_roughness.then(|| crate::buffer::filled(width * height, f32::NAN));
+    if width == 0 || height == 0 {
+        return Ok((zcomp, rough));
+    }
+    // Rows above and below a row that its neighbourhood reads.
+    let reach = row_size_m
+        .iter()
+        .map(|&[sx, sy]| {
+            neighbourhood(radius_m, sx, sy)
+                .iter()
+                .map(|h| h.1.unsigned_abs())
+                .max()
+                .unwrap_or(0)
+        })
+        .max()
+        .unwrap_or(0);
+    let band_job = |b: usize,
+                    zc_band: &mut [f32],
+                    mut rough_band: Option<&mut [f32]>,
+                    (smoothed, scratch): &mut (Vec<f64>, Vec<f64>)| {
+        let r0 = b * BAND_ROWS;
+        let r1 = r0 + zc_band.len() / width;
+        // The rows the band's neighbourhoods read, smoothed if asked.
+        let (l0, l1) = (r0.saturating_sub(reach), (r1 + reach).min(height));
+        let local: &[f64] = match smoother {
+            Some(s) => {
+                smoothed.resize((l1 - l0) * width, 0.0);
+                s.smooth_rows(z, width, height, l0..l1, smoothed, scratch);
+                smoothed
             }
-            let inner = inner_rows && c >= full.reach_cols && c + full.reach_cols < width;
-            let fast = if inner { full.normal(z, i, zc) } else { None };
-            if let Some((n, rms)) = fast.or_else(|| cell_normal(z, width, height, r, c, zc, &hood))
-            {
-                zc_row[c] = n as f32;
-                if let Some(rr) = rough_row.as_deref_mut() {
-                    rr[c] = rms as f32;
-                }
+            None => &z[l0 * width..l1 * width],
+        };
+        for (k, zc_row) in zc_band.chunks_mut(width).enumerate() {
+            if !ticker.tick() {
+                return;
             }
+            let rough_row = rough_band
+                .as_deref_mut()
+                .map(|rb| &mut rb[k * width..(k + 1) * width]);
+            let r = r0 + k;
+            normal_row(
+                local,
+                width,
+                l1 - l0,
+                r - l0,
+                row_size_m[r],
+                radius_m,
+                zc_row,
+                rough_row,
+            );
         }
     };
+    let band = BAND_ROWS * width;
     match rough.as_mut() {
         Some(rough) => zcomp
-            .par_chunks_mut(width)
-            .zip(rough.par_chunks_mut(width))
+            .par_chunks_mut(band)
+            .zip(rough.par_chunks_mut(band))
             .enumerate()
-            .for_each(|(r, (a, b))| row_job(r, a, Some(b))),
+            .for_each_init(Default::default, |buf, (b, (a, r))| {
+                band_job(b, a, Some(r), buf)
+            }),
         None => zcomp
-            .par_chunks_mut(width)
+            .par_chunks_mut(band)
             .enumerate()
-            .for_each(|(r, a)| row_job(r, a, None)),
+            .for_each_init(Default::default, |buf, (b, a)| band_job(b, a, None, buf)),
     }
     if ticker.cancelled() {
         return Err(CostmapError::Cancelled);
     }
     Ok((zcomp, rough))
+}
+
+/// Zcomp (and roughness) of row `r` of the `width`×`height` heights `z`
+/// (a band of the grid with the rows its neighbourhoods read).
+#[allow(clippy::too_many_arguments)]
+fn normal_row(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    r: usize,
+    [sx, sy]: [f64; 2],
+    radius_m: f64,
+    zc_row: &mut [f32],
+    mut rough_row: Option<&mut [f32]>,
+) {
+    let hood = neighbourhood(radius_m, sx, sy);
+    let full = FullWindow::new(&hood, width);
+    let inner_rows = r >= full.reach_rows && r + full.reach_rows < height;
+    // The default 3 × 3 window: the whole row at once, then the cells it
+    // could not settle one by one.
+    let batched = inner_rows && width >= 3 && full.three_by_three.is_some();
+    let mut redo = Vec::new();
+    if batched {
+        full.row_3x3(z, r, zc_row, rough_row.as_deref_mut(), &mut redo);
+        redo.push(0);
+        redo.push(width - 1);
+    }
+    let cells: Box<dyn Iterator<Item = usize>> = if batched {
+        Box::new(redo.into_iter())
+    } else {
+        Box::new(0..width)
+    };
+    for c in cells {
+        let i = r * width + c;
+        let zc = z[i];
+        if zc.is_nan() {
+            continue;
+        }
+        let inner = inner_rows && c >= full.reach_cols && c + full.reach_cols < width;
+        let fast = if inner { full.normal(z, i, zc) } else { None };
+        if let Some((n, rms)) = fast.or_else(|| cell_normal(z, width, height, r, c, zc, &hood)) {
+            zc_row[c] = n as f32;
+            if let Some(rr) = rough_row.as_deref_mut() {
+                rr[c] = rms as f32;
+            }
+        }
+    }
 }
 
 /// A complete neighbourhood, all of whose cells are inside the grid: its
@@ -153,6 +235,48 @@ impl FullWindow {
             }),
             width,
         }
+    }
+
+    /// Zcomp (and roughness) of the cells 1 … width − 2 of inner row `r`
+    /// with the 3 × 3 window, in one branch-free pass the compiler can
+    /// vectorise: a fixed three Newton steps from λ = 0. Columns it cannot
+    /// settle (an unknown height, no convergence in three steps, λ near
+    /// min(a, b)) are left for [`FullWindow::normal`] and listed in `redo`.
+    fn row_3x3(
+        &self,
+        z: &[f64],
+        r: usize,
+        zc_out: &mut [f32],
+        rough_out: Option<&mut [f32]>,
+        redo: &mut Vec<usize>,
+    ) {
+        let w = self.width;
+        let [sx, sy] = self.three_by_three.expect("a 3 × 3 window");
+        let up = &z[(r - 1) * w..r * w];
+        let mid = &z[r * w..(r + 1) * w];
+        let down = &z[(r + 1) * w..(r + 2) * w];
+        let m = w - 2;
+        // λ per cell, NaN where the row pass could not settle it.
+        let mut settled = vec![0.0f64; m];
+        settle_row_3x3(
+            [up, mid, down],
+            [sx, sy],
+            [self.a, self.b, self.n],
+            &mut zc_out[1..m + 1],
+            &mut settled,
+        );
+        if let Some(rough) = rough_out {
+            for (o, &l) in rough[1..m + 1].iter_mut().zip(&settled) {
+                *o = if l > 0.0 {
+                    l.sqrt() as f32
+                } else if l == 0.0 {
+                    0.0
+                } else {
+                    f32::NAN
+                };
+            }
+        }
+        redo.extend((0..m).filter(|&k| settled[k].is_nan()).map(|k| k + 1));
     }
 
     /// (Zcomp, roughness) of the inner cell `i`; `None` when a neighbour
@@ -236,6 +360,78 @@ impl FullWindow {
         let gy = q * ib;
         Some((1.0 / (1.0 + gx * gx + gy * gy).sqrt(), l.max(0.0).sqrt()))
     }
+}
+
+/// The row pass of [`FullWindow::row_3x3`]: Zcomp into `zc_out` and λ into
+/// `settled` (NaN where not settled) for cells 1 … width − 2 of the rows
+/// `up`, `mid`, `down`. Compiled also for AVX2 and picked at run time;
+/// without `mul_add` the results are the same bits on every target.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn settle_row_3x3(
+    [up, mid, down]: [&[f64]; 3],
+    [sx, sy]: [f64; 2],
+    [a, b, n]: [f64; 3],
+    zc_out: &mut [f32],
+    settled: &mut [f64],
+) {
+    let m = settled.len();
+    let (ia0, ib0) = (1.0 / a, 1.0 / b);
+    let hi0 = a.min(b);
+    let inv_n = 1.0 / n;
+    // Slices of one length, indexed alike, so the loop has no bounds
+    // checks or branches and vectorises; column k is cell k + 1.
+    let (u0, u1, u2) = (&up[..m], &up[1..m + 1], &up[2..m + 2]);
+    let (m0, m1, m2) = (&mid[..m], &mid[1..m + 1], &mid[2..m + 2]);
+    let (d0_, d1_, d2_) = (&down[..m], &down[1..m + 1], &down[2..m + 2]);
+    let zc_out = &mut zc_out[..m];
+    for k in 0..m {
+        let zc = m1[k];
+        let (nw, no, ne) = (u0[k] - zc, u1[k] - zc, u2[k] - zc);
+        let (we, ea) = (m0[k] - zc, m2[k] - zc);
+        let (sw, so, se) = (d0_[k] - zc, d1_[k] - zc, d2_[k] - zc);
+        let sz = nw + no + ne + we + ea + sw + so + se;
+        let szz = nw * nw + no * no + ne * ne + we * we + ea * ea + sw * sw + so * so + se * se;
+        let p = sx * ((ne + ea + se) - (nw + we + sw)) * inv_n;
+        let q = sy * ((nw + no + ne) - (sw + so + se)) * inv_n;
+        let mz = sz * inv_n;
+        let cv = szz * inv_n - mz * mz;
+        let (pp, qq) = (p * p, q * q);
+        let scale = a + b + cv.abs();
+        // f(λ) = cv − λ − p²/(a − λ) − q²/(b − λ) is concave and falls,
+        // so from f(0) > 0 the first step lands at or past the root and
+        // the next ones come back to it monotonically.
+        let f0 = cv - pp * ia0 - qq * ib0;
+        let df0 = -1.0 - pp * ia0 * ia0 - qq * ib0 * ib0;
+        let plane = f0 <= 1e-15 * scale;
+        let l1 = -f0 / df0;
+        let (ia1, ib1) = reciprocals(a - l1, b - l1);
+        let f1 = cv - l1 - pp * ia1 - qq * ib1;
+        let df1 = -1.0 - pp * ia1 * ia1 - qq * ib1 * ib1;
+        let l2 = l1 - f1 / df1;
+        let (ia2, ib2) = reciprocals(a - l2, b - l2);
+        let f2 = cv - l2 - pp * ia2 - qq * ib2;
+        let df2 = -1.0 - pp * ia2 * ia2 - qq * ib2 * ib2;
+        let l3 = l2 - f2 / df2;
+        let (ia3, ib3) = reciprocals(a - l3, b - l3);
+        // `&`, not `&&`: no branches. NaN heights fail every test.
+        let good =
+            ((l3 - l2).abs() <= 1e-11 * scale) & (l1 < hi0) & (l3 > 0.0) & (hi0 - l3 >= 1e-6 * hi0);
+        let ok = plane | good;
+        let l = if plane { 0.0 } else { l3 };
+        let ia = if plane { ia0 } else { ia3 };
+        let ib = if plane { ib0 } else { ib3 };
+        let (gx, gy) = (p * ia, q * ib);
+        let zcomp = 1.0 / (1.0 + gx * gx + gy * gy).sqrt();
+        zc_out[k] = if ok { zcomp as f32 } else { f32::NAN };
+        settled[k] = if ok { l } else { f64::NAN };
+    }
+}
+
+/// (1/x, 1/y) with one division: dividing is most of the row pass's time.
+#[inline(always)]
+fn reciprocals(x: f64, y: f64) -> (f64, f64) {
+    let inv = 1.0 / (x * y);
+    (y * inv, x * inv)
 }
 
 /// (Zcomp, roughness) of cell (r, c) with height `zc`.
@@ -395,7 +591,8 @@ mod tests {
             let (w, h) = (9, 8);
             let z = tilted(w, h, cell, slope, az);
             let t = Ticker::new(&p, Stage::Normals, h);
-            let (zc, rough) = normals(&z, w, h, &vec![[cell, cell]; h], radius, true, &t).unwrap();
+            let (zc, rough) =
+                normals(&z, w, h, &vec![[cell, cell]; h], radius, None, true, &t).unwrap();
             let want = f64::to_radians(slope).cos();
             for (i, (&got, &rms)) in zc.iter().zip(rough.as_ref().unwrap()).enumerate() {
                 assert!(
@@ -483,6 +680,76 @@ mod tests {
     }
 
     #[test]
+    fn smoothing_band_by_band_equals_smoothing_the_whole_grid_first() {
+        let p = quiet();
+        let (w, h) = (45, 101);
+        let mut s = 3u64;
+        let z: Vec<f64> = (0..w * h)
+            .map(|i| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = (s >> 11) as f64 / (1u64 << 53) as f64;
+                if i % 97 == 11 {
+                    f64::NAN
+                } else {
+                    800.0 + 0.3 * (i % w) as f64 + 0.5 * noise
+                }
+            })
+            .collect();
+        let rows = vec![[0.5, 0.6]; h];
+        for radius in [0.9, 1.5, 2.3] {
+            let smoother = Smoother::new(0.8, 1.1, 3.0).unwrap();
+            let t = Ticker::new(&p, Stage::Normals, h);
+            let (banded, rough_banded) =
+                normals(&z, w, h, &rows, radius, Some(&smoother), true, &t).unwrap();
+            let mut smoothed = z.clone();
+            smoother.smooth_grid(&mut smoothed, w, h);
+            let (whole, rough_whole) =
+                normals(&smoothed, w, h, &rows, radius, None, true, &t).unwrap();
+            let same =
+                |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same(&banded, &whole), "radius {radius}");
+            assert!(same(&rough_banded.unwrap(), &rough_whole.unwrap()));
+        }
+    }
+
+    #[test]
+    fn the_row_pass_equals_the_cell_by_cell_window() {
+        // Rough, tilted ground: the row pass settles most cells; each must
+        // agree with the safeguarded one-cell solver.
+        let p = quiet();
+        let (w, h) = (60, 5);
+        let mut s = 17u64;
+        let z: Vec<f64> = (0..w * h)
+            .map(|i| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let noise = (s >> 11) as f64 / (1u64 << 53) as f64;
+                let roughness = [0.0, 0.01, 0.1, 1.0][(i % w) / 15];
+                1200.0 + 0.4 * (i % w) as f64 - 0.7 * (i / w) as f64 + roughness * noise
+            })
+            .collect();
+        let t = Ticker::new(&p, Stage::Normals, h);
+        let (zc, rough) = normals(&z, w, h, &[[1.0, 1.2]; 5], 1.6, None, true, &t).unwrap();
+        let hood = neighbourhood(1.6, 1.0, 1.2);
+        let full = FullWindow::new(&hood, w);
+        for r in 1..h - 1 {
+            for c in 1..w - 1 {
+                let i = r * w + c;
+                let (want, want_rms) = full
+                    .normal(&z, i, z[i])
+                    .or_else(|| cell_normal(&z, w, h, r, c, z[i], &hood))
+                    .unwrap();
+                assert!((f64::from(zc[i]) - want).abs() < 1e-7, "{r} {c}");
+                let rms = f64::from(rough.as_ref().unwrap()[i]);
+                assert!((rms - want_rms).abs() < 1e-6 * (1.0 + want_rms), "{r} {c}");
+            }
+        }
+    }
+
+    #[test]
     fn few_neighbours_fall_back_to_the_steepest_slope() {
         let p = quiet();
         // A 3×3 grid with only the centre, one east neighbour (rise 1 m in
@@ -495,11 +762,11 @@ mod tests {
             n, n, n,
         ];
         let t = Ticker::new(&p, Stage::Normals, 3);
-        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, false, &t).unwrap();
+        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, None, false, &t).unwrap();
         assert!((f64::from(zc[4]) - 45f64.to_radians().cos()).abs() < 1e-6);
         // A lone cell has no normal.
         let z = vec![n, n, n, n, 1.0, n, n, n, n];
-        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, false, &t).unwrap();
+        let (zc, _) = normals(&z, 3, 3, &[[1.0, 1.0]; 3], 1.5, None, false, &t).unwrap();
         assert!(zc[4].is_nan());
     }
 

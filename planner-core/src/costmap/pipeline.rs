@@ -12,7 +12,7 @@ use super::inflate::inflation;
 use super::landcover::landcover_costs;
 use super::normals::normals;
 use super::regions::fill_enclosed;
-use super::smooth::gaussian_smooth;
+use super::smooth::Smoother;
 use super::stats::costmap_stats;
 use super::steps::{depth_below_plane, step_heights};
 use super::{
@@ -22,6 +22,9 @@ use super::{
 use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
 use crate::geo::Issue;
 use crate::terrain::Dem;
+
+/// Cells per parallel task of the whole-grid passes.
+const CHUNK: usize = 1 << 14;
 
 /// Slope costs span [1, SLOPE_COST_MAX] (thesis §3.6.3: Zcomp remapped
 /// from [cos(max_slope), 1] to [10, 1]).
@@ -332,7 +335,7 @@ fn run(
 
     // 1. Working grid.
     Ticker::new(progress, Stage::Resample, 1).check()?;
-    let mut grid = work_grid(dem, params.resample_factor);
+    let grid = work_grid(dem, params.resample_factor);
     let (w, h) = (grid.width, grid.height);
     let [sx, sy] = grid.centre_size_m();
     coarse_warnings(&params, vehicle, [sx, sy], &mut warnings);
@@ -362,27 +365,26 @@ fn run(
         }
         None => None,
     };
-    let unknown_height: Vec<bool> = grid.z.par_iter().map(|v| v.is_nan()).collect();
+    let mut unknown_height = crate::buffer::filled(w * h, false);
+    unknown_height
+        .par_chunks_mut(CHUNK)
+        .zip(grid.z.par_chunks(CHUNK))
+        .for_each(|(u, z)| u.iter_mut().zip(z).for_each(|(u, z)| *u = z.is_nan()));
 
-    // 2. Smoothing and PCA normals.
-    let ticker = Ticker::new(progress, Stage::Smooth, 1);
-    if params.smoothing_sigma_m > 0.0 {
-        gaussian_smooth(
-            &mut grid.z,
-            w,
-            h,
-            params.smoothing_sigma_m / sx,
-            params.smoothing_sigma_m / sy,
-        );
-    }
-    ticker.check()?;
+    // 2. Smoothing and PCA normals, band by band.
     let ticker = Ticker::new(progress, Stage::Normals, h);
+    let smoother = Smoother::new(
+        params.smoothing_sigma_m / sx,
+        params.smoothing_sigma_m / sy,
+        3.0,
+    );
     let (zcomp, roughness) = normals(
         &grid.z,
         w,
         h,
         &grid.row_size_m,
         params.pca_radius_m,
+        smoother.as_ref(),
         options.roughness.is_some(),
         &ticker,
     )?;
@@ -399,32 +401,56 @@ fn run(
 
     // 3–5. Classes.
     let cos_max = vehicle.max_slope_deg.to_radians().cos();
-    let mut class = vec![Class::Unknown as u8; w * h];
-    class.par_iter_mut().enumerate().for_each(|(i, k)| {
-        let (s, zc) = (step[i], zcomp[i]);
-        if unknown_height[i] || s.is_nan() || zc.is_nan() {
-            return;
-        }
-        let ditch = negative
-            .as_ref()
-            .is_some_and(|(d, max)| f64::from(d[i]) > *max);
-        let rough = match (&roughness, &options.roughness) {
-            (Some(r), Some(o)) => f64::from(r[i]) > o.max_m,
-            _ => false,
-        };
-        let lethal = landcover_cost
-            .as_ref()
-            .is_some_and(|l| l[i] == f32::INFINITY);
-        *k = if f64::from(s) > vehicle.max_step_m || ditch {
-            Class::Step
-        } else if f64::from(zc) <= cos_max {
-            Class::Slope
-        } else if rough || lethal {
-            Class::Other
-        } else {
-            Class::Traversable
-        } as u8;
-    });
+    let mut class = crate::buffer::filled(w * h, Class::Unknown as u8);
+    let plain = negative.is_none() && roughness.is_none() && landcover_cost.is_none();
+    if plain {
+        // No optional layer: a loop without per-cell option checks. (A
+        // NaN step or Zcomp fails both tests and stays unknown.)
+        let max_step = vehicle.max_step_m;
+        class
+            .par_chunks_mut(CHUNK)
+            .zip(step.par_chunks(CHUNK).zip(zcomp.par_chunks(CHUNK)))
+            .for_each(|(ks, (ss, zs))| {
+                for ((k, &s), &zc) in ks.iter_mut().zip(ss).zip(zs) {
+                    let (s, zc) = (f64::from(s), f64::from(zc));
+                    *k = if s.is_nan() || zc.is_nan() {
+                        Class::Unknown
+                    } else if s > max_step {
+                        Class::Step
+                    } else if zc <= cos_max {
+                        Class::Slope
+                    } else {
+                        Class::Traversable
+                    } as u8;
+                }
+            });
+    } else {
+        class.par_iter_mut().enumerate().for_each(|(i, k)| {
+            let (s, zc) = (step[i], zcomp[i]);
+            if unknown_height[i] || s.is_nan() || zc.is_nan() {
+                return;
+            }
+            let ditch = negative
+                .as_ref()
+                .is_some_and(|(d, max)| f64::from(d[i]) > *max);
+            let rough = match (&roughness, &options.roughness) {
+                (Some(r), Some(o)) => f64::from(r[i]) > o.max_m,
+                _ => false,
+            };
+            let lethal = landcover_cost
+                .as_ref()
+                .is_some_and(|l| l[i] == f32::INFINITY);
+            *k = if f64::from(s) > vehicle.max_step_m || ditch {
+                Class::Step
+            } else if f64::from(zc) <= cos_max {
+                Class::Slope
+            } else if rough || lethal {
+                Class::Other
+            } else {
+                Class::Traversable
+            } as u8;
+        });
+    }
     let ticker = Ticker::new(progress, Stage::Regions, 1);
     fill_enclosed(&mut class, w, h, params.min_region_area_m2 / (sx * sy));
     ticker.check()?;
@@ -454,25 +480,43 @@ fn run(
     let ticker = Ticker::new(progress, Stage::Cost, 1);
     let slope_span = 1.0 - cos_max;
     let rough_opts = options.roughness.as_ref();
-    let mut cost = vec![f32::NAN; w * h];
-    cost.par_iter_mut().enumerate().for_each(|(i, c)| {
-        if class[i] != Class::Traversable as u8 {
-            return;
-        }
-        let zc = f64::from(zcomp[i]);
+    // The costs take the inflation's place (one grid less to allocate).
+    let inflation_layer = options
+        .layers
+        .contains(&Layer::Inflation)
+        .then(|| inflated.clone());
+    let mut cost = inflated;
+    let cost_of = |zc: f32, infl: f32| {
+        let zc = f64::from(zc);
         let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
-        let mut v = vehicle.w_infl * f64::from(inflated[i]) + vehicle.w_slope * slope_cost;
-        if let (Some(r), Some(o)) = (&roughness, rough_opts) {
-            v += o.weight * (f64::from(r[i]) / o.max_m).min(1.0);
-        }
-        if let Some(l) = &landcover_cost {
-            let lc = l[i];
-            if lc.is_finite() {
-                v += f64::from(lc);
+        vehicle.w_infl * f64::from(infl) + vehicle.w_slope * slope_cost
+    };
+    if roughness.is_none() && landcover_cost.is_none() {
+        // No optional cost: a loop without per-cell option checks.
+        let weights = [cos_max, slope_span, vehicle.w_infl, vehicle.w_slope];
+        cost.par_chunks_mut(CHUNK)
+            .zip(class.par_chunks(CHUNK))
+            .zip(zcomp.par_chunks(CHUNK))
+            .for_each(|((cs, ks), zs)| plain_costs(cs, ks, zs, weights));
+    } else {
+        cost.par_iter_mut().enumerate().for_each(|(i, c)| {
+            if class[i] != Class::Traversable as u8 {
+                *c = f32::NAN;
+                return;
             }
-        }
-        *c = v as f32;
-    });
+            let mut v = cost_of(zcomp[i], *c);
+            if let (Some(r), Some(o)) = (&roughness, rough_opts) {
+                v += o.weight * (f64::from(r[i]) / o.max_m).min(1.0);
+            }
+            if let Some(l) = &landcover_cost {
+                let lc = l[i];
+                if lc.is_finite() {
+                    v += f64::from(lc);
+                }
+            }
+            *c = v as f32;
+        });
+    }
     ticker.check()?;
 
     let mut cost_hi = vehicle.w_infl + vehicle.w_slope * SLOPE_COST_MAX;
@@ -512,7 +556,7 @@ fn run(
                 .collect(),
             Layer::Zcomp => zcomp.clone(),
             Layer::Step => step.clone(),
-            Layer::Inflation => inflated.clone(),
+            Layer::Inflation => inflation_layer.clone().unwrap_or_default(),
             Layer::Roughness => roughness.clone().unwrap_or_default(),
             Layer::NegativeStep => negative.as_ref().map(|n| n.0.clone()).unwrap_or_default(),
             Layer::Landcover => landcover_cost
@@ -539,6 +583,28 @@ fn run(
         stats,
         warnings,
     })
+}
+
+/// Costs without optional layers, in place of the inflation in `cost`
+/// (NaN off the traversable cells): the same arithmetic as the general
+/// loop, compiled also for AVX2 and picked at run time.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn plain_costs(
+    cost: &mut [f32],
+    class: &[u8],
+    zcomp: &[f32],
+    [cos_max, slope_span, w_infl, w_slope]: [f64; 4],
+) {
+    for ((c, &k), &zc) in cost.iter_mut().zip(class).zip(zcomp) {
+        let zc = f64::from(zc);
+        let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
+        let v = (w_infl * f64::from(*c) + w_slope * slope_cost) as f32;
+        *c = if k == Class::Traversable as u8 {
+            v
+        } else {
+            f32::NAN
+        };
+    }
 }
 
 /// Warnings for a DEM too coarse to judge the vehicle on.

@@ -6,6 +6,8 @@
 //! unknown cells are transparent. When the map is shrunk, a pixel shows
 //! the worst obstacle in its block, so one-cell walls stay visible.
 
+use rayon::prelude::*;
+
 use super::{Class, Costmap};
 use crate::export::xml_escape;
 
@@ -46,38 +48,41 @@ pub fn preview_png(map: &Costmap, max_side: usize) -> Vec<u8> {
     let ph = ((map.height as f64 / scale).round() as usize).max(1);
     let range = map.stats.cost_range;
     let mut pixels = vec![0u8; pw * ph * 4];
-    for py in 0..ph {
-        let r0 = py * map.height / ph;
-        let r1 = ((py + 1) * map.height / ph).max(r0 + 1);
-        for px in 0..pw {
-            let c0 = px * map.width / pw;
-            let c1 = ((px + 1) * map.width / pw).max(c0 + 1);
-            let (mut worst, mut sum, mut n) = (Class::Unknown, 0.0, 0usize);
-            for r in r0..r1 {
-                for c in c0..c1 {
-                    let i = r * map.width + c;
-                    let k = Class::from_code(map.class[i]).unwrap_or(Class::Unknown);
-                    if k == Class::Traversable {
-                        sum += f64::from(map.cost[i]);
-                        n += 1;
-                    } else if priority(k) > priority(worst) {
-                        worst = k;
+    // Pixel rows in parallel: each reads its own band of the map.
+    pixels
+        .par_chunks_mut(pw * 4)
+        .enumerate()
+        .for_each(|(py, line)| {
+            let r0 = py * map.height / ph;
+            let r1 = ((py + 1) * map.height / ph).max(r0 + 1);
+            for px in 0..pw {
+                let c0 = px * map.width / pw;
+                let c1 = ((px + 1) * map.width / pw).max(c0 + 1);
+                let (mut worst, mut sum, mut n) = (Class::Unknown, 0.0, 0usize);
+                for r in r0..r1 {
+                    for c in c0..c1 {
+                        let i = r * map.width + c;
+                        let k = Class::from_code(map.class[i]).unwrap_or(Class::Unknown);
+                        if k == Class::Traversable {
+                            sum += f64::from(map.cost[i]);
+                            n += 1;
+                        } else if priority(k) > priority(worst) {
+                            worst = k;
+                        }
                     }
                 }
+                let rgba = if worst != Class::Unknown {
+                    let [r, g, b] = class_colour(worst);
+                    [r, g, b, 255]
+                } else if n > 0 {
+                    let v = grey(sum / n as f64, range);
+                    [v, v, v, 255]
+                } else {
+                    [0, 0, 0, 0]
+                };
+                line[px * 4..px * 4 + 4].copy_from_slice(&rgba);
             }
-            let rgba = if worst != Class::Unknown {
-                let [r, g, b] = class_colour(worst);
-                [r, g, b, 255]
-            } else if n > 0 {
-                let v = grey(sum / n as f64, range);
-                [v, v, v, 255]
-            } else {
-                [0, 0, 0, 0]
-            };
-            let o = (py * pw + px) * 4;
-            pixels[o..o + 4].copy_from_slice(&rgba);
-        }
-    }
+        });
     let mut buf = Vec::new();
     {
         // Writing to memory only fails on sizes beyond u32, excluded above.

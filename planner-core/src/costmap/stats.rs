@@ -95,8 +95,10 @@ pub fn costmap_stats(
                     t.3 = t.3.max(c);
                     t.4 += c;
                     t.5 += 1;
-                    let b = (((c - lo) / span) * HISTOGRAM_BINS as f64).floor();
-                    t.1[(b.max(0.0) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+                    // Truncation is floor here: below 0 is bin 0 anyway.
+                    let b = ((c - lo) / span) * HISTOGRAM_BINS as f64;
+                    let bin = if b > 0.0 { b as usize } else { 0 };
+                    t.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
                 }
             }
             t

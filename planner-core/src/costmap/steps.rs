@@ -49,7 +49,7 @@ pub fn step_heights(
     mode: StepMode,
     ticker: &Ticker,
 ) -> Result<Vec<f32>, CostmapError> {
-    let mut out = vec![f32::NAN; width * height];
+    let mut out = crate::buffer::filled(width * height, f32::NAN);
     let at = |c: isize, r: isize| -> f64 {
         if c < 0 || r < 0 || c >= width as isize || r >= height as isize {
             f64::NAN
@@ -59,13 +59,9 @@ pub fn step_heights(
     };
     let w = width as isize;
     let offsets: Vec<isize> = DIRECTIONS.iter().map(|&(dc, dr)| dr * w + dc).collect();
-    let row_has_nan: Vec<bool> = z
-        .par_chunks(width.max(1))
-        .map(|row| row.iter().any(|v| v.is_nan()))
-        .collect();
-    out.par_chunks_mut(width.max(1))
-        .enumerate()
-        .for_each_init(Vec::new, |worst, (r, row)| {
+    out.par_chunks_mut(width.max(1)).enumerate().for_each_init(
+        || (Vec::new(), Vec::new()),
+        |(worst, probe), (r, row)| {
             if !ticker.tick() || r == 0 || r + 1 >= height {
                 return;
             }
@@ -74,16 +70,17 @@ pub fn step_heights(
             let inner_row = r >= 2 && r + 2 < height;
             let ri = r as isize;
             let last = width.saturating_sub(1);
-            let clean = inner_row && width >= 5 && !row_has_nan[r - 2..=r + 2].contains(&true);
-            if clean {
-                // No unknown height within reach: whole lines at once.
-                clean_row(z, width, r, mode, worst);
-                for (o, &v) in row[2..width - 2].iter_mut().zip(worst.iter()) {
-                    *o = v as f32;
+            let lines = inner_row && width >= 5;
+            if lines {
+                // Whole lines at once; the cells whose tests met an unknown
+                // height (a NaN probe) are done again one by one below.
+                clean_row(z, width, r, mode, worst, probe);
+                for ((o, &v), &p) in row[2..width - 2].iter_mut().zip(&*worst).zip(&*probe) {
+                    *o = if p.is_nan() { f32::NAN } else { v as f32 };
                 }
             }
             for (c, out) in row.iter_mut().enumerate().take(last).skip(1) {
-                if clean && c >= 2 && c + 2 < width {
+                if lines && c >= 2 && c + 2 < width && !probe[c - 2].is_nan() {
                     continue;
                 }
                 let i = r * width + c;
@@ -122,7 +119,8 @@ pub fn step_heights(
                     *out = worst as f32;
                 }
             }
-        });
+        },
+    );
     if ticker.cancelled() {
         return Err(CostmapError::Cancelled);
     }
@@ -130,12 +128,42 @@ pub fn step_heights(
 }
 
 /// Largest step of every cell 2 columns in of row `r` (into `worst`,
-/// from column 2), where rows r − 2 … r + 2 hold no NaN: the same tests
-/// as [`inner_step`], one line direction at a time over whole rows.
-fn clean_row(z: &[f64], width: usize, r: usize, mode: StepMode, worst: &mut Vec<f64>) {
+/// from column 2): the same tests as [`inner_step`], one line direction
+/// at a time over whole rows. `probe` gets the sum of the heights each
+/// cell's tests read: NaN exactly where one of them is unknown, and there
+/// `worst` is meaningless.
+fn clean_row(
+    z: &[f64],
+    width: usize,
+    r: usize,
+    mode: StepMode,
+    worst: &mut Vec<f64>,
+    probe: &mut Vec<f64>,
+) {
     let n = width - 4;
     worst.clear();
     worst.resize(n, 0.0);
+    probe.clear();
+    probe.resize(n, 0.0);
+    clean_row_lines(z, width, r, mode, worst, probe);
+}
+
+/// The loops of [`clean_row`], compiled also for AVX2 and picked at run
+/// time (the same bits on every target). Plain comparisons stand in for
+/// the NaN-aware `max`/`min`: cells that read a NaN are redone anyway.
+#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+fn clean_row_lines(
+    z: &[f64],
+    width: usize,
+    r: usize,
+    mode: StepMode,
+    worst: &mut [f64],
+    probe: &mut [f64],
+) {
+    let n = worst.len();
+    let max = |a: f64, b: f64| if a > b { a } else { b };
+    let min = |a: f64, b: f64| if a < b { a } else { b };
+    let excess = |d0: f64, s1: f64, s2: f64| max(max(d0 - max(s1, s2), min(s1, s2) - d0), 0.0);
     let base = (r * width + 2) as isize;
     // One direction per line; each cell's two neighbours on it are the
     // forward edge and (as the previous cell's forward edge) the backward.
@@ -146,29 +174,28 @@ fn clean_row(z: &[f64], width: usize, r: usize, mode: StepMode, worst: &mut Vec<
             &z[start..start + n]
         };
         let (m2, m1, c0, p1, p2) = (line(-2), line(-1), line(0), line(1), line(2));
+        for (((((p, &a), &b), &c), &d), &e) in
+            probe.iter_mut().zip(m2).zip(m1).zip(c0).zip(p1).zip(p2)
+        {
+            *p += ((a + b) + c) + (d + e);
+        }
         let cells = worst.iter_mut().zip(m2).zip(m1).zip(c0).zip(p1).zip(p2);
         match mode {
             StepMode::Residual => {
                 for (((((w, &a), &b), &c), &d), &e) in cells {
-                    let forward = interval_excess(d - c, c - b, e - d);
-                    let backward = interval_excess(c - b, b - a, d - c);
-                    let across = interval_excess(d - b, 2.0 * (b - a), 2.0 * (e - d));
-                    *w = w.max(forward).max(backward).max(across);
+                    let forward = excess(d - c, c - b, e - d);
+                    let backward = excess(c - b, b - a, d - c);
+                    let across = excess(d - b, 2.0 * (b - a), 2.0 * (e - d));
+                    *w = max(max(*w, forward), max(backward, across));
                 }
             }
             StepMode::Neighbours => {
                 for (((((w, _), &b), &c), &d), _) in cells {
-                    *w = w.max((d - c).abs()).max((c - b).abs());
+                    *w = max(max(*w, (d - c).abs()), (c - b).abs());
                 }
             }
         }
     }
-}
-
-/// How far `d0` lies outside the range between `s1` and `s2` (all finite).
-#[inline]
-fn interval_excess(d0: f64, s1: f64, s2: f64) -> f64 {
-    (d0 - s1.max(s2)).max(s1.min(s2) - d0).max(0.0)
 }
 
 /// The step in a height difference `d0` given the slopes on either side
@@ -246,7 +273,7 @@ pub fn depth_below_plane(
     radius_m: f64,
     ticker: &Ticker,
 ) -> Result<Vec<f32>, CostmapError> {
-    let mut out = vec![f32::NAN; width * height];
+    let mut out = crate::buffer::filled(width * height, f32::NAN);
     out.par_chunks_mut(width.max(1))
         .enumerate()
         .for_each(|(r, row)| {
@@ -413,13 +440,29 @@ mod tests {
             .iter()
             .map(|&(dc, dr)| dr * w as isize + dc)
             .collect();
-        for mode in [StepMode::Residual, StepMode::Neighbours] {
-            let got = run(&z, w, h, mode);
-            for r in 2..h - 2 {
-                for c in 2..w - 2 {
-                    let i = r * w + c;
-                    let want = inner_step(&z, i, z[i], &offsets, mode);
-                    assert!((f64::from(got[i]) - want).abs() < 1e-6, "{mode:?} {r} {c}");
+        // Also with unknown heights scattered through every row, which
+        // send the cells whose tests read them to the cell-by-cell path.
+        let mut holes = z.clone();
+        for i in (5..w * h).step_by(37) {
+            holes[i] = f64::NAN;
+        }
+        for z in [&z, &holes] {
+            for mode in [StepMode::Residual, StepMode::Neighbours] {
+                let got = run(z, w, h, mode);
+                for r in 2..h - 2 {
+                    for c in 2..w - 2 {
+                        let i = r * w + c;
+                        let want = if z[i].is_nan() {
+                            f64::NAN
+                        } else {
+                            inner_step(z, i, z[i], &offsets, mode)
+                        };
+                        let got = f64::from(got[i]);
+                        assert!(
+                            (got - want).abs() < 1e-6 || (got.is_nan() && want.is_nan()),
+                            "{mode:?} {r} {c}: {got} vs {want}"
+                        );
+                    }
                 }
             }
         }

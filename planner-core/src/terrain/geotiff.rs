@@ -1004,7 +1004,7 @@ pub(super) fn read(
         .checked_mul(height)
         .ok_or_else(|| invalid("the TIFF's pixel count overflows"))?;
     let matcher = NoDataMatch::new(h.nodata, h.sample);
-    let mut values = vec![0.0f64; n];
+    let mut values = crate::buffer::filled(n, 0.0f64);
 
     let decoded = catch_unwind(AssertUnwindSafe(|| {
         decode(bytes, &h, matcher, width, &mut values)
