@@ -80,6 +80,7 @@ pub fn costmap_stats(
 ) -> CostmapStats {
     let [lo, hi] = cost_range;
     let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let bins_per_cost = HISTOGRAM_BINS as f64 / span;
     // One parallel pass: class counts, and min / max / sum / bins of the
     // traversable costs.
     let (counts, bins, min, max, sum, n) = cost
@@ -96,7 +97,7 @@ pub fn costmap_stats(
                     t.4 += c;
                     t.5 += 1;
                     // Truncation is floor here: below 0 is bin 0 anyway.
-                    let b = ((c - lo) / span) * HISTOGRAM_BINS as f64;
+                    let b = (c - lo) * bins_per_cost;
                     let bin = if b > 0.0 { b as usize } else { 0 };
                     t.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
                 }
