@@ -13,5 +13,6 @@ pub mod decompose;
 pub mod export;
 pub mod flock;
 pub mod geo;
+pub mod route;
 pub mod survey;
 pub mod terrain;

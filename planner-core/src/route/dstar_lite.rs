@@ -1,0 +1,941 @@
+//! D* Lite (Koenig & Likhachev 2002, the optimised version of their
+//! figure 4) on the same graph and arc rules as [`astar`](super::astar()).
+//!
+//! The search runs backwards from the goal: g(s) is the cost from s to the
+//! goal, rhs(s) = min over moves s → s' of arc(s, s') + g(s'), and the
+//! queue orders inconsistent cells (g ≠ rhs) by the key
+//! [min(g, rhs) + h(start, s) + k_m; min(g, rhs)]. When the robot moves,
+//! k_m grows by the heuristic
+//! distance moved, so queued keys stay valid lower bounds; when cells
+//! change, only the cells whose moves changed are re-evaluated and the
+//! previous search is repaired from there.
+//!
+//! Memory: the caller's f32 cost, an f64 g and one state byte per cell
+//! (13 bytes) plus the queue. rhs is not stored: each cell keeps the move
+//! to its best successor (3 bits + a flag) and rhs(s) = arc(s, bp(s)) +
+//! g(bp(s)). That is an exact representation of D* Lite's rhs as long as
+//! every change of a successor's g is followed by updating the cell, which
+//! D* Lite does anyway (the optimised version's "rhs(s) == c(s,u) + g_old"
+//! test becomes "bp(s) == u"). The queue is a binary heap with lazy
+//! deletion: a cell's "in the queue" bit says whether its entries are live,
+//! and an entry whose key is out of date is re-queued with the current key
+//! (the algorithm's own "k_old < k_new" rule).
+//!
+//! Changes of the arc model: with `thesis` arcs every arc depends on the
+//! map's cost range (min, max of the finite costs). After each
+//! [`update_cells`](DStarLite::update_cells) the range of the current map is
+//! used, exactly as a search from scratch would; when a change moves it
+//! (a new cost above the max or below the min, or the last cell at the max
+//! or min changed), every arc changes and the planner starts over (a full
+//! re-plan; [`restarts`](DStarLite::restarts) counts them). Changes inside
+//! the range are repaired incrementally. With `integrated` arcs only the
+//! heuristic depends on the range (its factor is the least cost): a new
+//! cost below it restarts the search, other changes never do.
+
+use super::arc_model::{ArcModel, Heuristic};
+use super::dist_array::DistArray;
+use super::neighbourhood::{ByteMarks, Neighbourhood, flood_budget, opposite};
+use super::quaternary_heap::QuaternaryHeap;
+use super::{
+    CANCEL_CHECK_INTERVAL, Cell, CostGrid, End, Route, RouteError, RouteOptions, finite_range,
+};
+use crate::geo::Issue;
+
+const BEST_MOVE: u8 = 0b0000_0111;
+const HAS_BEST: u8 = 0b0000_1000;
+const QUEUED: u8 = 0b0001_0000;
+const MARK: u8 = 0b0010_0000;
+const FLOOD: u8 = 0b1000_0000;
+
+/// Relative slack on the termination test (see `may_matter`).
+const KEY_TOLERANCE: f64 = 1e-12;
+
+/// A queue entry ordered by (k1, k2); keys are ≥ 0 so their bit patterns
+/// order like the numbers (+∞ last).
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct QueueEntry {
+    k1: u64,
+    k2: u64,
+    cell: u32,
+}
+
+impl QueueEntry {
+    fn key(&self) -> (u64, u64) {
+        (self.k1, self.k2)
+    }
+}
+
+/// An incremental planner for one goal: plan, then move the start and
+/// change cells, and plan again reusing the previous search. Cloning
+/// copies the whole search state (about 13 bytes per cell).
+#[derive(Clone)]
+pub struct DStarLite {
+    grid: CostGrid,
+    hood: Neighbourhood,
+    options: RouteOptions,
+    model: ArcModel,
+    /// The finite cost range the model was built for.
+    model_range: Option<(f32, f32)>,
+    /// The current finite cost range of the grid.
+    range: Option<(f32, f32)>,
+    heuristic: Heuristic,
+    start: usize,
+    goal: usize,
+    /// The start when k_m was last updated.
+    last_start: usize,
+    km: f64,
+    g: DistArray,
+    state: Vec<u8>,
+    queue: QuaternaryHeap<QueueEntry>,
+    restarts: u64,
+}
+
+impl DStarLite {
+    /// A planner on `grid` (which it owns: changes go through
+    /// [`update_cells`](Self::update_cells)). Start and goal must be inside
+    /// the grid; whether they are blocked is checked by [`plan`](Self::plan),
+    /// since cells change. `options.epsilon` must be 1.
+    pub fn new(
+        grid: CostGrid,
+        start: Cell,
+        goal: Cell,
+        options: RouteOptions,
+    ) -> Result<DStarLite, RouteError> {
+        options.validate()?;
+        if options.epsilon != 1.0 {
+            return Err(RouteError::InvalidOptions(vec![Issue::new(
+                "/epsilon",
+                "D* Lite replans optimally: epsilon must be 1",
+            )]));
+        }
+        let start = inside(&grid, start, End::Start)?;
+        let goal = inside(&grid, goal, End::Goal)?;
+        let hood = Neighbourhood::new(&grid);
+        let range = grid.finite_cost_range();
+        let model = ArcModel::new(options.arc_cost, range);
+        let heuristic = Heuristic::new(&hood, start, model.heuristic_factor());
+        let n = grid.cell_count();
+        let mut planner = DStarLite {
+            grid,
+            hood,
+            options,
+            model,
+            model_range: range,
+            range,
+            heuristic,
+            start,
+            goal,
+            last_start: start,
+            km: 0.0,
+            g: DistArray::new(n),
+            state: vec![0; n],
+            queue: QuaternaryHeap::new(),
+            restarts: 0,
+        };
+        planner.update_vertex(goal, 0.0);
+        Ok(planner)
+    }
+
+    /// The current grid, with all changes applied.
+    pub fn grid(&self) -> &CostGrid {
+        &self.grid
+    }
+
+    pub fn start(&self) -> Cell {
+        self.cell(self.start)
+    }
+
+    pub fn goal(&self) -> Cell {
+        self.cell(self.goal)
+    }
+
+    /// How many times a change of the arc model forced a search from
+    /// scratch (see the module docs).
+    pub fn restarts(&self) -> u64 {
+        self.restarts
+    }
+
+    /// The robot is now at `start` (anywhere inside the grid; usually a
+    /// cell further along the last route).
+    pub fn move_start(&mut self, start: Cell) -> Result<(), RouteError> {
+        let s = inside(&self.grid, start, End::Start)?;
+        // Queued keys were computed from the old start; they stay lower
+        // bounds if k_m grows by the heuristic distance moved.
+        self.km += self.distance_bound(self.last_start, s);
+        self.start = s;
+        self.last_start = s;
+        self.heuristic = Heuristic::new(&self.hood, s, self.model.heuristic_factor());
+        Ok(())
+    }
+
+    /// Sets new costs, `(row-major index, cost)`; a non-finite cost blocks
+    /// the cell. All changes are checked before any is applied. The next
+    /// [`plan`](Self::plan) repairs the search.
+    pub fn update_cells(&mut self, changes: &[(usize, f32)]) -> Result<(), RouteError> {
+        let n = self.grid.cell_count();
+        for &(index, cost) in changes {
+            if index >= n {
+                return Err(RouteError::ChangeOutside { index, cells: n });
+            }
+            if cost.is_finite() && cost <= 0.0 {
+                return Err(RouteError::InvalidChangeCost { index, cost });
+            }
+        }
+        let (mut lo, mut hi) = self.range.unwrap_or((f32::INFINITY, f32::NEG_INFINITY));
+        let mut rescan = false;
+        let mut changed = Vec::with_capacity(changes.len());
+        let costs = self.grid.costs_mut();
+        for &(i, new) in changes {
+            let old = costs[i];
+            if old == new || (!old.is_finite() && !new.is_finite()) {
+                costs[i] = new;
+                continue;
+            }
+            // Losing a cell at the min or max may shrink the range.
+            if old.is_finite() && (old <= lo || old >= hi) {
+                rescan = true;
+            }
+            if new.is_finite() {
+                lo = lo.min(new);
+                hi = hi.max(new);
+            }
+            costs[i] = new;
+            changed.push(i);
+        }
+        if changed.is_empty() {
+            return Ok(());
+        }
+        self.range = if rescan {
+            finite_range(self.grid.costs())
+        } else {
+            (lo <= hi).then_some((lo, hi))
+        };
+        let model_changes = if self.model.is_thesis() {
+            self.range != self.model_range
+        } else {
+            match (self.range, self.model_range) {
+                (Some((lo, _)), Some((model_lo, _))) => lo < model_lo,
+                (Some(_), None) => true,
+                (None, _) => false,
+            }
+        };
+        if model_changes {
+            self.model = ArcModel::new(self.options.arc_cost, self.range);
+            self.model_range = self.range;
+            self.restart();
+            return Ok(());
+        }
+        // Every cell whose moves changed: the changed cells and their
+        // neighbours (a cell's moves depend on its 3×3 block).
+        let (width, height) = (self.grid.width(), self.grid.height());
+        let mut affected = Vec::with_capacity(changed.len() * 9);
+        for &i in &changed {
+            let (r, c) = (i / width, i % width);
+            for nr in r.saturating_sub(1)..=(r + 1).min(height - 1) {
+                for nc in c.saturating_sub(1)..=(c + 1).min(width - 1) {
+                    let j = nr * width + nc;
+                    if self.state[j] & MARK == 0 {
+                        self.state[j] |= MARK;
+                        affected.push(j);
+                    }
+                }
+            }
+        }
+        for s in affected {
+            self.state[s] &= !MARK;
+            let rhs = self.best_successor(s);
+            self.update_vertex(s, rhs);
+        }
+        Ok(())
+    }
+
+    /// The cheapest route from the current start to the goal, repairing the
+    /// previous search. `cancel` is asked every [`CANCEL_CHECK_INTERVAL`]
+    /// expansions; an interrupted search (cancelled or over
+    /// `max_expansions`) stays valid and the next call continues it.
+    pub fn plan(&mut self, cancel: &dyn Fn() -> bool) -> Result<Route, RouteError> {
+        let start = self.grid.endpoint(self.start(), End::Start)?;
+        let goal = self.grid.endpoint(self.goal(), End::Goal)?;
+        let n = self.grid.cell_count();
+        let (path, expanded) = if start == goal {
+            (vec![start], 0)
+        } else {
+            // The start in a small pocket without the goal: answer at once.
+            let mut marks = ByteMarks {
+                bytes: &mut self.state,
+                bit: FLOOD,
+            };
+            if self.hood.region_excludes(
+                self.grid.costs(),
+                &mut marks,
+                start,
+                goal,
+                flood_budget(n),
+            ) {
+                return Err(RouteError::Unreachable);
+            }
+            let expanded = self.compute_shortest_path(cancel)?;
+            if self.rhs(start) == f64::INFINITY {
+                return Err(RouteError::Unreachable);
+            }
+            (self.extract_path()?, expanded)
+        };
+        Ok(super::finish_route(
+            &self.grid,
+            &self.hood,
+            &self.model,
+            &path,
+            expanded,
+            self.options.smooth,
+        ))
+    }
+
+    fn cell(&self, i: usize) -> Cell {
+        (i / self.grid.width(), i % self.grid.width())
+    }
+
+    /// Heuristic distance between two cells (for k_m).
+    fn distance_bound(&self, a: usize, b: usize) -> f64 {
+        let (ar, ac) = self.cell(a);
+        let (br, bc) = self.cell(b);
+        self.model.heuristic_factor() * self.hood.octile(ar.abs_diff(br), ac.abs_diff(bc))
+    }
+
+    /// Forget the search and start it again (the arc model changed).
+    fn restart(&mut self) {
+        let n = self.grid.cell_count();
+        self.restarts += 1;
+        self.g = DistArray::new(n);
+        self.state = vec![0; n];
+        self.queue = QuaternaryHeap::new();
+        self.km = 0.0;
+        self.last_start = self.start;
+        self.heuristic = Heuristic::new(&self.hood, self.start, self.model.heuristic_factor());
+        self.update_vertex(self.goal, 0.0);
+    }
+
+    /// rhs(s) from the stored best move.
+    #[inline]
+    fn rhs(&self, s: usize) -> f64 {
+        if s == self.goal {
+            return 0.0;
+        }
+        let st = self.state[s];
+        if st & HAS_BEST == 0 {
+            return f64::INFINITY;
+        }
+        let d = (st & BEST_MOVE) as usize;
+        let v = self.hood.neighbour(s, d);
+        let costs = self.grid.costs();
+        let len = self.hood.step_len(s / self.grid.width(), d);
+        self.model.arc(len, costs[s], costs[v]) + self.g.get(v)
+    }
+
+    /// Recomputes rhs(s) over all moves and stores the best one.
+    fn best_successor(&mut self, s: usize) -> f64 {
+        if s == self.goal {
+            return 0.0;
+        }
+        let width = self.grid.width();
+        let costs = self.grid.costs();
+        let (r, c) = (s / width, s % width);
+        let mut moves = self.hood.moves(costs, s, r, c);
+        let (mut best, mut best_move) = (f64::INFINITY, None);
+        while moves != 0 {
+            let d = moves.trailing_zeros() as usize;
+            moves &= moves - 1;
+            let v = self.hood.neighbour(s, d);
+            let value =
+                self.model.arc(self.hood.step_len(r, d), costs[s], costs[v]) + self.g.get(v);
+            if value < best {
+                best = value;
+                best_move = Some(d);
+            }
+        }
+        self.state[s] = match best_move {
+            Some(d) => (self.state[s] & !BEST_MOVE) | HAS_BEST | d as u8,
+            None => self.state[s] & !(BEST_MOVE | HAS_BEST),
+        };
+        best
+    }
+
+    #[inline]
+    fn key(&self, s: usize, g: f64, rhs: f64) -> QueueEntry {
+        let m = g.min(rhs);
+        QueueEntry {
+            k1: (m + self.heuristic.at_index(&self.hood, s) + self.km).to_bits(),
+            k2: m.to_bits(),
+            cell: s as u32,
+        }
+    }
+
+    /// Queue s if inconsistent (with rhs(s) = `rhs`), else mark it out.
+    #[inline]
+    fn update_vertex(&mut self, s: usize, rhs: f64) {
+        let g = self.g.get(s);
+        if g != rhs {
+            let entry = self.key(s, g, rhs);
+            self.queue.push(entry);
+            self.state[s] |= QUEUED;
+        } else {
+            self.state[s] &= !QUEUED;
+        }
+    }
+
+    fn compute_shortest_path(&mut self, cancel: &dyn Fn() -> bool) -> Result<u64, RouteError> {
+        let limit = self.options.max_expansions.unwrap_or(u64::MAX);
+        let width = self.grid.width();
+        let mut expanded = 0u64;
+        loop {
+            // Drop entries of cells no longer queued.
+            while let Some(top) = self.queue.peek() {
+                if self.state[top.cell as usize] & QUEUED == 0 {
+                    self.queue.pop();
+                } else {
+                    break;
+                }
+            }
+            let Some(&top) = self.queue.peek() else {
+                break;
+            };
+            let (g_start, rhs_start) = (self.g.get(self.start), self.rhs(self.start));
+            let start_key = self.key(self.start, g_start, rhs_start);
+            if !self.may_matter(top, start_key) && rhs_start <= g_start {
+                break;
+            }
+            self.queue.pop();
+            let u = top.cell as usize;
+            let (g_u, rhs_u) = (self.g.get(u), self.rhs(u));
+            if g_u == rhs_u {
+                self.state[u] &= !QUEUED;
+                continue;
+            }
+            let current = self.key(u, g_u, rhs_u);
+            if top.key() < current.key() {
+                self.queue.push(current);
+                continue;
+            }
+            if expanded >= limit {
+                self.queue.push(current);
+                return Err(RouteError::TooManyExpansions { limit });
+            }
+            if expanded.is_multiple_of(CANCEL_CHECK_INTERVAL) && cancel() {
+                self.queue.push(current);
+                return Err(RouteError::Cancelled);
+            }
+            expanded += 1;
+            self.state[u] &= !QUEUED;
+            let (r, c) = (u / width, u % width);
+            let mut moves = self.hood.moves(self.grid.costs(), u, r, c);
+            if g_u > rhs_u {
+                // Overconsistent: u's cost to the goal is now final.
+                self.g.set(u, rhs_u);
+                while moves != 0 {
+                    let d = moves.trailing_zeros() as usize;
+                    moves &= moves - 1;
+                    let s = self.hood.neighbour(u, d);
+                    if s == self.goal {
+                        continue;
+                    }
+                    let costs = self.grid.costs();
+                    let via_u =
+                        self.model.arc(self.hood.step_len(r, d), costs[s], costs[u]) + rhs_u;
+                    let back = opposite(d) as u8;
+                    let st = self.state[s];
+                    if st & HAS_BEST != 0 && st & BEST_MOVE == back {
+                        // rhs(s) went through u and fell with g(u).
+                        self.update_vertex(s, via_u);
+                    } else if via_u < self.rhs(s) {
+                        self.state[s] = (st & !BEST_MOVE) | HAS_BEST | back;
+                        self.update_vertex(s, via_u);
+                    }
+                }
+            } else {
+                // Underconsistent: u got dearer; cells that relied on it
+                // look for their best move again.
+                self.g.set(u, f64::INFINITY);
+                while moves != 0 {
+                    let d = moves.trailing_zeros() as usize;
+                    moves &= moves - 1;
+                    let s = self.hood.neighbour(u, d);
+                    if s == self.goal {
+                        continue;
+                    }
+                    let st = self.state[s];
+                    if st & HAS_BEST != 0 && st & BEST_MOVE == opposite(d) as u8 {
+                        let rhs = self.best_successor(s);
+                        self.update_vertex(s, rhs);
+                    }
+                }
+                self.update_vertex(u, rhs_u);
+            }
+        }
+        Ok(expanded)
+    }
+
+    /// The loop condition "key(top) < key(start)", made robust to rounding:
+    /// keys are sums (min(g, rhs) + h + k_m) whose mathematically equal
+    /// values can differ in the last bit, and stopping one ulp short of a
+    /// cell that ties with the start leaves its stale g on the route (the
+    /// path walk could even cycle). So every cell whose k1 is within a
+    /// relative 1e-12 of the start's is still processed, whatever its k2
+    /// (deciding such near-ties by k2 is not safe either: k1 values that
+    /// truly differ by less than the slack exist). Processing more cells
+    /// than needed is always correct for D* Lite.
+    #[inline]
+    fn may_matter(&self, top: QueueEntry, start_key: QueueEntry) -> bool {
+        let (top_k1, start_k1) = (f64::from_bits(top.k1), f64::from_bits(start_key.k1));
+        top.key() < start_key.key() || top_k1 <= start_k1 + KEY_TOLERANCE * start_k1
+    }
+
+    /// Follows the cheapest move (arc + g) from the start to the goal.
+    fn extract_path(&self) -> Result<Vec<usize>, RouteError> {
+        let width = self.grid.width();
+        let costs = self.grid.costs();
+        let mut path = vec![self.start];
+        let mut s = self.start;
+        while s != self.goal {
+            let (r, c) = (s / width, s % width);
+            let mut moves = self.hood.moves(costs, s, r, c);
+            let (mut best, mut next) = (f64::INFINITY, None);
+            while moves != 0 {
+                let d = moves.trailing_zeros() as usize;
+                moves &= moves - 1;
+                let v = self.hood.neighbour(s, d);
+                let value =
+                    self.model.arc(self.hood.step_len(r, d), costs[s], costs[v]) + self.g.get(v);
+                if value < best {
+                    best = value;
+                    next = Some(v);
+                }
+            }
+            // Neither can happen after a completed search (D* Lite's
+            // theorem); guard so that a bug can never loop forever.
+            let Some(v) = next else {
+                return Err(RouteError::Unreachable);
+            };
+            if path.len() > costs.len() {
+                return Err(RouteError::Unreachable);
+            }
+            path.push(v);
+            s = v;
+        }
+        Ok(path)
+    }
+}
+
+fn inside(grid: &CostGrid, cell: Cell, end: End) -> Result<usize, RouteError> {
+    grid.index(cell).ok_or(match end {
+        End::Start => RouteError::StartOutside {
+            row: cell.0,
+            col: cell.1,
+            width: grid.width(),
+            height: grid.height(),
+        },
+        End::Goal => RouteError::GoalOutside {
+            row: cell.0,
+            col: cell.1,
+            width: grid.width(),
+            height: grid.height(),
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::route::testing::{Rng, assert_path_valid, dijkstra, random_endpoints, random_grid};
+    use crate::route::{ArcCost, astar};
+
+    const X: f32 = f32::NAN;
+
+    fn check_against_scratch(
+        planner: &mut DStarLite,
+        arc: ArcCost,
+        context: &str,
+    ) -> Option<Route> {
+        let grid = planner.grid().clone();
+        let (start, goal) = (planner.start(), planner.goal());
+        let expected = dijkstra(&grid, start, goal, arc);
+        match (planner.plan(&|| false), expected) {
+            (Ok(route), Some(best)) => {
+                assert!(
+                    (route.cost - best).abs() <= 1e-9 * best.max(1e-300),
+                    "{context}: D* Lite {} vs from scratch {best}",
+                    route.cost
+                );
+                assert_eq!(route.cells.first(), Some(&start), "{context}");
+                assert_eq!(route.cells.last(), Some(&goal), "{context}");
+                assert_path_valid(&grid, &route.cells);
+                Some(route)
+            }
+            (Err(RouteError::Unreachable), None) => None,
+            (got, want) => panic!("{context}: D* Lite {got:?}, from scratch {want:?}"),
+        }
+    }
+
+    #[test]
+    fn replans_equal_a_search_from_scratch() {
+        let mut rng = Rng::new(99);
+        let (mut routes, mut unreachable, mut moves) = (0, 0, 0);
+        for trial in 0..24 {
+            let (w, h) = (20 + rng.below(30) as usize, 20 + rng.below(30) as usize);
+            let grid = random_grid(&mut rng, w, h, 0.1, trial % 2 == 0);
+            let Some((start, goal)) = random_endpoints(&mut rng, &grid) else {
+                continue;
+            };
+            let arc = if trial % 3 == 2 {
+                ArcCost::Thesis {
+                    d_max: 1.0 + 9.0 * rng.unit(),
+                }
+            } else {
+                ArcCost::Integrated
+            };
+            let options = RouteOptions {
+                arc_cost: arc,
+                ..RouteOptions::default()
+            };
+            let mut planner = DStarLite::new(grid, start, goal, options).unwrap();
+            let mut last =
+                check_against_scratch(&mut planner, arc, &format!("trial {trial} initial"));
+            for batch in 0..50 {
+                let context = format!("trial {trial} batch {batch}");
+                // Sometimes drive a few cells along the last route.
+                if let Some(route) = &last
+                    && rng.below(3) == 0
+                    && route.cells.len() > 2
+                {
+                    let k = 1 + rng.below((route.cells.len() - 1).min(5) as u64) as usize;
+                    planner.move_start(route.cells[k]).unwrap();
+                    moves += 1;
+                }
+                let (s, g) = (
+                    planner.grid().index(planner.start()).unwrap(),
+                    planner.grid().index(planner.goal()).unwrap(),
+                );
+                let mut changes = Vec::new();
+                // Block cells, often on or next to the last route.
+                for _ in 0..1 + rng.below(6) {
+                    let i = match &last {
+                        Some(route) if rng.below(2) == 0 => {
+                            let (r, c) = route.cells[rng.below(route.cells.len() as u64) as usize];
+                            let r = (r + rng.below(3) as usize).saturating_sub(1).min(h - 1);
+                            let c = (c + rng.below(3) as usize).saturating_sub(1).min(w - 1);
+                            r * w + c
+                        }
+                        _ => rng.below((w * h) as u64) as usize,
+                    };
+                    changes.push((i, f32::INFINITY));
+                }
+                // Cost changes (some may unblock), mostly inside the range.
+                for _ in 0..rng.below(5) {
+                    let i = rng.below((w * h) as u64) as usize;
+                    let (lo, hi) = planner.grid().finite_cost_range().unwrap_or((1.0, 20.0));
+                    let cost = if rng.below(8) == 0 {
+                        rng.range_f32(0.5 * lo, 1.5 * hi)
+                    } else {
+                        rng.range_f32(lo, hi)
+                    };
+                    changes.push((i, cost));
+                }
+                changes.retain(|&(i, _)| i != s && i != g);
+                planner.update_cells(&changes).unwrap();
+                match check_against_scratch(&mut planner, arc, &context) {
+                    Some(route) => {
+                        routes += 1;
+                        last = Some(route);
+                    }
+                    None => {
+                        unreachable += 1;
+                        last = None;
+                    }
+                }
+            }
+        }
+        assert!(
+            routes > 600 && unreachable > 10 && moves > 100,
+            "{routes} {unreachable} {moves}"
+        );
+    }
+
+    #[test]
+    fn thesis_range_changes_restart_and_inside_changes_do_not() {
+        let mut rng = Rng::new(5);
+        let mut grid = random_grid(&mut rng, 30, 30, 0.0, false);
+        // Pin the range to [1, 20] with two dedicated cells far from the route.
+        let mut costs = grid.clone().into_costs();
+        for c in costs.iter_mut() {
+            *c = c.clamp(2.0, 19.0);
+        }
+        costs[0] = 1.0;
+        costs[29] = 20.0;
+        grid = CostGrid::with_cell_size(30, 30, costs, 1.0, 1.0).unwrap();
+        let arc = ArcCost::thesis();
+        let options = RouteOptions {
+            arc_cost: arc,
+            ..RouteOptions::default()
+        };
+        let mut planner = DStarLite::new(grid, (29, 0), (15, 29), options).unwrap();
+        check_against_scratch(&mut planner, arc, "initial");
+        planner
+            .update_cells(&[(15 * 30 + 10, 7.0), (16 * 30 + 10, f32::NAN)])
+            .unwrap();
+        check_against_scratch(&mut planner, arc, "inside the range");
+        assert_eq!(planner.restarts(), 0);
+        planner.update_cells(&[(29, 5.0)]).unwrap(); // the max cell: max falls
+        check_against_scratch(&mut planner, arc, "max falls");
+        assert_eq!(planner.restarts(), 1);
+        planner.update_cells(&[(100, 25.0)]).unwrap(); // above the max
+        check_against_scratch(&mut planner, arc, "max rises");
+        assert_eq!(planner.restarts(), 2);
+        planner.update_cells(&[(0, f32::INFINITY)]).unwrap(); // the min cell blocked
+        check_against_scratch(&mut planner, arc, "min rises");
+        assert_eq!(planner.restarts(), 3);
+        // Integrated: only a new least cost restarts.
+        let mut planner = DStarLite::new(
+            planner.grid().clone(),
+            (29, 0),
+            (15, 29),
+            RouteOptions::default(),
+        )
+        .unwrap();
+        planner.plan(&|| false).unwrap();
+        planner
+            .update_cells(&[(200, 100.0), (1, f32::NAN)])
+            .unwrap();
+        check_against_scratch(&mut planner, ArcCost::Integrated, "integrated");
+        assert_eq!(planner.restarts(), 0);
+        planner.update_cells(&[(300, 0.5)]).unwrap();
+        check_against_scratch(&mut planner, ArcCost::Integrated, "integrated new min");
+        assert_eq!(planner.restarts(), 1);
+    }
+
+    #[test]
+    fn errors_and_blocked_endpoints() {
+        let grid = CostGrid::with_cell_size(4, 3, vec![1.0; 12], 1.0, 1.0).unwrap();
+        let o = RouteOptions::default();
+        assert!(matches!(
+            DStarLite::new(grid.clone(), (3, 0), (0, 0), o.clone()),
+            Err(RouteError::StartOutside { row: 3, .. })
+        ));
+        assert!(matches!(
+            DStarLite::new(grid.clone(), (0, 0), (0, 4), o.clone()),
+            Err(RouteError::GoalOutside { col: 4, .. })
+        ));
+        let weighted = RouteOptions {
+            epsilon: 2.0,
+            ..RouteOptions::default()
+        };
+        assert!(matches!(
+            DStarLite::new(grid.clone(), (0, 0), (2, 3), weighted),
+            Err(RouteError::InvalidOptions(_))
+        ));
+        let mut p = DStarLite::new(grid, (0, 0), (2, 3), o).unwrap();
+        assert!((p.plan(&|| false).unwrap().cost - (1.0 + 2.0 * 2f64.sqrt())).abs() < 1e-12);
+        assert_eq!(
+            p.update_cells(&[(12, 1.0)]),
+            Err(RouteError::ChangeOutside {
+                index: 12,
+                cells: 12
+            })
+        );
+        assert_eq!(
+            p.update_cells(&[(1, 2.0), (3, -1.0)]),
+            Err(RouteError::InvalidChangeCost {
+                index: 3,
+                cost: -1.0
+            })
+        );
+        assert_eq!(p.grid().costs()[1], 1.0, "nothing applied on error");
+        p.update_cells(&[(11, X)]).unwrap();
+        assert_eq!(
+            p.plan(&|| false),
+            Err(RouteError::GoalBlocked { row: 2, col: 3 })
+        );
+        p.update_cells(&[(11, 1.0), (0, X)]).unwrap();
+        assert_eq!(
+            p.plan(&|| false),
+            Err(RouteError::StartBlocked { row: 0, col: 0 })
+        );
+        assert!(matches!(
+            p.move_start((9, 9)),
+            Err(RouteError::StartOutside { .. })
+        ));
+        p.move_start((1, 0)).unwrap();
+        let r = p.plan(&|| false).unwrap();
+        assert_eq!(r.cells.first(), Some(&(1, 0)));
+        // Wall off the goal, then open it again.
+        p.update_cells(&[(7, X), (10, X)]).unwrap();
+        assert_eq!(p.plan(&|| false), Err(RouteError::Unreachable));
+        p.update_cells(&[(10, 3.0)]).unwrap();
+        assert!(p.plan(&|| false).is_ok());
+        // Start = goal.
+        p.move_start((2, 3)).unwrap();
+        let r = p.plan(&|| false).unwrap();
+        assert_eq!((r.cells.len(), r.cost), (1, 0.0));
+    }
+
+    #[test]
+    fn cancel_and_limit_leave_a_resumable_search() {
+        let mut rng = Rng::new(12);
+        let grid = random_grid(&mut rng, 120, 120, 0.05, false);
+        let (start, goal) = ((0, 0), (119, 119));
+        let mut costs = grid.clone().into_costs();
+        costs[0] = 1.0;
+        costs[119 * 120 + 119] = 1.0;
+        let grid = CostGrid::with_cell_size(120, 120, costs, 1.0, 1.0).unwrap();
+        let expected = astar(&grid, start, goal, &RouteOptions::default(), &|| false);
+        let limited = RouteOptions {
+            max_expansions: Some(100),
+            ..RouteOptions::default()
+        };
+        let mut p = DStarLite::new(grid.clone(), start, goal, limited).unwrap();
+        assert_eq!(p.plan(&|| true), Err(RouteError::Cancelled));
+        let mut calls = 0;
+        let result = loop {
+            calls += 1;
+            match p.plan(&|| false) {
+                Err(RouteError::TooManyExpansions { limit: 100 }) => continue,
+                other => break other,
+            }
+        };
+        assert!(calls > 5, "the limit applies per call ({calls})");
+        match (result, expected) {
+            (Ok(a), Ok(b)) => assert!((a.cost - b.cost).abs() <= 1e-9 * b.cost),
+            (a, b) => assert_eq!(a.map(|r| r.cost), b.map(|r| r.cost)),
+        }
+    }
+
+    #[test]
+    fn replanning_reuses_the_previous_search() {
+        let mut rng = Rng::new(3);
+        let grid = crate::route::testing::smooth_costmap(&mut rng, 300, 300, 0.05);
+        let (start, goal) = crate::route::testing::far_corners(&grid);
+        let mut p = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+        let first = p.plan(&|| false).unwrap();
+        // Drive a tenth of the way, then find a wall across the route ahead.
+        let here = first.cells[first.cells.len() / 10];
+        p.move_start(here).unwrap();
+        let ahead = first.cells[first.cells.len() / 5];
+        let width = p.grid().width();
+        let wall: Vec<(usize, f32)> = (0..10)
+            .map(|k| {
+                (
+                    ahead.0 * width + (ahead.1 + k).saturating_sub(5).min(width - 1),
+                    f32::INFINITY,
+                )
+            })
+            .filter(|&(i, _)| i != p.grid().index(here).unwrap())
+            .collect();
+        p.update_cells(&wall).unwrap();
+        let second = p.plan(&|| false).unwrap();
+        let scratch = astar(p.grid(), here, goal, &RouteOptions::default(), &|| false).unwrap();
+        assert!((second.cost - scratch.cost).abs() <= 1e-9 * scratch.cost);
+        assert!(
+            second.expanded * 4 < first.expanded,
+            "replan {} vs initial {}",
+            second.expanded,
+            first.expanded
+        );
+    }
+
+    /// Release-mode timing (run with `cargo test --release -p planner-core
+    /// --lib route::dstar_lite::tests::timing -- --ignored --nocapture`;
+    /// sizes from `ROUTE_SIZES`): the initial plan, then a 20 m wall across
+    /// the route 2 m ahead of the robot, at 10 %, 50 % and 90 % of the way.
+    #[test]
+    #[ignore]
+    fn timing_replan_after_a_blocked_stretch() {
+        use crate::route::neighbourhood::DIRECTIONS;
+        use crate::route::testing::{far_corners, sizes_from_env, smooth_costmap, terrain_costmap};
+        let cases = sizes_from_env()
+            .into_iter()
+            .flat_map(|size| [(size, "smooth"), (size, "terrain")]);
+        for (size, kind) in cases {
+            let mut rng = Rng::new(1);
+            let grid = if kind == "smooth" {
+                smooth_costmap(&mut rng, size, size, 0.05)
+            } else {
+                terrain_costmap(&mut rng, size, size, 0.05)
+            };
+            let (start, goal) = far_corners(&grid);
+            let t0 = std::time::Instant::now();
+            let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
+            let t_astar = t0.elapsed().as_secs_f64();
+            let t0 = std::time::Instant::now();
+            let mut planned = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+            let first = planned.plan(&|| false).unwrap();
+            let t_first = t0.elapsed().as_secs_f64();
+            assert!((first.cost - scratch.cost).abs() <= 1e-9 * scratch.cost);
+            println!(
+                "{kind} {size}²: A* {t_astar:.3} s ({} expanded); D* Lite initial plan \
+                 {t_first:.3} s ({} expanded)",
+                scratch.expanded, first.expanded
+            );
+            let cell = planned.grid().dx(0);
+            let width = planned.grid().width();
+            for fraction in [0.1, 0.5, 0.9] {
+                let mut p = planned.clone();
+                let k = (first.cells.len() as f64 * fraction) as usize;
+                let ahead = (2.0 / cell).round() as usize;
+                let here = first.cells[k - ahead];
+                p.move_start(here).unwrap();
+                // A wall through cells[k], across the route's local direction.
+                let (r, c) = first.cells[k];
+                let (pr, pc) = first.cells[k - 5];
+                let (nr, nc) = first.cells[k + 5];
+                let along = (
+                    (nr as f64 - pr as f64).signum(),
+                    (nc as f64 - pc as f64).signum(),
+                );
+                let across = DIRECTIONS
+                    .iter()
+                    .copied()
+                    .find(|&(dr, dc)| (dr as f64, dc as f64) == (-along.1, along.0))
+                    .unwrap();
+                let step = if across.0 != 0 && across.1 != 0 {
+                    cell * 2f64.sqrt()
+                } else {
+                    cell
+                };
+                let half = (10.0 / step).round() as isize;
+                let wall: Vec<(usize, f32)> = (-half..=half)
+                    .filter_map(|j| {
+                        let (wr, wc) = (r as isize + j * across.0, c as isize + j * across.1);
+                        p.grid()
+                            .index((wr.max(0) as usize, wc.max(0) as usize))
+                            .filter(|_| wr >= 0 && wc >= 0)
+                    })
+                    .filter(|&i| i != here.0 * width + here.1)
+                    .map(|i| (i, f32::INFINITY))
+                    .collect();
+                p.update_cells(&wall).unwrap();
+                let t0 = std::time::Instant::now();
+                let replan = p.plan(&|| false);
+                let t_replan = t0.elapsed().as_secs_f64();
+                let t0 = std::time::Instant::now();
+                let fresh = astar(p.grid(), here, goal, &RouteOptions::default(), &|| false);
+                let t_fresh = t0.elapsed().as_secs_f64();
+                let (a, b) = (
+                    replan.as_ref().map(|r| r.cost),
+                    fresh.as_ref().map(|r| r.cost),
+                );
+                match (a, b) {
+                    (Ok(a), Ok(b)) => assert!((a - b).abs() <= 1e-9 * b),
+                    (a, b) => assert_eq!(a, b),
+                }
+                println!(
+                    "{kind} {size}²: wall at {:.0}%: replan {:.4} s ({} expanded) = {:.1}% of \
+                     A* from the robot ({:.3} s), {:.1}% of D* Lite's initial plan; cost {:.3}",
+                    100.0 * fraction,
+                    t_replan,
+                    replan.as_ref().map(|r| r.expanded).unwrap_or(0),
+                    100.0 * t_replan / t_fresh,
+                    t_fresh,
+                    100.0 * t_replan / t_first,
+                    a.unwrap_or(f64::NAN)
+                );
+            }
+        }
+    }
+}
