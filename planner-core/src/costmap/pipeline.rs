@@ -412,22 +412,12 @@ fn run(
             .zip(step.par_chunks(CHUNK).zip(zcomp.par_chunks(CHUNK)))
             .for_each(|(ks, (ss, zs))| {
                 for ((k, &s), &zc) in ks.iter_mut().zip(ss).zip(zs) {
-                    let (s, zc) = (f64::from(s), f64::from(zc));
-                    *k = if s.is_nan() || zc.is_nan() {
-                        Class::Unknown
-                    } else if s > max_step {
-                        Class::Step
-                    } else if zc <= cos_max {
-                        Class::Slope
-                    } else {
-                        Class::Traversable
-                    } as u8;
+                    *k = class_of(s, zc, max_step, cos_max, false, false) as u8;
                 }
             });
     } else {
         class.par_iter_mut().enumerate().for_each(|(i, k)| {
-            let (s, zc) = (step[i], zcomp[i]);
-            if unknown_height[i] || s.is_nan() || zc.is_nan() {
+            if unknown_height[i] {
                 return;
             }
             let ditch = negative
@@ -440,15 +430,8 @@ fn run(
             let lethal = landcover_cost
                 .as_ref()
                 .is_some_and(|l| l[i] == f32::INFINITY);
-            *k = if f64::from(s) > vehicle.max_step_m || ditch {
-                Class::Step
-            } else if f64::from(zc) <= cos_max {
-                Class::Slope
-            } else if rough || lethal {
-                Class::Other
-            } else {
-                Class::Traversable
-            } as u8;
+            let max_step = vehicle.max_step_m;
+            *k = class_of(step[i], zcomp[i], max_step, cos_max, ditch, rough || lethal) as u8;
         });
     }
     let ticker = Ticker::new(progress, Stage::Regions, 1);
@@ -486,14 +469,9 @@ fn run(
         .contains(&Layer::Inflation)
         .then(|| inflated.clone());
     let mut cost = inflated;
-    let cost_of = |zc: f32, infl: f32| {
-        let zc = f64::from(zc);
-        let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
-        vehicle.w_infl * f64::from(infl) + vehicle.w_slope * slope_cost
-    };
+    let weights = [cos_max, slope_span, vehicle.w_infl, vehicle.w_slope];
     if roughness.is_none() && landcover_cost.is_none() {
         // No optional cost: a loop without per-cell option checks.
-        let weights = [cos_max, slope_span, vehicle.w_infl, vehicle.w_slope];
         cost.par_chunks_mut(CHUNK)
             .zip(class.par_chunks(CHUNK))
             .zip(zcomp.par_chunks(CHUNK))
@@ -504,7 +482,7 @@ fn run(
                 *c = f32::NAN;
                 return;
             }
-            let mut v = cost_of(zcomp[i], *c);
+            let mut v = traversing_cost(zcomp[i], *c, weights);
             if let (Some(r), Some(o)) = (&roughness, rough_opts) {
                 v += o.weight * (f64::from(r[i]) / o.max_m).min(1.0);
             }
@@ -585,20 +563,42 @@ fn run(
     })
 }
 
+/// A cell's class from its step height and Zcomp (NaN: unknown), and
+/// whether a ditch or an "other" obstacle (roughness, lethal land cover)
+/// lies there. Precedence: step > slope > other.
+#[inline(always)]
+fn class_of(step: f32, zcomp: f32, max_step: f64, cos_max: f64, ditch: bool, other: bool) -> Class {
+    let (s, zc) = (f64::from(step), f64::from(zcomp));
+    if s.is_nan() || zc.is_nan() {
+        Class::Unknown
+    } else if s > max_step || ditch {
+        Class::Step
+    } else if zc <= cos_max {
+        Class::Slope
+    } else if other {
+        Class::Other
+    } else {
+        Class::Traversable
+    }
+}
+
+/// SPEC §4.2 steps 7–8 before the optional layers: w_infl·inflation +
+/// w_slope·(Zcomp remapped from [cos max_slope, 1] to [10, 1]).
+#[inline(always)]
+fn traversing_cost(zcomp: f32, inflation: f32, weights: [f64; 4]) -> f64 {
+    let [cos_max, slope_span, w_infl, w_slope] = weights;
+    let zc = f64::from(zcomp);
+    let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
+    w_infl * f64::from(inflation) + w_slope * slope_cost
+}
+
 /// Costs without optional layers, in place of the inflation in `cost`
-/// (NaN off the traversable cells): the same arithmetic as the general
-/// loop, compiled also for AVX2 and picked at run time.
+/// (NaN off the traversable cells), compiled also for AVX2 and picked at
+/// run time.
 #[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
-fn plain_costs(
-    cost: &mut [f32],
-    class: &[u8],
-    zcomp: &[f32],
-    [cos_max, slope_span, w_infl, w_slope]: [f64; 4],
-) {
+fn plain_costs(cost: &mut [f32], class: &[u8], zcomp: &[f32], weights: [f64; 4]) {
     for ((c, &k), &zc) in cost.iter_mut().zip(class).zip(zcomp) {
-        let zc = f64::from(zc);
-        let slope_cost = SLOPE_COST_MAX - (SLOPE_COST_MAX - 1.0) * (zc - cos_max) / slope_span;
-        let v = (w_infl * f64::from(*c) + w_slope * slope_cost) as f32;
+        let v = traversing_cost(zc, *c, weights) as f32;
         *c = if k == Class::Traversable as u8 {
             v
         } else {
