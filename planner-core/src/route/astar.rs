@@ -564,19 +564,8 @@ mod tests {
     #[test]
     #[ignore]
     fn timing_large_grid() {
-        use crate::route::testing::{
-            far_corners, sizes_from_env, smooth_costmap, terrain_costmap, thread_cpu_seconds,
-        };
-        let cases = sizes_from_env()
-            .into_iter()
-            .flat_map(|size| [(size, "smooth"), (size, "terrain")]);
-        for (size, kind) in cases {
-            let mut rng = Rng::new(1);
-            let grid = if kind == "smooth" {
-                smooth_costmap(&mut rng, size, size, 0.05)
-            } else {
-                terrain_costmap(&mut rng, size, size, 0.05)
-            };
+        use crate::route::testing::{far_corners, thread_cpu_seconds, timing_costmaps};
+        for (size, kind, grid) in timing_costmaps() {
             let (start, goal) = far_corners(&grid);
             if let Ok(dir) = std::env::var("ROUTE_DUMP") {
                 // Raw little-endian f32 rows, for comparing with other tools.

@@ -336,6 +336,17 @@ impl DStarLite {
         if s == self.goal {
             return 0.0;
         }
+        let (best, best_move) = self.cheapest_move(s);
+        self.state[s] = match best_move {
+            Some(d) => (self.state[s] & !BEST_MOVE) | HAS_BEST | d as u8,
+            None => self.state[s] & !(BEST_MOVE | HAS_BEST),
+        };
+        best
+    }
+
+    /// The least arc + g over the moves from `s`, and the move giving it
+    /// (`None` when no move leads to a finite value).
+    fn cheapest_move(&self, s: usize) -> (f64, Option<usize>) {
         let width = self.grid.width();
         let costs = self.grid.costs();
         let (r, c) = (s / width, s % width);
@@ -352,11 +363,7 @@ impl DStarLite {
                 best_move = Some(d);
             }
         }
-        self.state[s] = match best_move {
-            Some(d) => (self.state[s] & !BEST_MOVE) | HAS_BEST | d as u8,
-            None => self.state[s] & !(BEST_MOVE | HAS_BEST),
-        };
-        best
+        (best, best_move)
     }
 
     #[inline]
@@ -490,25 +497,11 @@ impl DStarLite {
 
     /// Follows the cheapest move (arc + g) from the start to the goal.
     fn extract_path(&self) -> Result<Vec<usize>, RouteError> {
-        let width = self.grid.width();
         let costs = self.grid.costs();
         let mut path = vec![self.start];
         let mut s = self.start;
         while s != self.goal {
-            let (r, c) = (s / width, s % width);
-            let mut moves = self.hood.moves(costs, s, r, c);
-            let (mut best, mut next) = (f64::INFINITY, None);
-            while moves != 0 {
-                let d = moves.trailing_zeros() as usize;
-                moves &= moves - 1;
-                let v = self.hood.neighbour(s, d);
-                let value =
-                    self.model.arc(self.hood.step_len(r, d), costs[s], costs[v]) + self.g.get(v);
-                if value < best {
-                    best = value;
-                    next = Some(v);
-                }
-            }
+            let next = self.cheapest_move(s).1.map(|d| self.hood.neighbour(s, d));
             // Neither can happen after a completed search (D* Lite's
             // theorem); guard so that a bug can never loop forever.
             let Some(v) = next else {
@@ -847,17 +840,8 @@ mod tests {
     #[ignore]
     fn timing_replan_after_a_blocked_stretch() {
         use crate::route::neighbourhood::DIRECTIONS;
-        use crate::route::testing::{far_corners, sizes_from_env, smooth_costmap, terrain_costmap};
-        let cases = sizes_from_env()
-            .into_iter()
-            .flat_map(|size| [(size, "smooth"), (size, "terrain")]);
-        for (size, kind) in cases {
-            let mut rng = Rng::new(1);
-            let grid = if kind == "smooth" {
-                smooth_costmap(&mut rng, size, size, 0.05)
-            } else {
-                terrain_costmap(&mut rng, size, size, 0.05)
-            };
+        use crate::route::testing::{far_corners, timing_costmaps};
+        for (size, kind, grid) in timing_costmaps() {
             let (start, goal) = far_corners(&grid);
             let t0 = std::time::Instant::now();
             let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();

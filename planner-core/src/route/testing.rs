@@ -221,6 +221,22 @@ pub(crate) fn sizes_from_env() -> Vec<usize> {
         .collect()
 }
 
+/// The timing tests' maps, built one at a time: for each size from
+/// `ROUTE_SIZES`, a "smooth" and a "terrain" costmap with 5 % obstacles.
+pub(crate) fn timing_costmaps() -> impl Iterator<Item = (usize, &'static str, CostGrid)> {
+    sizes_from_env().into_iter().flat_map(|size| {
+        ["smooth", "terrain"].into_iter().map(move |kind| {
+            let mut rng = Rng::new(1);
+            let grid = if kind == "smooth" {
+                smooth_costmap(&mut rng, size, size, 0.05)
+            } else {
+                terrain_costmap(&mut rng, size, size, 0.05)
+            };
+            (size, kind, grid)
+        })
+    })
+}
+
 /// The traversable cells nearest the top-left and bottom-right corners.
 pub(crate) fn far_corners(grid: &CostGrid) -> (Cell, Cell) {
     let nearest = |from: Cell| {
