@@ -16,3 +16,5 @@ pub mod geo;
 pub mod route;
 pub mod survey;
 pub mod terrain;
+#[cfg(test)]
+pub(crate) mod test_rng;

@@ -553,6 +553,7 @@ impl Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::Lcg;
 
     /// The distance to the nearest obstacle centre, by brute force.
     fn brute(obstacle: &[bool], w: usize, h: usize, dx: f64, dy: f64) -> Vec<f64> {
@@ -572,13 +573,8 @@ mod tests {
 
     #[test]
     fn equals_brute_force_on_random_grids_with_rectangular_cells() {
-        let mut state = 0x5eed_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut state = Lcg(0x5eed_u64);
+        let mut next = || state.next();
         for case in 0..60 {
             let (w, h) = (1 + (next() * 23.0) as usize, 1 + (next() * 17.0) as usize);
             let density = [0.0, 0.01, 0.1, 0.5, 0.95][case % 5];
@@ -642,13 +638,8 @@ mod tests {
 
     #[test]
     fn the_mapped_transform_equals_f_of_the_squares() {
-        let mut state = 0x0bad_cafe_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut state = Lcg(0x0bad_cafe_u64);
+        let mut next = || state.next();
         let mut sizes = vec![(1, 1), (1, 2), (2, 1), (3, 3), (1, 150), (150, 1), (3, 140)];
         sizes
             .extend((0..30).map(|_| (1 + (next() * 60.0) as usize, 1 + (next() * 300.0) as usize)));
@@ -699,13 +690,8 @@ mod tests {
 
     #[test]
     fn the_window_and_the_envelope_row_passes_agree() {
-        let mut state = 0x3141_5926_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut state = Lcg(0x3141_5926_u64);
+        let mut next = || state.next();
         let mut compared = 0;
         for case in 0..40 {
             let (w, h) = (1 + (next() * 120.0) as usize, 1 + (next() * 150.0) as usize);

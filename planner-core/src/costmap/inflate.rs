@@ -44,6 +44,7 @@ pub fn inflation(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::Lcg;
 
     fn walls(w: usize, h: usize, cols: std::ops::RangeInclusive<usize>) -> Vec<bool> {
         (0..w * h).map(|i| cols.contains(&(i % w))).collect()
@@ -105,13 +106,8 @@ mod tests {
 
     #[test]
     fn distance_mode_equals_the_gaussian_of_the_brute_force_distance() {
-        let mut state = 0x1f1a7e_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut state = Lcg(0x1f1a7e_u64);
+        let mut next = || state.next();
         let mut sizes = vec![(1, 1), (1, 3), (3, 1), (2, 3), (3, 3)];
         sizes.extend((0..25).map(|_| (1 + (next() * 30.0) as usize, 1 + (next() * 90.0) as usize)));
         for (w, h) in sizes {

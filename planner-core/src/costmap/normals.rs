@@ -557,6 +557,7 @@ mod tests {
     use super::*;
     use crate::costmap::pipeline::Ticker;
     use crate::costmap::{Progress, Stage};
+    use crate::test_rng::Lcg;
 
     fn quiet() -> impl Progress {
         |_: Stage, _: f64| true
@@ -606,13 +607,8 @@ mod tests {
 
     #[test]
     fn eigenpairs_match_nalgebra_on_random_matrices() {
-        let mut s = 12345u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut s = Lcg(12345u64);
+        let mut rnd = || s.next() * 2.0 - 1.0;
         for _ in 0..2000 {
             let m = [
                 [rnd(), rnd(), rnd()],
@@ -642,13 +638,8 @@ mod tests {
 
     #[test]
     fn the_fast_window_agrees_with_the_general_eigensolver() {
-        let mut s = 99u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut s = Lcg(99u64);
+        let mut rnd = || s.next();
         let (w, h) = (9, 9);
         for case in 0..500 {
             let roughness = [0.0, 0.01, 0.3, 3.0][case % 4];
@@ -683,13 +674,10 @@ mod tests {
     fn smoothing_band_by_band_equals_smoothing_the_whole_grid_first() {
         let p = quiet();
         let (w, h) = (45, 101);
-        let mut s = 3u64;
+        let mut s = Lcg(3);
         let z: Vec<f64> = (0..w * h)
             .map(|i| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let noise = (s >> 11) as f64 / (1u64 << 53) as f64;
+                let noise = s.next();
                 if i % 97 == 11 {
                     f64::NAN
                 } else {
@@ -720,13 +708,10 @@ mod tests {
         // agree with the safeguarded one-cell solver.
         let p = quiet();
         let (w, h) = (60, 5);
-        let mut s = 17u64;
+        let mut s = Lcg(17);
         let z: Vec<f64> = (0..w * h)
             .map(|i| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let noise = (s >> 11) as f64 / (1u64 << 53) as f64;
+                let noise = s.next();
                 let roughness = [0.0, 0.01, 0.1, 1.0][(i % w) / 15];
                 1200.0 + 0.4 * (i % w) as f64 - 0.7 * (i / w) as f64 + roughness * noise
             })

@@ -342,6 +342,7 @@ fn fill_enclosed_flood(class: &mut [u8], width: usize, height: usize, min_cells:
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::Lcg;
 
     /// A grid from rows of '.', '#' (slope obstacle) and '?' (unknown).
     fn grid(rows: &[&str]) -> (Vec<u8>, usize, usize) {
@@ -419,13 +420,8 @@ mod tests {
 
     #[test]
     fn runs_equal_the_flood_fill_on_random_grids() {
-        let mut state = 0x2e91_u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut state = Lcg(0x2e91_u64);
+        let mut next = || state.next();
         let mut cases = 0;
         // Tiny grids, and grids taller than a band (bands meet inside).
         let mut sizes = vec![(1, 1), (1, 3), (3, 1), (2, 2), (3, 3), (2, 7), (9, 2)];

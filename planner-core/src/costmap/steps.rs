@@ -342,6 +342,7 @@ fn solve3(m: [[f64; 3]; 3], v: [f64; 3]) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::costmap::{Progress, Stage};
+    use crate::test_rng::Lcg;
 
     fn run(z: &[f64], w: usize, h: usize, mode: StepMode) -> Vec<f32> {
         let p = |_: Stage, _: f64| true;
@@ -427,15 +428,8 @@ mod tests {
     #[test]
     fn whole_row_passes_equal_the_cell_by_cell_test() {
         let (w, h) = (23, 17);
-        let mut s = 7u64;
-        let z: Vec<f64> = (0..w * h)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 11) as f64 / (1u64 << 53) as f64) * 0.6
-            })
-            .collect();
+        let mut s = Lcg(7);
+        let z: Vec<f64> = (0..w * h).map(|_| s.next() * 0.6).collect();
         let offsets: Vec<isize> = DIRECTIONS
             .iter()
             .map(|&(dc, dr)| dr * w as isize + dc)

@@ -39,20 +39,7 @@ pub(crate) fn lawnmower(cell_index: usize, cell: &Polygon<f64>, n: usize) -> Cel
     }
 }
 
-/// Small deterministic generator (a 64-bit LCG) so random tests are
-/// reproducible without an RNG dependency.
-pub(crate) struct Lcg(pub(crate) u64);
-
-impl Lcg {
-    /// The next number, uniform in [0, 1).
-    pub(crate) fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+pub(crate) use crate::test_rng::Lcg;
 
 /// One random star-shaped 8-gon per block of a `blocks` × `blocks` grid of
 /// `block`-sized squares whose corner is at `origin`: centres jittered by up
