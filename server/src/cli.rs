@@ -1,5 +1,5 @@
-//! Command-line interface: `terraplan survey` and `terraplan costmap` run
-//! the same planner as the service on files; `terraplan dem-info` reads a
+//! Command-line interface: `terraplan survey`, `terraplan costmap` and
+//! `terraplan route` run the same planners as the service on files; `terraplan dem-info` reads a
 //! DEM as the service does. Exit status: 0 success, 2 invalid input (the
 //! message names the fault), 1 any other failure.
 
@@ -17,6 +17,8 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 use crate::config::ServeConfig;
+
+mod route;
 
 #[derive(Parser)]
 #[command(
@@ -42,6 +44,10 @@ enum Command {
     /// write costmap.tif (band 1 cost, band 2 class), preview.png,
     /// legend.svg, stats.json and layers/<name>.tif.
     Costmap(CostmapArgs),
+    /// Plan the cheapest safe route for a ground robot across a costmap
+    /// GeoTIFF and write route.json, route.geojson, route.csv and an
+    /// ArduPilot Rover mission.waypoints.
+    Route(route::RouteArgs),
     /// Reproducible experiments on embedded real data.
     #[command(subcommand)]
     Experiment(ExperimentCommand),
@@ -179,6 +185,7 @@ pub fn run() -> ExitCode {
         Command::Survey(args) => survey(&args),
         Command::DemInfo(args) => dem_info(&args),
         Command::Costmap(args) => costmap(&args),
+        Command::Route(args) => route::route(&args),
         Command::Experiment(ExperimentCommand::Flock { out }) => experiment_flock(out.as_deref()),
     };
     match result {

@@ -2,6 +2,7 @@
 //! georeferenced Float32 rasters (costmaps, SPEC §4.2).
 
 pub mod geojson;
+pub mod ground_route;
 pub mod geotiff;
 pub mod kml;
 pub mod mission;

@@ -34,6 +34,7 @@ pub mod astar;
 mod bucket_queue;
 mod dist_array;
 pub mod dstar_lite;
+pub mod on_map;
 mod neighbourhood;
 mod quaternary_heap;
 pub mod smooth;
@@ -43,6 +44,7 @@ mod tiles;
 
 pub use astar::astar;
 pub use dstar_lite::DStarLite;
+pub use on_map::{Endpoint, MapRoute, MapRouteError, Position, RouteMap, RoutePoint};
 pub use smooth::{SegmentCost, polyline_cost, segment_cost, smooth_path, turning_points};
 
 use serde::{Deserialize, Serialize};

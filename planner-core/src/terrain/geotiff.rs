@@ -15,6 +15,12 @@
 //!   truncated to an integer for integer samples (and ignored when out of the
 //!   type's range), rounded to f32 for Float32; NaN samples are always nodata;
 //! - sparse chunks (offset and byte count 0) read as nodata (0 if none).
+//!
+//! A DEM has one band; `read_geotiff_band` reads one band of a file with
+//! several through the same path: PlanarConfiguration 1 chunks hold every
+//! band of their pixels (the decoder undoes the predictor across pixels,
+//! SamplesPerPixel samples apart), PlanarConfiguration 2 stores band b's
+//! chunks after all of band b−1's.
 
 use std::io::Cursor;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -566,6 +572,18 @@ struct Header {
     sample: SampleType,
     white_is_zero: bool,
     grid: ChunkGrid,
+    /// The band read, as the decoder sees it: samples per pixel in a
+    /// decoded chunk (SamplesPerPixel for PlanarConfiguration 1, else 1),
+    /// the band's index among them, and the index of its first chunk in
+    /// the offsets (PlanarConfiguration 2: band b's chunks follow all of
+    /// band b−1's). A single-band raster is (1, 0, 0).
+    chunk_samples: usize,
+    sample_index: usize,
+    /// SamplesPerPixel.
+    bands: u64,
+    first_chunk: u64,
+    /// Rows the decoder produces for a chunk, at most (see `parse_header`).
+    decoded_rows: u64,
     offsets: Vec<u64>,
     byte_counts: Vec<u64>,
     transform: GeoTransform,
@@ -579,7 +597,13 @@ struct Header {
     big: bool,
 }
 
-fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError> {
+/// The header of a GeoTIFF, for reading band `band` (1-based) of it, or
+/// with `None` for reading it as a DEM (which must have a single band).
+fn parse_header(
+    bytes: &[u8],
+    limits: &DemLimits,
+    band: Option<usize>,
+) -> Result<Header, TerrainError> {
     let le = bytes.first() == Some(&b'I');
     let big = matches!(bytes.get(2..4), Some(b"+\0" | b"\0+"));
     let file = TiffBytes { b: bytes, le, big };
@@ -602,15 +626,58 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
     check_limits(width, height, limits)?;
 
     let spp = ifd.uint(SAMPLES_PER_PIXEL, Some(1))?;
-    if spp != 1 {
-        return Err(unsupported(format!(
-            "the TIFF has {spp} samples per pixel (SamplesPerPixel={spp}); a DEM must have a \
-             single band"
-        )));
-    }
+    let sample_index = match band {
+        None if spp != 1 => {
+            return Err(unsupported(format!(
+                "the TIFF has {spp} samples per pixel (SamplesPerPixel={spp}); a DEM must have a \
+                 single band"
+            )));
+        }
+        None => 0,
+        Some(_) if spp == 0 || spp > u64::from(u16::MAX) => {
+            return Err(invalid(format!("the TIFF's SamplesPerPixel is {spp}")));
+        }
+        Some(b) if b == 0 || b as u64 > spp => {
+            return Err(invalid(format!(
+                "band {b} does not exist: the TIFF has {spp} band{} (SamplesPerPixel={spp}), \
+                 numbered from 1",
+                if spp == 1 { "" } else { "s" }
+            )));
+        }
+        Some(b) => b - 1,
+    };
     let bits = ifd.uint(BITS_PER_SAMPLE, Some(1))?;
     let format = ifd.uint(SAMPLE_FORMAT, Some(1))?;
     let sample = SampleType::from_tags(format, bits)?;
+    // Several bands: one sample type for all (as libtiff and the decoder
+    // require), and the PlanarConfiguration.
+    let planar = if spp > 1 {
+        let bits_all = ifd.uints(BITS_PER_SAMPLE)?.unwrap_or_default();
+        let format_all = ifd.uints(SAMPLE_FORMAT)?.unwrap_or_default();
+        if bits_all.len() != 1 && bits_all.len() as u64 != spp {
+            return Err(invalid(format!(
+                "the TIFF has {spp} samples per pixel but {} BitsPerSample values",
+                bits_all.len()
+            )));
+        }
+        if bits_all.iter().any(|&b| b != bits) || format_all.iter().any(|&f| f != format) {
+            return Err(unsupported(format!(
+                "the TIFF's bands have different sample types (BitsPerSample {bits_all:?}, \
+                 SampleFormat {format_all:?}); terraplan reads bands of one type"
+            )));
+        }
+        match ifd.uint(PLANAR_CONFIG, Some(1))? {
+            1 => false,
+            2 => true,
+            p => {
+                return Err(invalid(format!(
+                    "the TIFF's PlanarConfiguration is {p} (1 or 2 expected)"
+                )));
+            }
+        }
+    } else {
+        false
+    };
     let compression = ifd.uint(COMPRESSION, Some(1))?;
     let compression_name = match compression {
         1 | 5 | 8 | 32946 | 32773 => None,
@@ -668,6 +735,13 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
         }
     };
 
+    if white_is_zero && spp > 1 {
+        return Err(unsupported(format!(
+            "the TIFF's {spp} bands are WhiteIsZero (PhotometricInterpretation=0); terraplan \
+             reads several bands only as MinIsBlack (1)"
+        )));
+    }
+
     let grid = chunk_grid(&ifd, width, height)?;
     // One decoded chunk (a tile, cut at the bottom) must fit the limits too.
     if grid.tiled && grid.cw.saturating_mul(grid.ch.min(height)) > limits.max_pixels {
@@ -675,6 +749,37 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
             "the TIFF's {}×{} tiles are larger than the limit of {} pixels",
             grid.cw, grid.ch, limits.max_pixels
         )));
+    }
+    let (chunk_samples, planes) = if planar { (1, spp) } else { (spp, 1) };
+    // The decoder (tiff 0.11.3) cuts the bottom tiles of the first plane
+    // only: a later plane's bottom tiles come out whole.
+    let decoded_rows = if planar && grid.tiled && sample_index > 0 {
+        grid.ch
+    } else {
+        grid.ch.min(height)
+    };
+    if spp > 1 {
+        // A decoded chunk holds every band of its pixels (PlanarConfiguration
+        // 1): it may take at most as many bytes as the Float64 raster read.
+        let chunk = grid
+            .cw
+            .saturating_mul(decoded_rows)
+            .saturating_mul(chunk_samples)
+            .saturating_mul(sample.bytes());
+        let budget = limits.max_pixels.saturating_mul(8);
+        if chunk > budget {
+            return Err(invalid(format!(
+                "the TIFF's {}×{} {}s of {} sample{} of {} bytes take {chunk} bytes decoded, \
+                 more than the limit of {budget} ({} pixels × 8 bytes)",
+                grid.cw,
+                decoded_rows,
+                grid.kind(),
+                chunk_samples,
+                if chunk_samples == 1 { "" } else { "s" },
+                sample.bytes(),
+                limits.max_pixels
+            )));
+        }
     }
     let (off_tag, cnt_tag) = if grid.tiled {
         (TILE_OFFSETS, TILE_BYTE_COUNTS)
@@ -686,9 +791,16 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
         .uints(cnt_tag)?
         .ok_or_else(|| invalid(format!("the TIFF has no {} tag", tag_name(cnt_tag))))?;
     let n = grid.count();
-    if offsets.len() as u64 != n || byte_counts.len() as u64 != n {
+    let all = n.saturating_mul(planes);
+    if offsets.len() as u64 != all || byte_counts.len() as u64 != all {
+        let per_band = if planes > 1 {
+            format!(" ({n} for each of its {planes} separate bands)")
+        } else {
+            String::new()
+        };
         return Err(invalid(format!(
-            "the TIFF's {width}×{height} image needs {n} {}s but {} lists {} and {} lists {}",
+            "the TIFF's {width}×{height} image needs {all} {}s{per_band} but {} lists {} and {} \
+             lists {}",
             grid.kind(),
             tag_name(off_tag),
             offsets.len(),
@@ -700,8 +812,8 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
     for (i, (&o, &c)) in offsets.iter().zip(&byte_counts).enumerate() {
         if o.checked_add(c).is_none_or(|end| end > len) {
             return Err(invalid(format!(
-                "{} {i} of {n} (offset {o}, {c} bytes) extends past the end of the file ({len} \
-                 bytes): the file is truncated",
+                "{} {i} of {all} (offset {o}, {c} bytes) extends past the end of the file \
+                 ({len} bytes): the file is truncated",
                 grid.kind()
             )));
         }
@@ -738,6 +850,16 @@ fn parse_header(bytes: &[u8], limits: &DemLimits) -> Result<Header, TerrainError
         sample,
         white_is_zero,
         grid,
+        chunk_samples: usize::try_from(chunk_samples)
+            .map_err(|_| invalid("the TIFF has too many samples per pixel"))?,
+        sample_index: if planar { 0 } else { sample_index },
+        bands: spp,
+        first_chunk: if planar {
+            n.saturating_mul(sample_index as u64)
+        } else {
+            0
+        },
+        decoded_rows,
         offsets,
         byte_counts,
         transform,
@@ -991,12 +1113,34 @@ fn tiff_error(e: TiffError) -> TerrainError {
     }
 }
 
+/// Read a single-band GeoTIFF as a DEM.
 pub(super) fn read(
     bytes: &[u8],
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
-    let h = parse_header(bytes, limits)?;
+    read_raster(bytes, None, crs, limits)
+}
+
+/// Read band `band` (1-based) of a GeoTIFF with any number of bands.
+pub(super) fn read_band(
+    bytes: &[u8],
+    band: usize,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    read_raster(bytes, Some(band), crs, limits)
+}
+
+/// The one reading path: band `band` (1-based), or with `None` the only
+/// band of a single-band file.
+fn read_raster(
+    bytes: &[u8],
+    band: Option<usize>,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    let h = parse_header(bytes, limits, band)?;
     let crs = resolve_crs(h.crs_code.clone(), crs)?;
     let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
     let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
@@ -1066,7 +1210,8 @@ fn decode(
     let chunk_bytes = h
         .grid
         .cw
-        .saturating_mul(h.grid.ch.min(h.height))
+        .saturating_mul(h.decoded_rows)
+        .saturating_mul(h.chunk_samples as u64)
         .saturating_mul(h.sample.bytes());
     limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
     limits.intermediate_buffer_size = bytes.len().max(1);
@@ -1074,6 +1219,16 @@ fn decode(
     let (dw, dh) = dec.dimensions().map_err(tiff_error)?;
     if (u64::from(dw), u64::from(dh)) != (padded_width, h.height) {
         return Err(invalid("the TIFF's first image directory is inconsistent"));
+    }
+    if h.bands > 1 {
+        // The decoder parses the IFD itself: it must see the same bands.
+        let samples = match dec.colortype().map_err(tiff_error)? {
+            tiff::ColorType::Multiband { num_samples, .. } => u64::from(num_samples),
+            _ => 0,
+        };
+        if samples != h.bands {
+            return Err(invalid("the TIFF's first image directory is inconsistent"));
+        }
     }
 
     let n = h.grid.count();
@@ -1084,7 +1239,8 @@ fn decode(
         let cw = h.grid.cw.min(h.width - x0);
         let ch = h.grid.ch.min(h.height - y0);
         let (x0, y0, cw, ch) = (x0 as usize, y0 as usize, cw as usize, ch as usize);
-        let idx = i as usize;
+        let chunk = h.first_chunk + i;
+        let idx = usize::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
         if h.byte_counts.get(idx) == Some(&0) && h.offsets.get(idx) == Some(&0) {
             // Sparse chunk: GDAL reads nodata (or 0).
             for r in 0..ch {
@@ -1095,7 +1251,8 @@ fn decode(
             }
             continue;
         }
-        let chunk_index = u32::try_from(i).map_err(|_| invalid("the TIFF has too many chunks"))?;
+        let chunk_index =
+            u32::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
         let res = dec.read_chunk(chunk_index).map_err(|e| {
             let e = tiff_error(e);
             invalid(format!("{} {i} of {n}: {e}", h.grid.kind()))
@@ -1107,7 +1264,7 @@ fn decode(
             nd,
             out,
             width,
-            src_width,
+            (src_width, h.chunk_samples, h.sample_index),
             x0,
             y0,
             cw,
@@ -1152,7 +1309,9 @@ fn widen(bytes: &[u8], h: &Header, pos: u64, new_width: u64) -> Result<Vec<u8>, 
     Ok(b)
 }
 
-/// Copy one decoded chunk (`cw`×`ch`, row-major) into the output.
+/// Copy sample `sample` of every pixel of one decoded chunk (`cw`×`ch`
+/// pixels of `spp` interleaved samples, rows `src_width` pixels apart)
+/// into the output.
 #[allow(clippy::too_many_arguments)]
 fn put_chunk(
     res: DecodingResult,
@@ -1160,41 +1319,46 @@ fn put_chunk(
     nd: NoDataMatch,
     out: &mut [f64],
     width: usize,
-    src_width: usize,
+    (src_width, spp, sample): (usize, usize, usize),
     x0: usize,
     y0: usize,
     cw: usize,
     ch: usize,
 ) -> Result<(), String> {
+    #[allow(clippy::type_complexity)]
     fn copy<T: Copy>(
         src: &[T],
         out: &mut [f64],
         width: usize,
-        (x0, y0, cw, ch, sw): (usize, usize, usize, usize, usize),
+        (x0, y0, cw, ch, sw, spp, sample): (usize, usize, usize, usize, usize, usize, usize),
         conv: impl Fn(T) -> f64,
     ) -> Result<(), String> {
-        if src.len() < sw * ch || sw < cw {
-            return Err(format!(
-                "decoded {} samples, expected {}",
-                src.len(),
-                sw * ch
-            ));
+        let row_len = sw.checked_mul(spp).ok_or("chunk too large")?;
+        let need = row_len.checked_mul(ch).ok_or("chunk too large")?;
+        if src.len() < need || sw < cw || sample >= spp {
+            return Err(format!("decoded {} samples, expected {need}", src.len()));
         }
         for r in 0..ch {
             let s = src
-                .get(r * sw..r * sw + cw)
+                .get(r * row_len..r * row_len + cw * spp)
                 .ok_or("chunk row out of range")?;
             let start = (y0 + r) * width + x0;
             let d = out
                 .get_mut(start..start + cw)
                 .ok_or("chunk outside the image")?;
-            for (d, &s) in d.iter_mut().zip(s) {
-                *d = conv(s);
+            if spp == 1 {
+                for (d, &s) in d.iter_mut().zip(s) {
+                    *d = conv(s);
+                }
+            } else {
+                for (d, &s) in d.iter_mut().zip(s.iter().skip(sample).step_by(spp)) {
+                    *d = conv(s);
+                }
             }
         }
         Ok(())
     }
-    let area = (x0, y0, cw, ch, src_width);
+    let area = (x0, y0, cw, ch, src_width, spp, sample);
     let int = move |v: i64| -> f64 {
         match nd {
             NoDataMatch::Int(n) if n == v => f64::NAN,
@@ -2084,5 +2248,464 @@ mod tests {
             .strips(2, vec![vec![0xFF; 7]])
             .build();
         assert!(matches!(read(&b), Err(TerrainError::Invalid(_))));
+    }
+
+    // ---- Reading one band of a multi-band GeoTIFF. ----
+
+    use crate::terrain::read_geotiff_band;
+
+    const EXTRA_SAMPLES: u16 = 338;
+
+    /// Band `b` (0-based) of the test rasters at (x, y): distinct Float32
+    /// values, -9999 (the nodata value) and NaN at a few cells.
+    fn band_value(b: usize, x: usize, y: usize) -> f32 {
+        match (b, x, y) {
+            (0, 1, 0) | (1, 2, 3) => -9999.0,
+            (0, 3, 2) | (1, 0, 4) => f32::NAN,
+            (0, ..) => 100.0 + x as f32 * 1.25 - y as f32 * 7.5 + 0.1,
+            _ => -(x as f32) * 0.3 - y as f32 * 1000.0 + b as f32,
+        }
+    }
+
+    /// What the reader must give for `band_value`.
+    fn expected(b: usize, x: usize, y: usize) -> Option<f64> {
+        let v = band_value(b, x, y);
+        (!v.is_nan() && v != -9999.0).then_some(f64::from(v))
+    }
+
+    #[derive(Clone, Copy, Debug)]
+    enum Chunks {
+        Strips(usize),
+        Tiles(usize, usize),
+    }
+
+    /// Encode one chunk: `rows` rows of `row_px` pixels of `spp`
+    /// interleaved samples each (`value(x, y, s)`), with a predictor
+    /// (as libtiff's horDiff32 / fpDiff on a little-endian host) and a
+    /// compression.
+    fn encode_f32_chunk(
+        rows: usize,
+        row_px: usize,
+        spp: usize,
+        value: impl Fn(usize, usize, usize) -> f32,
+        predictor: u16,
+        compression: u16,
+    ) -> Vec<u8> {
+        use tiff::encoder::compression::{CompressionAlgorithm, Deflate, Lzw};
+        let mut raw = Vec::new();
+        for y in 0..rows {
+            let vals: Vec<f32> = (0..row_px * spp)
+                .map(|i| value(i / spp, y, i % spp))
+                .collect();
+            match predictor {
+                1 => raw.extend(vals.iter().flat_map(|v| v.to_le_bytes())),
+                2 => {
+                    let mut u: Vec<u32> = vals.iter().map(|v| v.to_bits()).collect();
+                    for i in (spp..u.len()).rev() {
+                        u[i] = u[i].wrapping_sub(u[i - spp]);
+                    }
+                    raw.extend(u.iter().flat_map(|v| v.to_le_bytes()));
+                }
+                3 => {
+                    // Bytes of every value, most significant first, in four
+                    // planes; then byte differences `spp` apart.
+                    let wc = vals.len();
+                    let mut b = vec![0u8; wc * 4];
+                    for (i, v) in vals.iter().enumerate() {
+                        for (k, byte) in v.to_be_bytes().into_iter().enumerate() {
+                            b[k * wc + i] = byte;
+                        }
+                    }
+                    for i in (spp..b.len()).rev() {
+                        b[i] = b[i].wrapping_sub(b[i - spp]);
+                    }
+                    raw.extend(b);
+                }
+                _ => unreachable!(),
+            }
+        }
+        let mut out = Vec::new();
+        match compression {
+            1 => return raw,
+            5 => Lzw.write_to(&mut out, &raw).unwrap(),
+            8 => Deflate::default().write_to(&mut out, &raw).unwrap(),
+            _ => unreachable!(),
+        };
+        out
+    }
+
+    /// A `w`×`h` GeoTIFF of `spp` Float32 bands (`band_value`) with
+    /// GDAL_NODATA -9999, interleaved per pixel or in separate planes.
+    fn multiband_f32(
+        (w, h, spp): (usize, usize, usize),
+        planar: bool,
+        chunks: Chunks,
+        predictor: u16,
+        compression: u16,
+    ) -> Vec<u8> {
+        let (cw, ch, across, down) = match chunks {
+            Chunks::Strips(rps) => (w, rps, 1, h.div_ceil(rps)),
+            Chunks::Tiles(tw, th) => (tw, th, w.div_ceil(tw), h.div_ceil(th)),
+        };
+        let tiled = matches!(chunks, Chunks::Tiles(..));
+        let mut data = Vec::new();
+        let planes: Vec<Option<usize>> = if planar {
+            (0..spp).map(Some).collect()
+        } else {
+            vec![None]
+        };
+        for plane in planes {
+            for i in 0..across * down {
+                let (x0, y0) = ((i % across) * cw, (i / across) * ch);
+                // Strips are cut at the bottom, tiles are padded (with 0).
+                let rows = if tiled { ch } else { ch.min(h - y0) };
+                let value = |x: usize, y: usize, s: usize| {
+                    let (gx, gy) = (x0 + x, y0 + y);
+                    if gx < w && gy < h {
+                        band_value(plane.unwrap_or(s), gx, gy)
+                    } else {
+                        0.0
+                    }
+                };
+                let n = if planar { 1 } else { spp };
+                data.push(encode_f32_chunk(rows, cw, n, value, predictor, compression));
+            }
+        }
+        let bld = Builder::image(w as u32, h as u32, 3, 32)
+            .tag(SAMPLES_PER_PIXEL, V::Short(vec![spp as u16]))
+            .tag(BITS_PER_SAMPLE, V::Short(vec![32; spp]))
+            .tag(SAMPLE_FORMAT, V::Short(vec![3; spp]))
+            .tag(EXTRA_SAMPLES, V::Short(vec![0; spp - 1]))
+            .tag(PLANAR_CONFIG, V::Short(vec![if planar { 2 } else { 1 }]))
+            .tag(COMPRESSION, V::Short(vec![compression]))
+            .tag(PREDICTOR, V::Short(vec![predictor]))
+            .tag(GDAL_NODATA, V::Ascii("-9999"));
+        match chunks {
+            Chunks::Strips(rps) => bld.strips(rps as u32, data),
+            Chunks::Tiles(tw, th) => bld.tiles(tw as u32, th as u32, data),
+        }
+        .build()
+    }
+
+    fn band(bytes: &[u8], b: usize) -> Result<Dem, TerrainError> {
+        read_geotiff_band(bytes, b, None, &DemLimits::default())
+    }
+
+    fn assert_band(dem: &Dem, b: usize, what: &str) {
+        assert_eq!((dem.width, dem.height), (7, 5), "{what}");
+        assert_eq!(dem.nodata, Some(-9999.0), "{what}");
+        assert_eq!(dem.crs.epsg, 32633, "{what}");
+        let t = dem.transform;
+        assert_eq!(
+            (t.origin_x, t.origin_y, t.pixel_width, t.pixel_height),
+            (500000.0, 4000000.0, 10.0, -10.0),
+            "{what}"
+        );
+        for y in 0..5 {
+            for x in 0..7 {
+                let got = dem.value(x, y);
+                let want = expected(b, x, y);
+                assert!(
+                    got.map(f64::to_bits) == want.map(f64::to_bits),
+                    "{what}, band {}, ({x},{y}): {got:?} != {want:?}",
+                    b + 1
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn float32_bands_chunky_and_planar_strips_and_tiles() {
+        // 7×5 in strips of 2 rows (the last one cut) or 4×4 tiles (padded
+        // right and below), every predictor with each compression.
+        for planar in [false, true] {
+            for chunks in [
+                Chunks::Strips(2),
+                Chunks::Tiles(4, 4),
+                Chunks::Tiles(16, 16),
+            ] {
+                for (predictor, compression) in [(1, 1), (1, 8), (2, 5), (2, 8), (3, 1), (3, 8)] {
+                    let what = format!(
+                        "planar {planar}, {chunks:?}, predictor {predictor}, compression \
+                         {compression}"
+                    );
+                    let b = multiband_f32((7, 5, 2), planar, chunks, predictor, compression);
+                    for bn in [1, 2] {
+                        let dem = band(&b, bn).unwrap_or_else(|e| panic!("{what}: {e}"));
+                        assert_band(&dem, bn - 1, &what);
+                    }
+                    // A DEM upload must still have a single band.
+                    let e = read_dem(&b, None, None, &DemLimits::default()).unwrap_err();
+                    assert!(
+                        matches!(e, TerrainError::Unsupported(ref m)
+                            if m.contains("SamplesPerPixel=2")
+                                && m.contains("a DEM must have a single band")),
+                        "{what}: {e}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn three_bands_and_big_endian() {
+        // Three bands, band 2 and 3 read, interleaved and planar; also a
+        // big-endian file (predictor 3 output does not depend on it).
+        for planar in [false, true] {
+            for (predictor, compression) in [(2, 8), (3, 5)] {
+                let b = multiband_f32(
+                    (7, 5, 3),
+                    planar,
+                    Chunks::Tiles(4, 4),
+                    predictor,
+                    compression,
+                );
+                for bn in 1..=3 {
+                    let what = format!("planar {planar} predictor {predictor}");
+                    assert_band(&band(&b, bn).unwrap(), bn - 1, &what);
+                }
+            }
+        }
+        // Big-endian, uncompressed, chunky strips.
+        let mut data = Vec::new();
+        for y in 0..5 {
+            for x in 0..7 {
+                for s in 0..2 {
+                    data.extend(band_value(s, x, y).to_be_bytes());
+                }
+            }
+        }
+        let mut bld = Builder::image(7, 5, 3, 32)
+            .tag(SAMPLES_PER_PIXEL, V::Short(vec![2]))
+            .tag(BITS_PER_SAMPLE, V::Short(vec![32]))
+            .tag(GDAL_NODATA, V::Ascii("-9999"))
+            .strips(5, vec![data]);
+        bld.le = false;
+        let b = bld.build();
+        for bn in [1, 2] {
+            assert_band(&band(&b, bn).unwrap(), bn - 1, "big-endian");
+        }
+    }
+
+    #[test]
+    fn int16_bands_with_horizontal_predictor() {
+        use tiff::encoder::compression::{CompressionAlgorithm, Lzw};
+        // 5×3 Int16, 3 bands interleaved, LZW + predictor 2: the
+        // differences are taken between the same band of neighbours.
+        let v = |x: usize, y: usize, s: usize| (x * 300 + y * 7) as i16 * (s as i16 + 1) - 1000;
+        let mut raw: Vec<i16> = Vec::new();
+        for y in 0..3 {
+            let mut row: Vec<i16> = (0..15).map(|i| v(i / 3, y, i % 3)).collect();
+            for i in (3..15).rev() {
+                row[i] = row[i].wrapping_sub(row[i - 3]);
+            }
+            raw.extend(row);
+        }
+        let mut strip = Vec::new();
+        Lzw.write_to(&mut strip, &i16_le(&raw)).unwrap();
+        let b = Builder::image(5, 3, 2, 16)
+            .tag(SAMPLES_PER_PIXEL, V::Short(vec![3]))
+            .tag(BITS_PER_SAMPLE, V::Short(vec![16, 16, 16]))
+            .tag(COMPRESSION, V::Short(vec![5]))
+            .tag(PREDICTOR, V::Short(vec![2]))
+            .tag(GDAL_NODATA, V::Ascii("-1000"))
+            .strips(3, vec![strip])
+            .build();
+        for bn in 1..=3 {
+            let dem = band(&b, bn).unwrap();
+            for y in 0..3 {
+                for x in 0..5 {
+                    let want = v(x, y, bn - 1);
+                    let want = (want != -1000).then_some(f64::from(want));
+                    assert_eq!(dem.value(x, y), want, "band {bn} ({x},{y})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn single_band_file_is_band_one() {
+        let b = Builder::image(3, 3, 2, 16)
+            .tag(GDAL_NODATA, V::Ascii("-9999"))
+            .strips(
+                2,
+                vec![i16_le(&[1, 2, 3, -9999, 5, 6]), i16_le(&[7, 8, -32768])],
+            )
+            .build();
+        let dem = read_dem(&b, None, None, &DemLimits::default()).unwrap();
+        let one = band(&b, 1).unwrap();
+        assert_eq!(
+            one.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            dem.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            (one.transform, one.crs, one.nodata, one.format),
+            (dem.transform, dem.crs, dem.nodata, dem.format)
+        );
+        let e = band(&b, 2).unwrap_err();
+        assert!(
+            e.to_string().contains("band 2") && e.to_string().contains("has 1 band "),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn band_numbers_and_bad_multiband_layouts() {
+        let b = multiband_f32((7, 5, 2), true, Chunks::Strips(2), 1, 1);
+        for bn in [0, 3, usize::MAX] {
+            let e = band(&b, bn).unwrap_err();
+            let m = e.to_string();
+            assert!(
+                m.contains(&format!("band {bn} ")) && m.contains("has 2 bands"),
+                "{bn}: {m}"
+            );
+        }
+        let e = read_geotiff_band(b"not a tiff", 1, None, &DemLimits::default()).unwrap_err();
+        assert!(e.to_string().contains("not a TIFF"), "{e}");
+
+        let base = || {
+            Builder::image(2, 1, 3, 32)
+                .tag(SAMPLES_PER_PIXEL, V::Short(vec![2]))
+                .tag(BITS_PER_SAMPLE, V::Short(vec![32, 32]))
+                .tag(SAMPLE_FORMAT, V::Short(vec![3, 3]))
+                .strips(1, vec![vec![0; 16]])
+        };
+        assert_eq!(band(&base().build(), 2).unwrap().values, vec![0.0, 0.0]);
+        let cases: Vec<(Builder, &str)> = vec![
+            (
+                base().tag(SAMPLE_FORMAT, V::Short(vec![3, 1])),
+                "different sample types",
+            ),
+            (
+                base().tag(BITS_PER_SAMPLE, V::Short(vec![32, 32, 32])),
+                "3 BitsPerSample",
+            ),
+            (
+                base().tag(PLANAR_CONFIG, V::Short(vec![3])),
+                "PlanarConfiguration is 3",
+            ),
+            // Separate planes need a strip per band.
+            (
+                base().tag(PLANAR_CONFIG, V::Short(vec![2])),
+                "needs 2 strips (1 for each of its 2 separate bands)",
+            ),
+            (
+                base().tag(PHOTOMETRIC, V::Short(vec![0])),
+                "PhotometricInterpretation is 0",
+            ),
+            (
+                base()
+                    .tag(BITS_PER_SAMPLE, V::Short(vec![16, 16]))
+                    .tag(SAMPLE_FORMAT, V::Short(vec![1, 1]))
+                    .tag(PHOTOMETRIC, V::Short(vec![0])),
+                "WhiteIsZero",
+            ),
+            (
+                base().tag(SAMPLES_PER_PIXEL, V::Short(vec![0])),
+                "SamplesPerPixel is 0",
+            ),
+        ];
+        for (bld, needle) in cases {
+            let e = band(&bld.build(), 1).unwrap_err();
+            assert!(e.to_string().contains(needle), "{needle}: {e}");
+        }
+        // A decoded chunk of many samples must fit the limits: 4 × 4
+        // pixels of 100 Float64 samples is 12 800 bytes.
+        let b = Builder::image(4, 4, 3, 64)
+            .tag(SAMPLES_PER_PIXEL, V::Short(vec![100]))
+            .strips(4, vec![vec![0; 16]])
+            .build();
+        let small = DemLimits {
+            max_pixels: 1000,
+            max_side: 100,
+        };
+        let e = read_geotiff_band(&b, 1, None, &small).unwrap_err();
+        assert!(e.to_string().contains("12800 bytes"), "{e}");
+    }
+
+    #[test]
+    fn every_truncation_of_a_multiband_file_is_an_error() {
+        for planar in [false, true] {
+            let full = multiband_f32((7, 5, 2), planar, Chunks::Tiles(4, 4), 3, 8);
+            for len in 0..full.len() {
+                for bn in [1, 2] {
+                    assert!(
+                        band(&full[..len], bn).is_err(),
+                        "prefix of {len} bytes read"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn costmap_written_by_our_writer_round_trips() {
+        use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
+        use crate::terrain::Crs;
+        // 300×250: two strips of about 256 KiB per band.
+        let (w, h) = (300usize, 250usize);
+        let cost: Vec<f32> = (0..w * h)
+            .map(|i| match i % 97 {
+                0 => f32::NAN,
+                k => 1.0 + k as f32 * 0.37 + (i / w) as f32 * 1e-3,
+            })
+            .collect();
+        let class: Vec<u8> = (0..w * h).map(|i| (i % 5) as u8).collect();
+        let transform = GeoTransform {
+            origin_x: 500000.0,
+            pixel_width: 2.0,
+            row_rotation: 0.0,
+            origin_y: 4000000.0,
+            col_rotation: 0.0,
+            pixel_height: -2.0,
+        };
+        let crs = Crs {
+            epsg: 32633,
+            name: "WGS 84 / UTM zone 33N".into(),
+            geographic: false,
+        };
+        let mut cur = std::io::Cursor::new(Vec::new());
+        write_geotiff_f32(
+            &mut cur,
+            w,
+            h,
+            &transform,
+            &crs,
+            &[
+                Band {
+                    description: "cost",
+                    data: BandData::F32(&cost),
+                },
+                Band {
+                    description: "class",
+                    data: BandData::U8(&class),
+                },
+            ],
+            Some(f64::NAN),
+        )
+        .unwrap();
+        let bytes = cur.into_inner();
+        let c = band(&bytes, 1).unwrap();
+        let k = band(&bytes, 2).unwrap();
+        for dem in [&c, &k] {
+            assert_eq!((dem.width, dem.height), (w, h));
+            assert_eq!(dem.transform, transform);
+            assert_eq!(dem.crs.epsg, 32633);
+            assert!(dem.nodata.is_some_and(f64::is_nan));
+        }
+        for i in 0..w * h {
+            let want = f64::from(cost[i]);
+            assert!(
+                c.values[i] == want || (want.is_nan() && c.values[i].is_nan()),
+                "cost {i}"
+            );
+            assert_eq!(k.values[i], f64::from(class[i]), "class {i}");
+        }
+        assert!(
+            band(&bytes, 3)
+                .unwrap_err()
+                .to_string()
+                .contains("has 2 bands")
+        );
     }
 }

@@ -21,7 +21,7 @@ pub use crs::Crs;
 pub use dilate::dilate;
 pub use follow::{HeightRule, Point3, TerrainModel, length_3d};
 pub use hillshade::hillshade_png;
-pub use read::read_dem;
+pub use read::{read_dem, read_geotiff_band};
 pub use sample::TerrainSampler;
 
 use serde::{Deserialize, Serialize};

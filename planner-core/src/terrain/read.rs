@@ -25,6 +25,46 @@ pub fn read_dem(
     Ok(dem)
 }
 
+/// Read band `band` (numbered from 1) of a GeoTIFF with one or more bands
+/// (`SamplesPerPixel`) into a [`Dem`], e.g. the cost or class band of a
+/// costmap. Everything else is as [`read_dem`] reads a single-band
+/// GeoTIFF: georeferencing, CRS (`crs` overrides or supplies it),
+/// `GDAL_NODATA` (one value for every band, as GDAL writes it) and `NaN`
+/// cells, vertical units, the `limits` checked before any pixel is
+/// allocated, and no panic on any input.
+///
+/// Bands may be interleaved per pixel (`PlanarConfiguration` 1) or
+/// separate (2), in strips or tiles, uncompressed, LZW, Deflate or
+/// PackBits, with or without a predictor; all bands must have one sample
+/// type (8-, 16- and 32-bit integers, Float32, Float64) and be MinIsBlack.
+///
+/// # Errors
+///
+/// A [`TerrainError`] for everything [`read_dem`] refuses (but several
+/// bands), for a band number of 0 or above the file's band count (the
+/// message names both), bands of different sample types, and bytes that
+/// are not a TIFF.
+pub fn read_geotiff_band(
+    bytes: &[u8],
+    band: usize,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    if !geotiff::is_tiff(bytes) {
+        return Err(TerrainError::Invalid(format!(
+            "not a TIFF file: the file starts with {}",
+            if bytes.is_empty() {
+                "nothing (it is empty)".to_string()
+            } else {
+                describe_start(bytes)
+            }
+        )));
+    }
+    let dem = geotiff::read_band(bytes, band, crs, limits)?;
+    check_degrees(&dem)?;
+    Ok(dem)
+}
+
 /// A geographic CRS whose coordinates are not degrees (e.g. a UTM raster
 /// uploaded with `crs=EPSG:4326`) would put the DEM somewhere absurd.
 fn check_degrees(dem: &Dem) -> Result<(), TerrainError> {

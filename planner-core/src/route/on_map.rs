@@ -1,0 +1,1139 @@
+//! Routes on a georeferenced costmap: where the start and goal given in
+//! WGS84 or UTM fall on the grid, the search, and the route described as a
+//! rover needs it (SPEC §4.3, thesis §3.6.4: waypoints in UTM): positions
+//! in WGS84 and UTM, heights, 2D and 3D length, the terrain's slope along
+//! it. Also turns areas (GeoJSON polygons) into the cell changes a replan
+//! applies.
+
+use std::borrow::Cow;
+use std::time::Instant;
+
+use geo_types::{Coord, LineString, Polygon};
+use proj::Proj;
+use serde::{Deserialize, Serialize};
+
+use super::{Cell, CostGrid, GridError, Route, RouteError, RouteOptions, astar};
+use crate::costmap::Class;
+use crate::costmap::grid::work_grid;
+use crate::geo::UtmProjection;
+use crate::terrain::dilate::cell_size_m;
+use crate::terrain::{Crs, Dem, DemLimits, GeoTransform, read_geotiff_band};
+
+/// A point given by the caller: `[lon, lat]` (WGS84 degrees) or
+/// `{"utm": [easting, northing]}` in the route's UTM zone (the zone of
+/// the costmap's centre, reported with every route).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Position {
+    LonLat([f64; 2]),
+    Utm { utm: [f64; 2] },
+}
+
+/// Which end of a route a point is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Endpoint {
+    Start,
+    Goal,
+}
+
+impl Endpoint {
+    pub fn name(self) -> &'static str {
+        match self {
+            Endpoint::Start => "start",
+            Endpoint::Goal => "goal",
+        }
+    }
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Why a route on a map could not be planned.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MapRouteError {
+    #[error("the costmap cannot be planned on: {0}")]
+    Grid(#[from] GridError),
+    #[error("the costmap's grid is rotated or sheared; only north-up grids can be planned on")]
+    RotatedGrid,
+    #[error("{0}")]
+    Crs(String),
+    #[error("the costmap file cannot be read: {0}")]
+    CostmapFile(String),
+    #[error("the DEM is not the one the costmap was built from: {0}")]
+    DemMismatch(String),
+    #[error("{what} has {got} values; the costmap has {expected} cells")]
+    LayerSize {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
+    #[error("the {end} {} is not a valid position: {reason}", show(.position))]
+    InvalidPosition {
+        end: Endpoint,
+        position: Position,
+        reason: String,
+    },
+    #[error(
+        "the {end} (lon {:.6}, lat {:.6}) is outside the costmap, which covers lon {:.6} to \
+         {:.6}, lat {:.6} to {:.6}",
+        .lonlat[0], .lonlat[1], .extent[0], .extent[2], .extent[1], .extent[3]
+    )]
+    Outside {
+        end: Endpoint,
+        lonlat: [f64; 2],
+        /// [min lon, min lat, max lon, max lat] of the costmap's corners.
+        extent: [f64; 4],
+    },
+    #[error(
+        "the {end} (lon {:.6}, lat {:.6}) is on {what}, not on traversable ground",
+        .lonlat[0], .lonlat[1]
+    )]
+    Blocked {
+        end: Endpoint,
+        lonlat: [f64; 2],
+        what: String,
+    },
+    #[error(
+        "the goal cannot be reached from the start: obstacles separate them \
+         (they are in different traversable regions of the costmap)"
+    )]
+    Unreachable,
+    #[error("{0}")]
+    Search(RouteError),
+    #[error("area {index}: {reason}")]
+    InvalidArea { index: usize, reason: String },
+}
+
+fn show(p: &Position) -> String {
+    match p {
+        Position::LonLat([lon, lat]) => format!("[{lon}, {lat}]"),
+        Position::Utm { utm: [e, n] } => format!("{{utm: [{e}, {n}]}}"),
+    }
+}
+
+/// A costmap ready for route searches: the cost grid with its
+/// georeferencing, the heights on the same cells (for 3D length and
+/// slopes) and the class codes (to say what a blocked endpoint is on).
+pub struct RouteMap {
+    grid: CostGrid,
+    transform: GeoTransform,
+    crs: Crs,
+    heights: Option<Vec<f64>>,
+    classes: Option<Vec<u8>>,
+    utm: UtmProjection,
+    map_to_wgs84: Option<Proj>,
+    wgs84_to_map: Option<Proj>,
+    map_to_utm: Proj,
+    utm_to_map: Proj,
+}
+
+impl std::fmt::Debug for RouteMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "RouteMap({}×{}, EPSG:{}, {:?})",
+            self.grid.width(),
+            self.grid.height(),
+            self.crs.epsg,
+            self.utm
+        )
+    }
+}
+
+fn crs_error(e: impl std::fmt::Display) -> MapRouteError {
+    MapRouteError::Crs(format!("coordinate transformation failed: {e}"))
+}
+
+fn proj(from: &str, to: &str) -> Result<Proj, MapRouteError> {
+    Proj::new_known_crs(from, to, None).map_err(crs_error)
+}
+
+impl RouteMap {
+    /// A map of `width` × `height` cells georeferenced by `transform` in
+    /// `crs`: row-major `costs` (non-finite = obstacle or unknown), and
+    /// optionally the heights (metres, NaN unknown) and [`Class`] codes of
+    /// the same cells. Cell sizes come from the transform, in local metres
+    /// for a geographic CRS.
+    pub fn new(
+        width: usize,
+        height: usize,
+        transform: GeoTransform,
+        crs: Crs,
+        costs: Vec<f32>,
+        heights: Option<Vec<f64>>,
+        classes: Option<Vec<u8>>,
+    ) -> Result<RouteMap, MapRouteError> {
+        if transform.col_rotation != 0.0 || transform.row_rotation != 0.0 {
+            return Err(MapRouteError::RotatedGrid);
+        }
+        let cells = width.saturating_mul(height);
+        if let Some(h) = &heights
+            && h.len() != cells
+        {
+            return Err(MapRouteError::LayerSize {
+                what: "the height grid",
+                expected: cells,
+                got: h.len(),
+            });
+        }
+        if let Some(c) = &classes
+            && c.len() != cells
+        {
+            return Err(MapRouteError::LayerSize {
+                what: "the class grid",
+                expected: cells,
+                got: c.len(),
+            });
+        }
+        let sizes: Vec<[f64; 2]> = (0..height)
+            .map(|r| {
+                cell_size_m(
+                    &transform,
+                    crs.geographic,
+                    width as f64 / 2.0,
+                    r as f64 + 0.5,
+                )
+            })
+            .collect();
+        let dy = sizes.get(height / 2).map_or(1.0, |s| s[1]);
+        let dx = sizes.iter().map(|s| s[0]).collect();
+        let grid = CostGrid::new(width, height, costs, dx, dy)?;
+
+        let map_id = crs.proj_id();
+        let (map_to_wgs84, wgs84_to_map) = if crs.epsg == 4326 {
+            (None, None)
+        } else {
+            (
+                Some(proj(&map_id, "EPSG:4326")?),
+                Some(proj("EPSG:4326", &map_id)?),
+            )
+        };
+        let (cx, cy) = transform.apply(width as f64 / 2.0, height as f64 / 2.0);
+        let centre = match &map_to_wgs84 {
+            None => (cx, cy),
+            Some(p) => p.convert((cx, cy)).map_err(crs_error)?,
+        };
+        let utm = UtmProjection::for_lonlat(Coord {
+            x: centre.0,
+            y: centre.1,
+        })
+        .map_err(|e| MapRouteError::Crs(e.to_string()))?;
+        let utm_id = format!("EPSG:{}", utm.epsg());
+        Ok(RouteMap {
+            grid,
+            transform,
+            heights,
+            classes,
+            map_to_utm: proj(&map_id, &utm_id)?,
+            utm_to_map: proj(&utm_id, &map_id)?,
+            crs,
+            utm,
+            map_to_wgs84,
+            wgs84_to_map,
+        })
+    }
+
+    /// A map from the bytes of a costmap GeoTIFF as terraplan writes it
+    /// (band 1 cost, band 2 class) and, for heights, the DEM it was built
+    /// from: the DEM is brought to the costmap's grid by the costmap's own
+    /// block averaging (`resample_factor` read off the two cell sizes) and
+    /// must then cover exactly the same cells.
+    pub fn from_costmap_geotiff(
+        costmap_tif: &[u8],
+        dem: Option<&Dem>,
+        limits: &DemLimits,
+    ) -> Result<RouteMap, MapRouteError> {
+        let read = |band| {
+            read_geotiff_band(costmap_tif, band, None, limits)
+                .map_err(|e| MapRouteError::CostmapFile(e.to_string()))
+        };
+        let cost = read(1)?;
+        let class = read(2)?;
+        let classes = class
+            .values
+            .iter()
+            .map(|&v| {
+                if (0.0..=255.0).contains(&v) {
+                    v as u8
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let heights = dem.map(|d| heights_on_grid(d, &cost)).transpose()?;
+        let costs = cost.values.iter().map(|&v| v as f32).collect();
+        RouteMap::new(
+            cost.width,
+            cost.height,
+            cost.transform,
+            cost.crs,
+            costs,
+            heights,
+            Some(classes),
+        )
+    }
+
+    pub fn grid(&self) -> &CostGrid {
+        &self.grid
+    }
+
+    /// Replace the cost grid (e.g. with the one a replanner has changed).
+    pub fn set_grid(&mut self, grid: CostGrid) -> Result<(), MapRouteError> {
+        if (grid.width(), grid.height()) != (self.grid.width(), self.grid.height()) {
+            return Err(MapRouteError::LayerSize {
+                what: "the new cost grid",
+                expected: self.grid.cell_count(),
+                got: grid.cell_count(),
+            });
+        }
+        self.grid = grid;
+        Ok(())
+    }
+
+    pub fn transform(&self) -> &GeoTransform {
+        &self.transform
+    }
+
+    pub fn crs(&self) -> &Crs {
+        &self.crs
+    }
+
+    /// The UTM zone routes are reported in: the zone of the map's centre.
+    pub fn utm(&self) -> &UtmProjection {
+        &self.utm
+    }
+
+    /// "18N", "33S".
+    pub fn utm_zone_name(&self) -> String {
+        format!(
+            "{}{}",
+            self.utm.zone(),
+            if self.utm.is_north() { 'N' } else { 'S' }
+        )
+    }
+
+    fn to_lonlat(&self, (x, y): (f64, f64)) -> Result<[f64; 2], MapRouteError> {
+        let (lon, lat) = match &self.map_to_wgs84 {
+            None => (x, y),
+            Some(p) => p.convert((x, y)).map_err(crs_error)?,
+        };
+        Ok([lon, lat])
+    }
+
+    fn to_utm(&self, (x, y): (f64, f64)) -> Result<[f64; 2], MapRouteError> {
+        let (e, n) = self.map_to_utm.convert((x, y)).map_err(crs_error)?;
+        Ok([e, n])
+    }
+
+    /// A position in the map's CRS; `None` when it cannot be transformed.
+    fn position_in_map(&self, p: &Position) -> Option<(f64, f64)> {
+        let (x, y) = match *p {
+            Position::LonLat([lon, lat]) => match &self.wgs84_to_map {
+                None => (lon, lat),
+                Some(t) => t.convert((lon, lat)).ok()?,
+            },
+            Position::Utm { utm: [e, n] } => self.utm_to_map.convert((e, n)).ok()?,
+        };
+        (x.is_finite() && y.is_finite()).then_some((x, y))
+    }
+
+    /// [min lon, min lat, max lon, max lat] of the map's four corners.
+    fn extent_lonlat(&self) -> [f64; 4] {
+        let (w, h) = (self.grid.width() as f64, self.grid.height() as f64);
+        let mut e = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for (c, r) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+            if let Ok([lon, lat]) = self.to_lonlat(self.transform.apply(c, r)) {
+                e = [e[0].min(lon), e[1].min(lat), e[2].max(lon), e[3].max(lat)];
+            }
+        }
+        e
+    }
+
+    /// The cell under `p`, checked: valid coordinates, inside the map, and
+    /// traversable (else an error naming `end` and what it is on).
+    pub fn locate(&self, p: &Position, end: Endpoint) -> Result<Cell, MapRouteError> {
+        let invalid = |reason: &str| MapRouteError::InvalidPosition {
+            end,
+            position: *p,
+            reason: reason.to_string(),
+        };
+        match *p {
+            Position::LonLat([lon, lat]) => {
+                if !(lon.is_finite() && lat.is_finite()) {
+                    return Err(invalid("coordinates must be finite numbers"));
+                }
+                if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) {
+                    return Err(invalid(
+                        "[lon, lat] must be within [-180, 180] × [-90, 90] degrees",
+                    ));
+                }
+            }
+            Position::Utm { utm: [e, n] } => {
+                if !(e.is_finite() && n.is_finite()) {
+                    return Err(invalid("coordinates must be finite numbers"));
+                }
+            }
+        }
+        let map_xy = self
+            .position_in_map(p)
+            .ok_or_else(|| invalid("it cannot be transformed into the costmap's CRS"))?;
+        let lonlat = match *p {
+            Position::LonLat(ll) => ll,
+            Position::Utm { .. } => self.to_lonlat(map_xy)?,
+        };
+        let cell = self
+            .transform
+            .invert(map_xy.0, map_xy.1)
+            .and_then(|(c, r)| {
+                let inside = c >= 0.0
+                    && r >= 0.0
+                    && c < self.grid.width() as f64
+                    && r < self.grid.height() as f64;
+                inside.then_some((r as usize, c as usize))
+            });
+        let Some(cell) = cell else {
+            return Err(MapRouteError::Outside {
+                end,
+                lonlat,
+                extent: self.extent_lonlat(),
+            });
+        };
+        if !self.grid.is_traversable(cell) {
+            let i = cell.0 * self.grid.width() + cell.1;
+            let what = match self.classes.as_ref().and_then(|c| Class::from_code(c[i])) {
+                Some(Class::Slope) => "an obstacle (a slope steeper than the vehicle can climb)",
+                Some(Class::Step) => "an obstacle (a step higher than the vehicle can climb)",
+                Some(Class::Enclosed) => "an obstacle (an area enclosed by obstacles)",
+                Some(Class::Other) => "an obstacle (lethal land cover or a hazard layer)",
+                Some(Class::Unknown) => "unknown terrain (no height data)",
+                _ => "an obstacle or unknown terrain",
+            };
+            return Err(MapRouteError::Blocked {
+                end,
+                lonlat,
+                what: what.to_string(),
+            });
+        }
+        Ok(cell)
+    }
+
+    /// The cheapest route from `start` to `goal` by A* (see
+    /// [`astar()`]), described by [`describe`](Self::describe).
+    pub fn plan(
+        &self,
+        start: &Position,
+        goal: &Position,
+        options: &RouteOptions,
+        cancel: &dyn Fn() -> bool,
+    ) -> Result<MapRoute, MapRouteError> {
+        options.validate().map_err(MapRouteError::Search)?;
+        let s = self.locate(start, Endpoint::Start)?;
+        let g = self.locate(goal, Endpoint::Goal)?;
+        let began = Instant::now();
+        let route = astar(&self.grid, s, g, options, cancel).map_err(search_error)?;
+        let ms = began.elapsed().as_secs_f64() * 1e3;
+        self.describe(&route, ms)
+    }
+
+    /// Height at a cell, `None` without heights or on unknown cells.
+    fn height_at(&self, (r, c): Cell) -> Option<f64> {
+        let h = self.heights.as_ref()?[r * self.grid.width() + c];
+        h.is_finite().then_some(h)
+    }
+
+    /// Bilinear height at fractional cell position (col, row) measured in
+    /// cells from the top-left corner; falls back to the nearest cell when
+    /// a neighbour is unknown.
+    fn height_at_point(&self, col: f64, row: f64) -> Option<f64> {
+        let (w, h) = (self.grid.width(), self.grid.height());
+        let x = (col - 0.5).clamp(0.0, (w - 1) as f64);
+        let y = (row - 0.5).clamp(0.0, (h - 1) as f64);
+        let (c0, r0) = (x.floor() as usize, y.floor() as usize);
+        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
+        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+        let corners = [
+            self.height_at((r0, c0)),
+            self.height_at((r0, c1)),
+            self.height_at((r1, c0)),
+            self.height_at((r1, c1)),
+        ];
+        if let [Some(a), Some(b), Some(c), Some(d)] = corners {
+            let top = a + (b - a) * fx;
+            let bottom = c + (d - c) * fx;
+            return Some(top + (bottom - top) * fy);
+        }
+        let nearest = (
+            (row.floor().max(0.0) as usize).min(h - 1),
+            (col.floor().max(0.0) as usize).min(w - 1),
+        );
+        self.height_at(nearest)
+    }
+
+    /// Terrain slope in degrees at a cell (Horn's 3 × 3 gradient, as
+    /// `gdaldem slope`), `None` without heights or where the window has an
+    /// unknown height or leaves the map.
+    pub fn slope_deg_at(&self, (r, c): Cell) -> Option<f64> {
+        let (w, h) = (self.grid.width(), self.grid.height());
+        if r == 0 || c == 0 || r + 1 >= h || c + 1 >= w {
+            return None;
+        }
+        let z = |dr: usize, dc: usize| self.height_at((r + dr - 1, c + dc - 1));
+        let mut v = [[0.0; 3]; 3];
+        for (dr, row) in v.iter_mut().enumerate() {
+            for (dc, cell) in row.iter_mut().enumerate() {
+                *cell = z(dr, dc)?;
+            }
+        }
+        let (sx, sy) = (self.grid.dx(r), self.grid.dy());
+        let gx = ((v[0][2] + 2.0 * v[1][2] + v[2][2]) - (v[0][0] + 2.0 * v[1][0] + v[2][0]))
+            / (8.0 * sx);
+        let gy = ((v[2][0] + 2.0 * v[2][1] + v[2][2]) - (v[0][0] + 2.0 * v[0][1] + v[0][2]))
+            / (8.0 * sy);
+        Some(gx.hypot(gy).atan().to_degrees())
+    }
+
+    /// A cell centre in the map's CRS.
+    fn centre(&self, (r, c): Cell) -> (f64, f64) {
+        self.transform.apply(c as f64 + 0.5, r as f64 + 0.5)
+    }
+
+    /// The route as a rover takes it: waypoints in WGS84 and UTM with
+    /// heights, its 2D and 3D length, and the terrain slope under it.
+    /// Lengths, heights and slopes are measured along the waypoint
+    /// polyline (the path driven), sampled at least every half cell.
+    pub fn describe(&self, route: &Route, search_ms: f64) -> Result<MapRoute, MapRouteError> {
+        let mut waypoints = Vec::with_capacity(route.waypoints.len());
+        for &(row, col) in &route.waypoints {
+            let xy = self.centre((row, col));
+            let [lon, lat] = self.to_lonlat(xy)?;
+            let [easting, northing] = self.to_utm(xy)?;
+            waypoints.push(RoutePoint {
+                lon,
+                lat,
+                easting,
+                northing,
+                height_m: self.height_at((row, col)),
+                row,
+                col,
+            });
+        }
+        let profile = self.profile(&route.waypoints);
+        Ok(MapRoute {
+            utm_zone: self.utm_zone_name(),
+            utm_epsg: self.utm.epsg(),
+            waypoints,
+            length_2d_m: route.waypoints_length_m,
+            length_3d_m: profile.length_3d_m,
+            cost: route.waypoints_cost,
+            path_cost: route.cost,
+            path_length_m: route.length_m,
+            path_cells: route.cells.len(),
+            max_slope_deg: profile.max_slope_deg,
+            mean_slope_deg: profile.mean_slope_deg,
+            max_grade_deg: profile.max_grade_deg,
+            climb_m: profile.climb_m,
+            descent_m: profile.descent_m,
+            expanded: route.expanded,
+            search_ms,
+        })
+    }
+
+    /// Heights and slopes sampled along the polyline through the cell
+    /// centres of `points`.
+    fn profile(&self, points: &[Cell]) -> Profile {
+        let mut p = Profile::default();
+        if self.heights.is_none() {
+            return p;
+        }
+        let mut length_3d = 0.0;
+        let (mut slope_sum, mut slope_len, mut slope_max) = (0.0, 0.0, f64::NEG_INFINITY);
+        let mut grade_max = f64::NEG_INFINITY;
+        let (mut climb, mut descent) = (0.0, 0.0);
+        let mut heights_known = true;
+        for pair in points.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let (ca, ra) = (a.1 as f64 + 0.5, a.0 as f64 + 0.5);
+            let (cb, rb) = (b.1 as f64 + 0.5, b.0 as f64 + 0.5);
+            let span = (cb - ca).abs().max((rb - ra).abs());
+            let steps = ((span * 2.0).ceil() as usize).max(1);
+            let mut prev: Option<(f64, f64, f64)> = None; // (x m, y m, z)
+            for k in 0..=steps {
+                let t = k as f64 / steps as f64;
+                let (col, row) = (ca + (cb - ca) * t, ra + (rb - ra) * t);
+                let r = (row.floor() as usize).min(self.grid.height() - 1);
+                // Metres along the segment from its start.
+                let xm = (col - ca) * self.grid.dx(r);
+                let ym = (row - ra) * self.grid.dy();
+                let z = self.height_at_point(col, row);
+                let Some(z) = z else {
+                    heights_known = false;
+                    prev = None;
+                    continue;
+                };
+                if let Some((px, py, pz)) = prev {
+                    let d = (xm - px).hypot(ym - py);
+                    length_3d += d.hypot(z - pz);
+                    if d > 0.0 {
+                        grade_max = grade_max.max(((z - pz).abs() / d).atan().to_degrees());
+                        let cell = (r, (col.floor() as usize).min(self.grid.width() - 1));
+                        if let Some(s) = self.slope_deg_at(cell) {
+                            slope_sum += s * d;
+                            slope_len += d;
+                            slope_max = slope_max.max(s);
+                        }
+                    }
+                    if z > pz {
+                        climb += z - pz;
+                    } else {
+                        descent += pz - z;
+                    }
+                }
+                prev = Some((xm, ym, z));
+            }
+        }
+        if heights_known {
+            p.length_3d_m = Some(length_3d);
+            p.climb_m = Some(climb);
+            p.descent_m = Some(descent);
+            if grade_max.is_finite() {
+                p.max_grade_deg = Some(grade_max);
+            }
+        }
+        if slope_len > 0.0 {
+            p.max_slope_deg = Some(slope_max);
+            p.mean_slope_deg = Some(slope_sum / slope_len);
+        }
+        p
+    }
+
+    /// The cells of the areas (GeoJSON-style polygons in WGS84 lon/lat):
+    /// every cell whose centre is inside an area or that an area's
+    /// boundary passes through (so a strip narrower than a cell still
+    /// blocks a line of cells). Row-major indices, sorted, no repeats;
+    /// areas wholly off the map contribute nothing.
+    pub fn cells_in_areas(&self, areas: &[Polygon<f64>]) -> Result<Vec<usize>, MapRouteError> {
+        let (w, h) = (self.grid.width(), self.grid.height());
+        let mut marked = vec![false; w * h];
+        for (index, area) in areas.iter().enumerate() {
+            let bad = |reason: &str| MapRouteError::InvalidArea {
+                index,
+                reason: reason.to_string(),
+            };
+            let mut rings = Vec::new();
+            for ring in std::iter::once(area.exterior()).chain(area.interiors()) {
+                let mut px = Vec::with_capacity(ring.0.len());
+                for p in &ring.0 {
+                    if !(p.x.is_finite() && p.y.is_finite()) {
+                        return Err(bad("a vertex is not a finite number"));
+                    }
+                    let (x, y) = self
+                        .position_in_map(&Position::LonLat([p.x, p.y]))
+                        .ok_or_else(|| {
+                            bad("a vertex cannot be transformed to the costmap's CRS")
+                        })?;
+                    let (c, r) = self
+                        .transform
+                        .invert(x, y)
+                        .ok_or_else(|| bad("the costmap's grid cannot be inverted"))?;
+                    px.push(Coord { x: c, y: r });
+                }
+                rings.push(LineString(px));
+            }
+            if rings[0].0.len() < 3 {
+                return Err(bad("a polygon needs at least 3 vertices"));
+            }
+            mark_polygon(&rings, w, h, &mut marked);
+        }
+        Ok(marked
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &m)| m.then_some(i))
+            .collect())
+    }
+}
+
+/// The DEM's heights on the costmap's grid `map` (as read from its
+/// GeoTIFF), averaged in blocks as the costmap pipeline does.
+fn heights_on_grid(dem: &Dem, map: &Dem) -> Result<Vec<f64>, MapRouteError> {
+    let mismatch = |why: String| MapRouteError::DemMismatch(why);
+    if dem.crs.epsg != map.crs.epsg {
+        return Err(mismatch(format!(
+            "the DEM is in EPSG:{}, the costmap in EPSG:{}",
+            dem.crs.epsg, map.crs.epsg
+        )));
+    }
+    let (d, m) = (&dem.transform, &map.transform);
+    let fx = (m.pixel_width / d.pixel_width).round();
+    let fy = (m.pixel_height / d.pixel_height).round();
+    if !(fx >= 1.0 && fy >= 1.0) {
+        return Err(mismatch("its cells are larger than the costmap's".into()));
+    }
+    let grid = work_grid(Cow::Borrowed(dem), [fx as usize, fy as usize]);
+    let g = &grid.transform;
+    let close = |a: f64, b: f64, cell: f64| (a - b).abs() <= 1e-6 * cell.abs();
+    let same = grid.width == map.width
+        && grid.height == map.height
+        && close(g.origin_x, m.origin_x, m.pixel_width)
+        && close(g.origin_y, m.origin_y, m.pixel_height)
+        && close(g.pixel_width, m.pixel_width, m.pixel_width)
+        && close(g.pixel_height, m.pixel_height, m.pixel_height);
+    if !same {
+        return Err(mismatch(format!(
+            "averaged {fx}×{fy} it gives a {}×{} grid at ({}, {}), the costmap is {}×{} at ({}, {})",
+            grid.width,
+            grid.height,
+            g.origin_x,
+            g.origin_y,
+            map.width,
+            map.height,
+            m.origin_x,
+            m.origin_y
+        )));
+    }
+    Ok(grid.z)
+}
+
+/// Sets the cells (in a `w` × `h` grid, pixel coordinates: cell (r, c)
+/// spans [c, c+1) × [r, r+1)) whose centre is inside the polygon (even-odd
+/// rule over all rings) or that a ring's edge passes through.
+fn mark_polygon(rings: &[LineString<f64>], w: usize, h: usize, marked: &mut [bool]) {
+    let edges: Vec<(Coord<f64>, Coord<f64>)> = rings
+        .iter()
+        .flat_map(|ring| {
+            let n = ring.0.len();
+            (0..n).map(move |i| (ring.0[i], ring.0[(i + 1) % n]))
+        })
+        .filter(|(a, b)| a != b)
+        .collect();
+    let (min_y, max_y) = edges
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |m, (a, b)| {
+            (m.0.min(a.y).min(b.y), m.1.max(a.y).max(b.y))
+        });
+    // Centres inside: scanlines through the row centres.
+    let r0 = (min_y - 0.5).ceil().max(0.0);
+    let r1 = (max_y - 0.5).floor().min(h as f64 - 1.0);
+    let mut xs = Vec::new();
+    if r0 <= r1 {
+        for r in r0 as usize..=r1 as usize {
+            let y = r as f64 + 0.5;
+            xs.clear();
+            for (a, b) in &edges {
+                // Half-open in y, so a vertex on the line counts once.
+                if (a.y <= y) != (b.y <= y) {
+                    xs.push(a.x + (y - a.y) / (b.y - a.y) * (b.x - a.x));
+                }
+            }
+            xs.sort_by(f64::total_cmp);
+            for span in xs.chunks_exact(2) {
+                let c0 = (span[0] - 0.5).ceil().max(0.0);
+                let c1 = (span[1] - 0.5).floor().min(w as f64 - 1.0);
+                if c0 <= c1 {
+                    for c in c0 as usize..=c1 as usize {
+                        marked[r * w + c] = true;
+                    }
+                }
+            }
+        }
+    }
+    // Cells the edges pass through: sampled finely enough that no crossed
+    // cell is missed by more than a sliver of 1/8 cell.
+    for (a, b) in &edges {
+        let span = (b.x - a.x).abs().max((b.y - a.y).abs());
+        // Edges far off the map cost nothing: clip the walk to the grid.
+        let steps = ((span * 8.0).ceil() as usize).clamp(1, 8 * 4 * (w + h));
+        for k in 0..=steps {
+            let t = k as f64 / steps as f64;
+            let (x, y) = (a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t);
+            if x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64 {
+                marked[y as usize * w + x as usize] = true;
+            }
+        }
+    }
+}
+
+fn search_error(e: RouteError) -> MapRouteError {
+    match e {
+        RouteError::Unreachable => MapRouteError::Unreachable,
+        other => MapRouteError::Search(other),
+    }
+}
+
+#[derive(Default)]
+struct Profile {
+    length_3d_m: Option<f64>,
+    max_slope_deg: Option<f64>,
+    mean_slope_deg: Option<f64>,
+    max_grade_deg: Option<f64>,
+    climb_m: Option<f64>,
+    descent_m: Option<f64>,
+}
+
+/// One waypoint of a route.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RoutePoint {
+    pub lon: f64,
+    pub lat: f64,
+    /// UTM easting, metres, in the route's zone.
+    pub easting: f64,
+    pub northing: f64,
+    /// Terrain height of the cell (the DEM's vertical datum); absent where
+    /// unknown or when the map has no heights.
+    pub height_m: Option<f64>,
+    /// The costmap cell, row 0 at the top.
+    pub row: usize,
+    pub col: usize,
+}
+
+/// A route on a map, as the API and CLI report it.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapRoute {
+    /// UTM zone of the eastings and northings, e.g. "18N".
+    pub utm_zone: String,
+    /// Its EPSG code (WGS 84 / UTM, 326zz or 327zz).
+    pub utm_epsg: u32,
+    /// Start, turning points, goal.
+    pub waypoints: Vec<RoutePoint>,
+    /// Length of the waypoint polyline in metres, horizontally.
+    pub length_2d_m: f64,
+    /// Length along the terrain (heights sampled every half cell); absent
+    /// without heights or where the route crosses unknown heights.
+    pub length_3d_m: Option<f64>,
+    /// Integrated cost of the waypoint polyline: the line integral of the
+    /// cell cost along it (cost × metres).
+    pub cost: f64,
+    /// What the search minimised: the cost of the 8-connected cell path
+    /// under the chosen arc rule (before smoothing).
+    pub path_cost: f64,
+    /// Length of the cell path in metres.
+    pub path_length_m: f64,
+    /// Cells on the cell path.
+    pub path_cells: usize,
+    /// Steepest terrain slope (Horn, degrees) under the route.
+    pub max_slope_deg: Option<f64>,
+    /// Length-weighted mean terrain slope under the route, degrees.
+    pub mean_slope_deg: Option<f64>,
+    /// Steepest climb or descent along the direction of travel, degrees.
+    pub max_grade_deg: Option<f64>,
+    /// Total ascent and descent along the route, metres.
+    pub climb_m: Option<f64>,
+    pub descent_m: Option<f64>,
+    /// Cells the search expanded.
+    pub expanded: u64,
+    /// Time the search took, milliseconds.
+    pub search_ms: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 100 × 80 grid of 2 m cells in UTM 18N (EPSG:32618) near
+    /// 75.3°W 38.8°N, cost 1 except where `blocked` says.
+    fn utm_map(blocked: impl Fn(usize, usize) -> bool, heights: Option<Vec<f64>>) -> RouteMap {
+        let (w, h) = (100, 80);
+        let costs = (0..w * h)
+            .map(|i| if blocked(i / w, i % w) { f32::NAN } else { 1.0 })
+            .collect();
+        let t = GeoTransform {
+            origin_x: 472_000.0,
+            pixel_width: 2.0,
+            col_rotation: 0.0,
+            origin_y: 4_295_000.0,
+            row_rotation: 0.0,
+            pixel_height: -2.0,
+        };
+        let classes = (0..w * h)
+            .map(|i| if blocked(i / w, i % w) { 3 } else { 1 })
+            .collect();
+        RouteMap::new(
+            w,
+            h,
+            t,
+            Crs::from_epsg(32618).unwrap(),
+            costs,
+            heights,
+            Some(classes),
+        )
+        .unwrap()
+    }
+
+    fn utm_of(map: &RouteMap, cell: Cell) -> Position {
+        let [e, n] = map.to_utm(map.centre(cell)).unwrap();
+        Position::Utm { utm: [e, n] }
+    }
+
+    fn lonlat_of(map: &RouteMap, cell: Cell) -> Position {
+        Position::LonLat(map.to_lonlat(map.centre(cell)).unwrap())
+    }
+
+    #[test]
+    fn positions_land_on_their_cells() {
+        let map = utm_map(|_, _| false, None);
+        assert_eq!(map.utm_zone_name(), "18N");
+        for cell in [(0, 0), (79, 99), (40, 17), (3, 96)] {
+            assert_eq!(map.locate(&utm_of(&map, cell), Endpoint::Start), Ok(cell));
+            assert_eq!(map.locate(&lonlat_of(&map, cell), Endpoint::Goal), Ok(cell));
+        }
+    }
+
+    #[test]
+    fn endpoint_faults_name_the_end() {
+        let map = utm_map(|r, c| r == 10 && c == 10, None);
+        let off = Position::Utm {
+            utm: [472_000.0 - 5.0, 4_295_000.0 - 10.0],
+        };
+        let e = map.locate(&off, Endpoint::Goal).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                MapRouteError::Outside {
+                    end: Endpoint::Goal,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().starts_with("the goal"), "{e}");
+        let e = map
+            .locate(&utm_of(&map, (10, 10)), Endpoint::Start)
+            .unwrap_err();
+        assert!(e.to_string().contains("step higher"), "{e}");
+        assert!(matches!(
+            map.locate(&Position::LonLat([200.0, 0.0]), Endpoint::Start),
+            Err(MapRouteError::InvalidPosition { .. })
+        ));
+        assert!(matches!(
+            map.locate(&Position::LonLat([f64::NAN, 0.0]), Endpoint::Start),
+            Err(MapRouteError::InvalidPosition { .. })
+        ));
+    }
+
+    #[test]
+    fn a_wall_with_no_gap_is_unreachable() {
+        let map = utm_map(|_, c| c == 50, None);
+        let e = map
+            .plan(
+                &utm_of(&map, (40, 10)),
+                &utm_of(&map, (40, 90)),
+                &RouteOptions::default(),
+                &|| false,
+            )
+            .unwrap_err();
+        assert_eq!(e, MapRouteError::Unreachable);
+    }
+
+    #[test]
+    fn straight_route_on_a_tilted_plane() {
+        // Heights rise 1 m per 2 m cell eastwards: a 26.57° slope.
+        let (w, h) = (100, 80);
+        let heights = (0..w * h).map(|i| (i % w) as f64).collect();
+        let map = utm_map(|_, _| false, Some(heights));
+        let r = map
+            .plan(
+                &utm_of(&map, (40, 10)),
+                &utm_of(&map, (40, 90)),
+                &RouteOptions::default(),
+                &|| false,
+            )
+            .unwrap();
+        assert_eq!(r.waypoints.len(), 2);
+        assert!((r.length_2d_m - 160.0).abs() < 1e-9, "{}", r.length_2d_m);
+        let expect_3d = 160.0f64.hypot(80.0);
+        assert!((r.length_3d_m.unwrap() - expect_3d).abs() < 1e-6);
+        let slope = 0.5f64.atan().to_degrees();
+        assert!((r.max_slope_deg.unwrap() - slope).abs() < 1e-9);
+        assert!((r.mean_slope_deg.unwrap() - slope).abs() < 1e-9);
+        assert!((r.max_grade_deg.unwrap() - slope).abs() < 1e-9);
+        assert!((r.climb_m.unwrap() - 80.0).abs() < 1e-9);
+        assert_eq!(r.descent_m, Some(0.0));
+        assert_eq!(r.waypoints[0].height_m, Some(10.0));
+        assert_eq!(r.waypoints[1].height_m, Some(90.0));
+        // 80 cells at cost 1: the path cost is its length.
+        assert!((r.path_cost - 160.0).abs() < 1e-9);
+        assert!((r.cost - 160.0).abs() < 1e-9);
+        let e = r.waypoints[1].easting - r.waypoints[0].easting;
+        assert!((e - 160.0).abs() < 1e-6, "{e}");
+    }
+
+    #[test]
+    fn area_cells_include_centres_and_boundary() {
+        let map = utm_map(|_, _| false, None);
+        let t = *map.transform();
+        let ll = |c: f64, r: f64| {
+            let [lon, lat] = map.to_lonlat(t.apply(c, r)).unwrap();
+            Coord { x: lon, y: lat }
+        };
+        // A square over cells 10..20 × 5..15 (pixel corners), and a sliver
+        // 0.1 cell wide along column 50.
+        let square = Polygon::new(
+            LineString(vec![
+                ll(10.0, 5.0),
+                ll(20.0, 5.0),
+                ll(20.0, 15.0),
+                ll(10.0, 15.0),
+            ]),
+            vec![],
+        );
+        let sliver = Polygon::new(
+            LineString(vec![
+                ll(50.4, 30.2),
+                ll(50.5, 30.2),
+                ll(50.5, 39.8),
+                ll(50.4, 39.8),
+            ]),
+            vec![],
+        );
+        let cells = map.cells_in_areas(&[square, sliver]).unwrap();
+        let w = 100;
+        for r in 5..15 {
+            for c in 10..20 {
+                assert!(cells.binary_search(&(r * w + c)).is_ok(), "({r}, {c})");
+            }
+        }
+        for r in 30..40 {
+            assert!(cells.binary_search(&(r * w + 50)).is_ok(), "sliver row {r}");
+        }
+        // Boundary cells may include the ring of cells the edges touch,
+        // never more than one cell beyond.
+        for &i in &cells {
+            let (r, c) = (i / w, i % w);
+            let in_square = (4..=15).contains(&r) && (9..=20).contains(&c);
+            let in_sliver = (30..40).contains(&r) && c == 50;
+            assert!(in_square || in_sliver, "({r}, {c})");
+        }
+        // Off the map: nothing.
+        let far = Polygon::new(
+            LineString(vec![ll(-50.0, -50.0), ll(-40.0, -50.0), ll(-40.0, -40.0)]),
+            vec![],
+        );
+        assert!(map.cells_in_areas(&[far]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn geographic_maps_use_local_metres() {
+        // 0.0001° cells at 60°N: about 5.57 m east-west, 11.1 m north-south.
+        let (w, h) = (50, 50);
+        let t = GeoTransform {
+            origin_x: 10.0,
+            pixel_width: 1e-4,
+            col_rotation: 0.0,
+            origin_y: 60.0025,
+            row_rotation: 0.0,
+            pixel_height: -1e-4,
+        };
+        let map = RouteMap::new(
+            w,
+            h,
+            t,
+            Crs::from_epsg(4326).unwrap(),
+            vec![1.0; w * h],
+            None,
+            None,
+        )
+        .unwrap();
+        let r = map
+            .plan(
+                &lonlat_of(&map, (25, 5)),
+                &lonlat_of(&map, (25, 45)),
+                &RouteOptions::default(),
+                &|| false,
+            )
+            .unwrap();
+        let de = r.waypoints[1].easting - r.waypoints[0].easting;
+        // The grid's metres agree with UTM's within 0.5 %.
+        assert!(
+            (r.length_2d_m / de - 1.0).abs() < 5e-3,
+            "{} vs {de}",
+            r.length_2d_m
+        );
+        assert_eq!(r.length_3d_m, None);
+    }
+
+    /// A costmap built by the pipeline at half the DEM's resolution,
+    /// written as its GeoTIFF and read back with the DEM: the heights are
+    /// the costmap's own block means, a wall of the DEM blocks the cells,
+    /// and the route goes round it.
+    #[test]
+    fn costmap_geotiff_round_trip_with_the_dem() {
+        use crate::costmap::{CostmapOptions, Stage, VehiclePreset, build_costmap};
+        use crate::terrain::test_support::{dem, north_up};
+        let (w, h) = (120, 100);
+        // A gentle plane (2 %) with a 3 m wall across columns 60..64,
+        // open in rows 80.. .
+        let values = (0..w * h)
+            .map(|i| {
+                let (r, c) = (i / w, i % w);
+                let wall = (60..64).contains(&c) && r < 80;
+                0.02 * 0.5 * c as f64 + if wall { 3.0 } else { 0.0 }
+            })
+            .collect();
+        let mut d = dem(
+            w,
+            h,
+            values,
+            north_up(500_000.0, 4_300_000.0, 0.5, 0.5),
+            false,
+        );
+        d.crs = Crs::from_epsg(32618).unwrap();
+        let options = CostmapOptions {
+            resolution_m: Some(1.0),
+            ..CostmapOptions::default()
+        };
+        let vehicle = VehiclePreset::UGo.vehicle();
+        let cm = build_costmap(&d, &vehicle, &options, None, &|_: Stage, _: f64| true).unwrap();
+        let mut tif = std::io::Cursor::new(Vec::new());
+        cm.write_geotiff(&mut tif).unwrap();
+        let tif = tif.into_inner();
+        let map = RouteMap::from_costmap_geotiff(&tif, Some(&d), &DemLimits::default()).unwrap();
+        assert_eq!((map.grid().width(), map.grid().height()), (60, 50));
+        // Block (r, c) of the 1 m grid is the mean of DEM cells 2r.., 2c..
+        let z = map.height_at((10, 5)).unwrap();
+        let expect = 0.02 * 0.5 * (10.0 + 11.0) / 2.0;
+        assert!((z - expect).abs() < 1e-9, "{z} vs {expect}");
+        let costs = map.grid().costs();
+        assert_eq!(costs.len(), cm.cost.len());
+        assert!(
+            costs
+                .iter()
+                .zip(&cm.cost)
+                .all(|(a, b)| a.is_nan() == b.is_nan())
+        );
+        let r = map
+            .plan(
+                &utm_of(&map, (10, 10)),
+                &utm_of(&map, (10, 50)),
+                &RouteOptions::default(),
+                &|| false,
+            )
+            .unwrap();
+        // Round the wall's end at row 40 of the 1 m grid.
+        assert!(r.waypoints.iter().any(|p| p.row >= 40), "{:?}", r.waypoints);
+        assert!(r.length_2d_m > 2.0 * 30.0);
+        assert!(r.max_slope_deg.unwrap() < 5.0);
+        // Without the DEM: no heights; with another DEM: refused.
+        let bare = RouteMap::from_costmap_geotiff(&tif, None, &DemLimits::default()).unwrap();
+        assert_eq!(bare.height_at((10, 5)), None);
+        let mut shifted = d.clone();
+        shifted.transform.origin_x += 7.0;
+        assert!(matches!(
+            RouteMap::from_costmap_geotiff(&tif, Some(&shifted), &DemLimits::default()),
+            Err(MapRouteError::DemMismatch(_))
+        ));
+        assert!(matches!(
+            RouteMap::from_costmap_geotiff(b"not a tiff", None, &DemLimits::default()),
+            Err(MapRouteError::CostmapFile(_))
+        ));
+    }
+}

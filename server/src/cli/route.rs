@@ -1,0 +1,337 @@
+//! `terraplan route`: the cheapest safe route across a costmap GeoTIFF
+//! (as `terraplan costmap` or the service writes it), and optionally a
+//! D* Lite replan after blocking areas, with the files the service serves.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use planner_core::export::ground_route::{route_csv, route_geojson, rover_mission};
+use planner_core::export::write_waypoints;
+use planner_core::route::{
+    ArcCost, DStarLite, Endpoint, MapRoute, MapRouteError, Position, RouteMap, RouteOptions, astar,
+};
+use planner_core::terrain::DemLimits;
+use serde_json::{Map, Value, json};
+
+use super::{Failure, read_dem_file, read_json};
+
+#[derive(clap::Args)]
+pub(super) struct RouteArgs {
+    /// The costmap GeoTIFF (band 1 cost, band 2 class), as written by
+    /// `terraplan costmap` or served as `costmap.tif`.
+    #[arg(value_name = "COSTMAP.tif")]
+    costmap: PathBuf,
+    /// Start: `LON,LAT` (WGS84 degrees) or `utm:EASTING,NORTHING` in the
+    /// UTM zone of the costmap's centre.
+    #[arg(long, value_name = "LON,LAT", allow_hyphen_values = true)]
+    from: String,
+    /// Goal, as `--from`.
+    #[arg(long, value_name = "LON,LAT", allow_hyphen_values = true)]
+    to: String,
+    /// Output directory (created if missing): route.json, route.geojson,
+    /// route.csv, mission.waypoints (and replanned/ with `--block`).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// The DEM the costmap was built from, for heights, 3D length and
+    /// slopes along the route.
+    #[arg(long, value_name = "FILE")]
+    dem: Option<PathBuf>,
+    /// Horizontal CRS of the DEM, when the file does not say.
+    #[arg(long, value_name = "EPSG:CODE", requires = "dem")]
+    dem_crs: Option<String>,
+    /// Arc cost rule: `integrated` (step length × mean cost, as
+    /// scikit-image's MCP_Geometric) or `thesis` (Algorithm 1).
+    #[arg(long, value_name = "RULE", default_value = "integrated")]
+    arc_cost: String,
+    /// d_max of the `thesis` rule.
+    #[arg(long, value_name = "D_MAX", default_value_t = ArcCost::DEFAULT_D_MAX)]
+    d_max: f64,
+    /// Heuristic weight ≥ 1: cost ≤ epsilon × the optimum, faster.
+    #[arg(long, default_value_t = 1.0)]
+    epsilon: f64,
+    /// Keep the turning points of the cell path instead of smoothing.
+    #[arg(long)]
+    no_smooth: bool,
+    /// Ground speed for the rover mission (DO_CHANGE_SPEED), m/s.
+    #[arg(long, value_name = "M/S")]
+    speed: Option<f64>,
+    /// Areas to block after planning (GeoJSON polygons, WGS84); may be
+    /// given several times. The route is then replanned from the start by
+    /// D* Lite, reusing its search, and the replan written to
+    /// DIR/replanned/ with its timing next to a search from scratch.
+    #[arg(long, value_name = "FILE.geojson")]
+    block: Vec<PathBuf>,
+    /// Most pixels (width × height) accepted.
+    #[arg(long, default_value_t = DemLimits::default().max_pixels)]
+    max_pixels: u64,
+}
+
+/// `LON,LAT` or `utm:E,N`.
+fn parse_position(text: &str, flag: &str) -> Result<Position, Failure> {
+    let bad = |why: &str| Failure::input(format!("{flag} {text:?}: {why}"));
+    let (utm, numbers) = match text.trim().strip_prefix("utm:") {
+        Some(rest) => (true, rest),
+        None => (false, text.trim()),
+    };
+    let parts: Vec<&str> = numbers.split(',').map(str::trim).collect();
+    let [a, b] = parts[..] else {
+        return Err(bad("expected two numbers separated by a comma"));
+    };
+    let num = |s: &str| {
+        s.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| bad(&format!("{s:?} is not a finite number")))
+    };
+    let (a, b) = (num(a)?, num(b)?);
+    Ok(if utm {
+        Position::Utm { utm: [a, b] }
+    } else {
+        Position::LonLat([a, b])
+    })
+}
+
+fn map_failure(e: MapRouteError, args: &RouteArgs) -> Failure {
+    let flag = |end: Endpoint| match end {
+        Endpoint::Start => "--from",
+        Endpoint::Goal => "--to",
+    };
+    match e {
+        MapRouteError::Outside { end, .. }
+        | MapRouteError::Blocked { end, .. }
+        | MapRouteError::InvalidPosition { end, .. } => {
+            Failure::input(format!("{}: {e}", flag(end)))
+        }
+        MapRouteError::CostmapFile(_)
+        | MapRouteError::Grid(_)
+        | MapRouteError::RotatedGrid
+        | MapRouteError::LayerSize { .. } => {
+            Failure::input(format!("{}: {e}", args.costmap.display()))
+        }
+        MapRouteError::DemMismatch(_) => Failure::input(format!(
+            "--dem {}: {e}",
+            args.dem.as_deref().unwrap_or(Path::new("")).display()
+        )),
+        MapRouteError::Unreachable | MapRouteError::InvalidArea { .. } => {
+            Failure::input(e.to_string())
+        }
+        MapRouteError::Search(inner) => match inner {
+            planner_core::route::RouteError::InvalidOptions(_) => Failure::input(inner.to_string()),
+            other => Failure::other(other.to_string()),
+        },
+        MapRouteError::Crs(_) => Failure::other(e.to_string()),
+    }
+}
+
+pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
+    let arc_cost = match args.arc_cost.as_str() {
+        "integrated" => ArcCost::Integrated,
+        "thesis" => ArcCost::Thesis { d_max: args.d_max },
+        other => {
+            return Err(Failure::input(format!(
+                "--arc-cost {other:?}: expected integrated or thesis"
+            )));
+        }
+    };
+    let options = RouteOptions {
+        arc_cost,
+        epsilon: args.epsilon,
+        smooth: !args.no_smooth,
+        max_expansions: None,
+    };
+    if let Err(issues) = options.validate().map_err(|e| e.to_string()) {
+        return Err(Failure::input(issues));
+    }
+    if let Some(s) = args.speed
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(Failure::input(format!("--speed {s}: must be a number > 0")));
+    }
+    let start = parse_position(&args.from, "--from")?;
+    let goal = parse_position(&args.to, "--to")?;
+    let mut blocked = Vec::new();
+    for path in &args.block {
+        let doc = read_json(path, "blocked area")?;
+        let parsed = planner_core::geo::parse_polygons(&doc, "").map_err(|issues| {
+            super::list_issues(&issues, |ptr| format!("{}#{ptr}", path.display()))
+        });
+        blocked.extend(
+            parsed
+                .map_err(Failure::input)?
+                .into_iter()
+                .map(|p| p.polygon),
+        );
+    }
+
+    let limits = DemLimits {
+        max_pixels: args.max_pixels,
+        ..DemLimits::default()
+    };
+    let bytes = std::fs::read(&args.costmap).map_err(|e| {
+        Failure::input(format!(
+            "cannot read costmap file {}: {e}",
+            args.costmap.display()
+        ))
+    })?;
+    let dem = match &args.dem {
+        Some(path) => {
+            Some(read_dem_file(path, args.dem_crs.as_deref(), "--dem-crs", limits.clone())?.0)
+        }
+        None => None,
+    };
+    let loaded = Instant::now();
+    let mut map = RouteMap::from_costmap_geotiff(&bytes, dem.as_ref(), &limits)
+        .map_err(|e| map_failure(e, args))?;
+    drop((bytes, dem));
+    let load_ms = loaded.elapsed().as_secs_f64() * 1e3;
+    let planned = map
+        .plan(&start, &goal, &options, &|| false)
+        .map_err(|e| map_failure(e, args))?;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
+    let request =
+        json!({"start": start, "goal": goal, "options": options, "speed_m_s": args.speed});
+    write_route(&args.out, &planned, &request, args.speed)?;
+    let g = map.grid();
+    println!(
+        "route {:.1} m ({} waypoints, 3D {}), cost {:.1}, {} cells expanded in {:.1} ms \
+         on {}×{} cells (read in {load_ms:.0} ms) -> {}",
+        planned.length_2d_m,
+        planned.waypoints.len(),
+        planned
+            .length_3d_m
+            .map_or("unknown".to_string(), |l| format!("{l:.1} m")),
+        planned.cost,
+        planned.expanded,
+        planned.search_ms,
+        g.width(),
+        g.height(),
+        args.out.display()
+    );
+
+    if blocked.is_empty() {
+        return Ok(());
+    }
+    replan(
+        args, &mut map, &planned, &start, &goal, &options, &blocked, request,
+    )
+}
+
+/// Block `areas`, then replan from the start with D* Lite reusing its
+/// first search, and time a from-scratch A* on the changed map beside it.
+#[allow(clippy::too_many_arguments)]
+fn replan(
+    args: &RouteArgs,
+    map: &mut RouteMap,
+    first: &MapRoute,
+    start: &Position,
+    goal: &Position,
+    options: &RouteOptions,
+    areas: &[geo_types::Polygon<f64>],
+    mut request: Value,
+) -> Result<(), Failure> {
+    let fail = |e| map_failure(e, args);
+    if options.epsilon != 1.0 {
+        return Err(Failure::input(
+            "--block replans with D* Lite, which is optimal: --epsilon must be 1",
+        ));
+    }
+    let s = map.locate(start, Endpoint::Start).map_err(fail)?;
+    let g = map.locate(goal, Endpoint::Goal).map_err(fail)?;
+    let cells = map.cells_in_areas(areas).map_err(fail)?;
+    let changes: Vec<(usize, f32)> = cells.iter().map(|&i| (i, f32::NAN)).collect();
+
+    let search = |e: planner_core::route::RouteError| fail(MapRouteError::Search(e));
+    let t = Instant::now();
+    let mut dstar = DStarLite::new(map.grid().clone(), s, g, options.clone()).map_err(search)?;
+    let initial = dstar.plan(&|| false).map_err(search)?;
+    let initial_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    dstar.update_cells(&changes).map_err(search)?;
+    let replanned = dstar.plan(&|| false);
+    let replan_ms = t.elapsed().as_secs_f64() * 1e3;
+    let changed = dstar.grid().clone();
+    let t = Instant::now();
+    let scratch = astar(&changed, s, g, options, &|| false);
+    let scratch_ms = t.elapsed().as_secs_f64() * 1e3;
+    let replanned = replanned.map_err(|e| match e {
+        planner_core::route::RouteError::Unreachable => fail(MapRouteError::Unreachable),
+        other => search(other),
+    })?;
+    let scratch = scratch.map_err(search)?;
+    map.set_grid(changed).map_err(fail)?;
+    let described = map.describe(&replanned, replan_ms).map_err(fail)?;
+    let dir = args.out.join("replanned");
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", dir.display())))?;
+    request["blocked_cells"] = json!(cells.len());
+    write_route(&dir, &described, &request, args.speed)?;
+    let timing = json!({
+        "blocked_cells": cells.len(),
+        "first_route_cost": first.path_cost,
+        "dstar_lite": {
+            "initial_ms": initial_ms, "initial_expanded": initial.expanded,
+            "replan_ms": replan_ms, "replan_expanded": replanned.expanded,
+            "replan_cost": replanned.cost,
+        },
+        "astar_from_scratch": {
+            "ms": scratch_ms, "expanded": scratch.expanded, "cost": scratch.cost,
+        },
+    });
+    write_json(&dir.join("timing.json"), &timing)?;
+    println!(
+        "replanned after blocking {} cells: {:.1} m, cost {:.1}; D* Lite {:.1} ms \
+         ({} cells expanded; its first search {:.1} ms, {} cells), A* from scratch {:.1} ms \
+         ({} cells, cost {:.1}) -> {}",
+        cells.len(),
+        described.length_2d_m,
+        described.cost,
+        replan_ms,
+        replanned.expanded,
+        initial_ms,
+        initial.expanded,
+        scratch_ms,
+        scratch.expanded,
+        scratch.cost,
+        dir.display()
+    );
+    Ok(())
+}
+
+fn write_json(path: &Path, value: &Value) -> Result<(), Failure> {
+    let mut text =
+        serde_json::to_string_pretty(value).map_err(|e| Failure::other(e.to_string()))?;
+    text.push('\n');
+    write(path, text.as_bytes())
+}
+
+fn write(path: &Path, content: &[u8]) -> Result<(), Failure> {
+    std::fs::write(path, content)
+        .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+}
+
+/// route.json (the request and the route), route.geojson, route.csv and
+/// mission.waypoints in `dir`.
+fn write_route(
+    dir: &Path,
+    route: &MapRoute,
+    request: &Value,
+    speed: Option<f64>,
+) -> Result<(), Failure> {
+    let mut doc = serde_json::to_value(route).map_err(|e| Failure::other(e.to_string()))?;
+    if let (Value::Object(d), Value::Object(r)) = (&mut doc, request) {
+        for (k, v) in r {
+            d.insert(k.clone(), v.clone());
+        }
+    }
+    write_json(&dir.join("route.json"), &doc)?;
+    write_json(
+        &dir.join("route.geojson"),
+        &route_geojson(route, Map::new()),
+    )?;
+    write(&dir.join("route.csv"), route_csv(route).as_bytes())?;
+    write(
+        &dir.join("mission.waypoints"),
+        write_waypoints(&rover_mission(route, speed)).as_bytes(),
+    )
+}

@@ -1,0 +1,176 @@
+"""Least-cost routes by scikit-image's MCP_Geometric, to check and time
+terraplan's route planner against.
+
+    mcp_route.py random DIR --seed N --count K --size WxH
+        writes K random 2-band costmap GeoTIFFs (band 1 cost, band 2 class,
+        2 m cells in EPSG:32618, planar, the layout `terraplan costmap`
+        writes) to DIR, half of them with obstacles, and DIR/cases.json:
+        for each, the file, start and goal cells and their UTM centres, and
+        MCP_Geometric's cost between them.
+    mcp_route.py cost COSTMAP.tif ROW,COL ROW,COL
+        MCP_Geometric's cost between two cells of a costmap GeoTIFF, and
+        the seconds it took (JSON on stdout).
+    mcp_route.py pick COSTMAP.tif
+        the traversable cells nearest the top-left and bottom-right corners
+        within the largest 8-connected traversable region, a cell of class
+        3 (step) and a traversable cell outside that region (JSON).
+
+MCP_Geometric with fully_connected=True costs a step as its length times
+the mean of the two cells' costs: terraplan's `integrated` rule. Obstacles
+(NaN costs) are walls (infinite cost). Unlike terraplan, MCP lets a
+diagonal step pass between two wall cells, so with obstacles its cost may
+be lower, never higher.
+"""
+
+import json
+import sys
+import time
+
+import numpy as np
+import tifffile
+from scipy import ndimage
+from skimage.graph import MCP_Geometric
+
+CELL_M = 2.0
+ORIGIN = (472000.0, 4295000.0)  # top-left corner, UTM 18N (EPSG:32618)
+
+
+def read_bands(path):
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        data = page.asarray()
+        planar = page.planarconfig == 2
+        tags = page.tags
+        scale = tags["ModelPixelScaleTag"].value
+        tie = tags["ModelTiepointTag"].value
+    return data, planar, scale, tie
+
+
+def read_costmap(path):
+    """Band 1 (cost, float64 with inf for NaN), the cell size (x, y) and
+    the top-left corner."""
+    data, planar, scale, tie = read_bands(path)
+    # A 2-band page reads as (2, h, w) when planar, (h, w, 2) when chunky.
+    if data.ndim == 3:
+        cost = data[0] if planar else data[..., 0]
+    else:
+        cost = data
+    cost = cost.astype(np.float64)
+    cost[~np.isfinite(cost)] = np.inf
+    origin = (tie[3] - tie[0] * scale[0], tie[4] + tie[1] * scale[1])
+    return cost, (scale[0], scale[1]), origin
+
+
+def mcp_cost(cost, cell, start, goal):
+    t = time.perf_counter()
+    m = MCP_Geometric(cost, fully_connected=True, sampling=(cell[1], cell[0]))
+    cum, _ = m.find_costs([start], [goal])
+    return float(cum[goal]), time.perf_counter() - t
+
+
+def write_costmap(path, cost):
+    h, w = cost.shape
+    cls = np.where(np.isfinite(cost), 1, 3).astype(np.float32)
+    geokeys = (1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 32618)
+    tifffile.imwrite(
+        path,
+        np.stack([cost.astype(np.float32), cls]),
+        planarconfig="separate",
+        photometric="minisblack",
+        extratags=[
+            (33550, "d", 3, (CELL_M, CELL_M, 0.0), True),
+            (33922, "d", 6, (0.0, 0.0, 0.0, ORIGIN[0], ORIGIN[1], 0.0), True),
+            (34735, "H", len(geokeys), geokeys, True),
+            (42113, "s", 4, "nan", True),
+        ],
+    )
+
+
+def centre_utm(row, col):
+    return [ORIGIN[0] + (col + 0.5) * CELL_M, ORIGIN[1] - (row + 0.5) * CELL_M]
+
+
+def random_cases(out, seed, count, w, h):
+    rng = np.random.default_rng(seed)
+    cases = []
+    for k in range(count):
+        # Smooth costs in [1, 20]: blurred noise, like terrain costs.
+        noise = ndimage.gaussian_filter(rng.standard_normal((h, w)), 3.0)
+        noise = (noise - noise.min()) / (np.ptp(noise) or 1.0)
+        cost = 1.0 + 19.0 * noise ** rng.uniform(0.5, 3.0)
+        obstacles = k % 2 == 1
+        if obstacles:
+            walls = ndimage.gaussian_filter(rng.standard_normal((h, w)), 2.0)
+            cost[walls > np.quantile(walls, 0.8)] = np.nan
+        finite = np.isfinite(cost)
+        labels, n = ndimage.label(finite, structure=np.ones((3, 3)))
+        biggest = 1 + int(np.argmax(ndimage.sum(finite, labels, range(1, n + 1))))
+        rows, cols = np.nonzero(labels == biggest)
+        i, j = rng.choice(len(rows), 2, replace=False)
+        start, goal = (int(rows[i]), int(cols[i])), (int(rows[j]), int(cols[j]))
+        path = f"{out}/random{k}.tif"
+        write_costmap(path, cost)
+        mcp = cost.astype(np.float64)
+        mcp[~np.isfinite(mcp)] = np.inf
+        value, _ = mcp_cost(mcp, (CELL_M, CELL_M), start, goal)
+        cases.append(
+            {
+                "file": path,
+                "obstacles": obstacles,
+                "start": list(start),
+                "goal": list(goal),
+                "start_utm": centre_utm(*start),
+                "goal_utm": centre_utm(*goal),
+                "mcp_cost": value,
+            }
+        )
+    with open(f"{out}/cases.json", "w") as f:
+        json.dump(cases, f, indent=1)
+
+
+def pick(path):
+    cost, _, _ = read_costmap(path)
+    finite = np.isfinite(cost)
+    labels, n = ndimage.label(finite, structure=np.ones((3, 3)))
+    if n == 0:
+        raise SystemExit("no traversable cell")
+    biggest = 1 + int(np.argmax(ndimage.sum(finite, labels, range(1, n + 1))))
+    rows, cols = np.nonzero(labels == biggest)
+    h, w = cost.shape
+    a = int(np.argmin(rows.astype(np.int64) ** 2 + cols.astype(np.int64) ** 2))
+    b = int(np.argmin((h - 1 - rows.astype(np.int64)) ** 2 + (w - 1 - cols.astype(np.int64)) ** 2))
+    data, planar, _, _ = read_bands(path)
+    cls = data[1] if planar else data[..., 1]
+    step = np.argwhere(cls == 3)
+    island = np.argwhere(finite & (labels != biggest))
+    first = lambda cells: [int(v) for v in cells[0]] if len(cells) else None
+    return {
+        "start": [int(rows[a]), int(cols[a])],
+        "goal": [int(rows[b]), int(cols[b])],
+        "step": first(step),
+        "island": first(island),
+    }
+
+
+def cell(text):
+    r, c = text.split(",")
+    return int(r), int(c)
+
+
+def main(argv):
+    if argv[1] == "random":
+        args = dict(zip(argv[3::2], argv[4::2]))
+        w, h = (int(v) for v in args.get("--size", "120x90").split("x"))
+        random_cases(argv[2], int(args.get("--seed", "1")), int(args.get("--count", "10")), w, h)
+    elif argv[1] == "cost":
+        cost, size, _ = read_costmap(argv[2])
+        value, seconds = mcp_cost(cost, size, cell(argv[3]), cell(argv[4]))
+        print(json.dumps({"cost": value, "seconds": seconds, "cells": int(cost.size)}))
+    elif argv[1] == "pick":
+        print(json.dumps(pick(argv[2])))
+    else:
+        raise SystemExit(__doc__)
+
+
+if __name__ == "__main__":
+    main(sys.argv)
