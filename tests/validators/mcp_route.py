@@ -14,6 +14,12 @@ terraplan's route planner against.
         the traversable cells nearest the top-left and bottom-right corners
         within the largest 8-connected traversable region, a cell of class
         3 (step) and a traversable cell outside that region (JSON).
+    mcp_route.py block ROUTE.json OUT.geojson [LENGTH_M [HALF_WIDTH_M]]
+        a polygon covering LENGTH_M (default 20) of a `terraplan route`
+        route around the middle of its length, HALF_WIDTH_M (default 2)
+        either side, as GeoJSON in WGS84 (shapely buffers it in UTM); prints
+        the robot's position 20 m before the stretch along the route
+        (`robot_utm`), where it would see the block.
 
 MCP_Geometric with fully_connected=True costs a step as its length times
 the mean of the two cells' costs: terraplan's `integrated` rule. Obstacles
@@ -152,6 +158,30 @@ def pick(path):
     }
 
 
+def block(route_path, out_path, length=20.0, half_width=2.0):
+    from pyproj import Transformer
+    import shapely
+    from shapely.geometry import LineString, mapping
+    from shapely.ops import substring
+
+    with open(route_path) as f:
+        route = json.load(f)
+    line = LineString([(w["easting"], w["northing"]) for w in route["waypoints"]])
+    mid = line.length / 2.0
+    stretch = substring(line, max(0.0, mid - length / 2.0), min(line.length, mid + length / 2.0))
+    area = stretch.buffer(half_width, cap_style="flat")
+    to_wgs84 = Transformer.from_crs(route["utm_epsg"], 4326, always_xy=True)
+    area = shapely.transform(area, lambda xy: np.column_stack(to_wgs84.transform(xy[:, 0], xy[:, 1])))
+    with open(out_path, "w") as f:
+        json.dump(mapping(area), f)
+    robot = line.interpolate(max(0.0, mid - length / 2.0 - 20.0))
+    return {
+        "stretch_m": stretch.length,
+        "area_m2": stretch.buffer(half_width, cap_style="flat").area,
+        "robot_utm": [robot.x, robot.y],
+    }
+
+
 def cell(text):
     r, c = text.split(",")
     return int(r), int(c)
@@ -166,6 +196,9 @@ def main(argv):
         cost, size, _ = read_costmap(argv[2])
         value, seconds = mcp_cost(cost, size, cell(argv[3]), cell(argv[4]))
         print(json.dumps({"cost": value, "seconds": seconds, "cells": int(cost.size)}))
+    elif argv[1] == "block":
+        extra = [float(v) for v in argv[4:6]]
+        print(json.dumps(block(argv[2], argv[3], *extra)))
     elif argv[1] == "pick":
         print(json.dumps(pick(argv[2])))
     else:

@@ -251,9 +251,12 @@ impl RouteMap {
             read_geotiff_band(costmap_tif, band, None, limits)
                 .map_err(|e| MapRouteError::CostmapFile(e.to_string()))
         };
-        let cost = read(1)?;
-        let class = read(2)?;
-        let classes = class
+        // One band in f64 at a time, each narrowed at once: the largest
+        // maps hold 8 bytes a cell less at the peak.
+        let mut cost = read(1)?;
+        let costs = cost.values.iter().map(|&v| v as f32).collect();
+        cost.values = Vec::new();
+        let classes = read(2)?
             .values
             .iter()
             .map(|&v| {
@@ -265,7 +268,6 @@ impl RouteMap {
             })
             .collect();
         let heights = dem.map(|d| heights_on_grid(d, &cost)).transpose()?;
-        let costs = cost.values.iter().map(|&v| v as f32).collect();
         RouteMap::new(
             cost.width,
             cost.height,

@@ -61,6 +61,15 @@ pub(super) struct RouteArgs {
     /// DIR/replanned/ with its timing next to a search from scratch.
     #[arg(long, value_name = "FILE.geojson")]
     block: Vec<PathBuf>,
+    /// Where the robot is when the areas are blocked (as `--from`; default
+    /// the start): the replan goes from there to the goal.
+    #[arg(
+        long,
+        value_name = "LON,LAT",
+        allow_hyphen_values = true,
+        requires = "block"
+    )]
+    replan_from: Option<String>,
     /// Most pixels (width × height) accepted.
     #[arg(long, default_value_t = DemLimits::default().max_pixels)]
     max_pixels: u64,
@@ -238,6 +247,14 @@ fn replan(
     }
     let s = map.locate(start, Endpoint::Start).map_err(fail)?;
     let g = map.locate(goal, Endpoint::Goal).map_err(fail)?;
+    let robot = match &args.replan_from {
+        None => s,
+        Some(text) => {
+            let p = parse_position(text, "--replan-from")?;
+            map.locate(&p, Endpoint::Start)
+                .map_err(|e| Failure::input(format!("--replan-from: {e}")))?
+        }
+    };
     let cells = map.cells_in_areas(areas).map_err(fail)?;
     let changes: Vec<(usize, f32)> = cells.iter().map(|&i| (i, f32::NAN)).collect();
 
@@ -247,12 +264,13 @@ fn replan(
     let initial = dstar.plan(&|| false).map_err(search)?;
     let initial_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
+    dstar.move_start(robot).map_err(search)?;
     dstar.update_cells(&changes).map_err(search)?;
     let replanned = dstar.plan(&|| false);
     let replan_ms = t.elapsed().as_secs_f64() * 1e3;
     let changed = dstar.grid().clone();
     let t = Instant::now();
-    let scratch = astar(&changed, s, g, options, &|| false);
+    let scratch = astar(&changed, robot, g, options, &|| false);
     let scratch_ms = t.elapsed().as_secs_f64() * 1e3;
     let replanned = replanned.map_err(|e| match e {
         planner_core::route::RouteError::Unreachable => fail(MapRouteError::Unreachable),
