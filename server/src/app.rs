@@ -11,6 +11,7 @@ use axum::http::{HeaderName, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use planner_core::geo::Limits;
+use planner_core::route::DStarLite;
 use planner_core::terrain::{Dem, DemLimits, read_dem};
 use tokio::sync::Semaphore;
 use tower_http::LatencyUnit;
@@ -24,6 +25,7 @@ use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 use utoipa_swagger_ui::SwaggerUi;
 
+use crate::api::routes as route_api;
 use crate::api::{costmaps, dems, health, surveys, vehicles};
 use crate::config::ServeConfig;
 use crate::costmap_jobs::CostmapJobs;
@@ -44,6 +46,8 @@ pub struct AppState {
     pub dems: Arc<DemStore>,
     /// The costmap jobs this process holds, and their live progress.
     pub costmaps: Arc<CostmapJobs>,
+    /// Route search limits and the searches kept for replanning.
+    pub routes: Arc<RouteStore>,
 }
 
 /// DEM upload limits and the parsed DEMs kept ready for sampling.
@@ -71,6 +75,117 @@ impl DemStore {
             config.max_dem_bytes(),
             usize::try_from(cache_bytes).unwrap_or(usize::MAX),
         )
+    }
+}
+
+/// Route searches: how long one may run, and the D* Lite searches kept
+/// in memory so that a replan repairs the previous search instead of
+/// starting over.
+pub struct RouteStore {
+    /// Longest a search may run (`--route-timeout-s`).
+    pub timeout: Duration,
+    pub searches: SearchCache,
+}
+
+/// `--route-timeout-s` and `--route-cache-mb` by default.
+const ROUTE_TIMEOUT: Duration = Duration::from_secs(120);
+const ROUTE_CACHE_BYTES: usize = 512 * 1024 * 1024;
+
+impl RouteStore {
+    pub fn new(timeout: Duration, cache_bytes: usize) -> RouteStore {
+        RouteStore {
+            timeout,
+            searches: SearchCache::new(cache_bytes),
+        }
+    }
+
+    pub fn from_config(config: &ServeConfig) -> RouteStore {
+        RouteStore::new(
+            Duration::from_secs_f64(config.route_timeout_s),
+            config.route_cache_bytes(),
+        )
+    }
+}
+
+impl Default for RouteStore {
+    fn default() -> Self {
+        RouteStore::new(ROUTE_TIMEOUT, ROUTE_CACHE_BYTES)
+    }
+}
+
+/// The D* Lite search of each recent route (its grid with every change
+/// applied so far, its g values and queue), by route id: an LRU bounded
+/// by an estimate of the memory held. A replan takes its parent's search
+/// out (so two replans of one route never share it), repairs it and puts
+/// it back under the new route's id.
+pub struct SearchCache {
+    /// Most recently used first: (route id, search, estimated bytes).
+    entries: Mutex<Vec<(String, DStarLite, usize)>>,
+    max_bytes: usize,
+}
+
+impl SearchCache {
+    pub fn new(max_bytes: usize) -> SearchCache {
+        SearchCache {
+            entries: Mutex::new(Vec::new()),
+            max_bytes,
+        }
+    }
+
+    /// Estimated memory of a search: 13 bytes per cell (cost, g, state
+    /// byte) plus 4 for its open list and slack, and the per-row cell
+    /// widths.
+    pub fn estimate_bytes(search: &DStarLite) -> usize {
+        let grid = search.grid();
+        grid.cell_count()
+            .saturating_mul(17)
+            .saturating_add(grid.height() * 8)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(String, DStarLite, usize)>> {
+        // The list guards no invariant a panic could break half-way.
+        self.entries.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Take the search of route `id` out of the cache.
+    pub fn take(&self, id: &str) -> Option<DStarLite> {
+        let mut entries = self.lock();
+        let i = entries.iter().position(|(k, _, _)| k == id)?;
+        Some(entries.remove(i).1)
+    }
+
+    /// Keep `search` as route `id`'s, the most recently used, evicting the
+    /// least recently used beyond the memory budget; a search alone over
+    /// the budget is not kept.
+    pub fn put(&self, id: &str, search: DStarLite) {
+        let size = Self::estimate_bytes(&search);
+        if size > self.max_bytes {
+            return;
+        }
+        let mut entries = self.lock();
+        entries.retain(|(k, _, _)| k != id);
+        entries.insert(0, (id.to_string(), search, size));
+        let mut total = 0usize;
+        let keep = entries
+            .iter()
+            .take_while(|(_, _, bytes)| {
+                total = total.saturating_add(*bytes);
+                total <= self.max_bytes
+            })
+            .count();
+        entries.truncate(keep);
+    }
+
+    /// Forget route `id`'s search.
+    pub fn remove(&self, id: &str) {
+        self.lock().retain(|(k, _, _)| k != id);
+    }
+
+    /// Searches held, and their estimated bytes.
+    #[cfg(test)]
+    pub fn usage(&self) -> (usize, usize) {
+        let entries = self.lock();
+        (entries.len(), entries.iter().map(|(_, _, b)| b).sum())
     }
 }
 
@@ -225,6 +340,7 @@ impl AppState {
         (name = "surveys", description = "Photo-survey planning: decomposition, lawnmower paths, missions"),
         (name = "dems", description = "Digital elevation models: upload (GeoTIFF, ESRI ASCII grid, SRTM .hgt), metadata, hillshade preview, heights at points"),
         (name = "costmaps", description = "Traversability costmaps of a DEM for a ground vehicle: background jobs with progress events, GeoTIFF, preview and per-layer files"),
+        (name = "routes", description = "UGV routes across a finished costmap: the cheapest safe path (A* or D* Lite), incremental replanning around blocked areas, GeoJSON, CSV (UTM) and ArduPilot Rover missions"),
         (name = "service", description = "Health"),
     ),
     components(schemas(crate::error::Problem, crate::error::IssueSchema))
@@ -255,6 +371,13 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .routes(routes!(costmaps::legend))
         .routes(routes!(costmaps::layer))
         .routes(routes!(vehicles::list_vehicles))
+        .routes(routes!(route_api::create_route))
+        .routes(routes!(route_api::list_routes))
+        .routes(routes!(route_api::get_route, route_api::delete_route))
+        .routes(routes!(route_api::replan_route))
+        .routes(routes!(route_api::route_geojson_file))
+        .routes(routes!(route_api::route_csv_file))
+        .routes(routes!(route_api::mission_waypoints))
         .split_for_parts();
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();
@@ -416,6 +539,40 @@ mod tests {
         // Alone over the budget: not kept.
         cache.insert("huge", dem(101), None);
         assert!(cache.get("huge").is_none());
+    }
+
+    /// A D* Lite search on a `cells`-cell strip.
+    fn search(cells: usize) -> DStarLite {
+        let grid =
+            planner_core::route::CostGrid::with_cell_size(cells, 1, vec![1.0; cells], 1.0, 1.0)
+                .unwrap();
+        DStarLite::new(grid, (0, 0), (0, cells - 1), Default::default()).unwrap()
+    }
+
+    #[test]
+    fn search_cache_is_lru_by_estimated_bytes() {
+        // 17 bytes a cell and 8 a row: 100 cells are 1708 bytes.
+        assert_eq!(SearchCache::estimate_bytes(&search(100)), 1708);
+        let cache = SearchCache::new(3 * 1708);
+        for id in ["a", "b", "c"] {
+            cache.put(id, search(100));
+        }
+        assert_eq!(cache.usage(), (3, 3 * 1708));
+        let a = cache.take("a").expect("held");
+        assert_eq!(a.grid().cell_count(), 100);
+        assert!(cache.take("a").is_none(), "taken out");
+        cache.put("d", a); // a's search, moved to d
+        cache.put("e", search(100)); // b, the least recently used, goes
+        assert!(cache.take("b").is_none());
+        assert!(cache.take("c").is_some() && cache.take("d").is_some());
+        // A search alone over the budget is not kept.
+        cache.put("huge", search(400));
+        assert!(cache.take("huge").is_none());
+        cache.remove("e");
+        assert_eq!(cache.usage(), (0, 0));
+        let none = SearchCache::new(0);
+        none.put("a", search(10));
+        assert!(none.take("a").is_none());
     }
 
     #[test]

@@ -53,6 +53,15 @@ pub struct ServeConfig {
     /// Costmaps built at once; further jobs wait, queued.
     #[arg(long, env = "TERRAPLAN_COSTMAP_JOBS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
     pub costmap_jobs: u64,
+    /// Longest a route search may take, seconds (fractions allowed); a
+    /// search still running then is stopped and answered with a 503.
+    #[arg(long, env = "TERRAPLAN_ROUTE_TIMEOUT_S", default_value_t = 120.0, value_parser = parse_route_timeout)]
+    pub route_timeout_s: f64,
+    /// Memory for the route searches kept for replanning (D* Lite states,
+    /// about 17 bytes per costmap cell each), MiB; the least recently used
+    /// goes first. 0 keeps none: every replan searches from scratch.
+    #[arg(long, env = "TERRAPLAN_ROUTE_CACHE_MB", default_value_t = 512)]
+    pub route_cache_mb: u64,
     /// Allowed CORS origin (repeatable; `*` allows any). None: no CORS headers.
     #[arg(
         long = "cors-origin",
@@ -69,6 +78,19 @@ pub struct ServeConfig {
 pub enum LogFormat {
     Text,
     Json,
+}
+
+/// `--route-timeout-s`: a number of seconds in (0, 86400].
+fn parse_route_timeout(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v > 0.0 && v <= 86_400.0 {
+        Ok(v)
+    } else {
+        Err(format!("{v} is outside (0, 86400] seconds"))
+    }
 }
 
 fn default_threads() -> usize {
@@ -90,6 +112,11 @@ impl ServeConfig {
             max_pixels: self.max_dem_pixels,
             ..DemLimits::default()
         }
+    }
+
+    /// `--route-cache-mb` in bytes.
+    pub fn route_cache_bytes(&self) -> usize {
+        usize::try_from(self.route_cache_mb.saturating_mul(1024 * 1024)).unwrap_or(usize::MAX)
     }
 
     /// `--max-dem-mb` in bytes.

@@ -801,6 +801,7 @@ mod tests {
                 planner: Arc::new(Semaphore::new(1)),
                 dems: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
                 costmaps: Arc::new(CostmapJobs::new(1)),
+                routes: Arc::new(crate::app::RouteStore::default()),
             };
             TestServer { state, dir }
         }

@@ -50,6 +50,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         planner: Arc::new(Semaphore::new(config.planner_threads)),
         dems: Arc::new(crate::app::DemStore::from_config(&config)),
         costmaps: jobs.clone(),
+        routes: Arc::new(crate::app::RouteStore::from_config(&config)),
     };
     // Jobs a previous server left queued or running are queued again.
     let recovered = jobs.recover(&state).await;

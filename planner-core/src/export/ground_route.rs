@@ -11,10 +11,12 @@ use crate::route::on_map::MapRoute;
 
 /// The route as a GeoJSON Feature: a LineString through the waypoints,
 /// `[lon, lat, height]` when every waypoint's height is known, else
-/// `[lon, lat]`; `properties` plus the route's figures.
+/// `[lon, lat]`; `properties` plus the route's figures. A route whose
+/// start is its goal has one waypoint, given twice (a LineString needs two
+/// positions, RFC 7946 §3.1.4).
 pub fn route_geojson(route: &MapRoute, mut properties: Map<String, Value>) -> Value {
     let with_height = route.waypoints.iter().all(|p| p.height_m.is_some());
-    let coords: Vec<Value> = route
+    let mut coords: Vec<Value> = route
         .waypoints
         .iter()
         .map(|p| match p.height_m {
@@ -22,6 +24,9 @@ pub fn route_geojson(route: &MapRoute, mut properties: Map<String, Value>) -> Va
             _ => json!([p.lon, p.lat]),
         })
         .collect();
+    if coords.len() == 1 {
+        coords.push(coords[0].clone());
+    }
     let figures = [
         ("length_2d_m", json!(route.length_2d_m)),
         ("length_3d_m", json!(route.length_3d_m)),
@@ -132,6 +137,13 @@ mod tests {
         assert_eq!(g["properties"]["utm_zone"], "18N");
         let g = route_geojson(&sample_route(false), Map::new());
         assert_eq!(g["geometry"]["coordinates"][0], json!([-75.0, 38.8]));
+        let mut one = sample_route(true);
+        one.waypoints.truncate(1);
+        let g = route_geojson(&one, Map::new());
+        assert_eq!(
+            g["geometry"]["coordinates"],
+            json!([[-75.0, 38.8, 10.0], [-75.0, 38.8, 10.0]])
+        );
     }
 
     #[test]

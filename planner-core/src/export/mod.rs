@@ -2,8 +2,8 @@
 //! georeferenced Float32 rasters (costmaps, SPEC §4.2).
 
 pub mod geojson;
-pub mod ground_route;
 pub mod geotiff;
+pub mod ground_route;
 pub mod kml;
 pub mod mission;
 pub mod qgc_plan;

@@ -34,8 +34,8 @@ pub mod astar;
 mod bucket_queue;
 mod dist_array;
 pub mod dstar_lite;
-pub mod on_map;
 mod neighbourhood;
+pub mod on_map;
 mod quaternary_heap;
 pub mod smooth;
 #[cfg(test)]

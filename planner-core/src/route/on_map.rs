@@ -24,7 +24,7 @@ use crate::terrain::{Crs, Dem, DemLimits, GeoTransform, read_geotiff_band};
 /// the costmap's centre, reported with every route).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(untagged)]
+#[serde(untagged, deny_unknown_fields)]
 pub enum Position {
     LonLat([f64; 2]),
     Utm { utm: [f64; 2] },
@@ -887,6 +887,27 @@ mod tests {
         for cell in [(0, 0), (79, 99), (40, 17), (3, 96)] {
             assert_eq!(map.locate(&utm_of(&map, cell), Endpoint::Start), Ok(cell));
             assert_eq!(map.locate(&lonlat_of(&map, cell), Endpoint::Goal), Ok(cell));
+        }
+    }
+
+    #[test]
+    fn positions_parse_from_json() {
+        let p: Position = serde_json::from_str("[-75.5, 38.8]").unwrap();
+        assert_eq!(p, Position::LonLat([-75.5, 38.8]));
+        let p: Position = serde_json::from_str(r#"{"utm": [472000, 4295000]}"#).unwrap();
+        assert_eq!(
+            p,
+            Position::Utm {
+                utm: [472_000.0, 4_295_000.0]
+            }
+        );
+        for bad in [
+            r#"{"utm": [1, 2], "zone": 18}"#,
+            "[1]",
+            "[1, 2, 3]",
+            r#"{"lon": 1}"#,
+        ] {
+            assert!(serde_json::from_str::<Position>(bad).is_err(), "{bad}");
         }
     }
 

@@ -5,5 +5,6 @@ pub mod dems;
 pub mod health;
 pub mod json_body;
 pub mod paging;
+pub mod routes;
 pub mod surveys;
 pub mod vehicles;
