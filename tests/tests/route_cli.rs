@@ -32,7 +32,8 @@ fn utm_arg(v: &Value) -> String {
 /// Routes on random cost arrays, with and without obstacles, against
 /// MCP_Geometric (fully connected, geometric: the `integrated` rule): the
 /// same cost to 1e-6 relative without obstacles, never cheaper with them
-/// (MCP cuts corners between two obstacle cells; terraplan does not).
+/// (MCP cuts corners between two obstacle cells; terraplan does not), and
+/// there the optimum of an independent Dijkstra with terraplan's rules.
 #[test]
 fn costs_match_scikit_image_mcp() {
     let dir = tempfile::tempdir().unwrap();
@@ -76,6 +77,15 @@ fn costs_match_scikit_image_mcp() {
         if c["obstacles"].as_bool().unwrap() {
             assert!(rel >= -1e-9, "case {k}: {ours} cheaper than MCP's {theirs}");
             dearer += usize::from(rel > 1e-6);
+            // Around obstacles, the optimum of the same rules.
+            let cell = |v: &Value| format!("{},{}", v[0], v[1]);
+            let file = c["file"].as_str().unwrap();
+            let d = mcp(&["dijkstra", file, &cell(&c["start"]), &cell(&c["goal"])]);
+            let d = d["cost"].as_f64().unwrap();
+            assert!(
+                (ours - d).abs() <= 1e-9 * d,
+                "case {k}: {ours} vs Dijkstra's {d}"
+            );
         } else {
             assert!(rel.abs() <= 1e-6, "case {k}: {ours} vs MCP's {theirs}");
             worst_equal = worst_equal.max(rel.abs());
@@ -130,7 +140,8 @@ fn dtm_cell_utm(cell: &Value) -> String {
 }
 
 /// Corner to corner of the DTM's largest traversable region: the files,
-/// the figures, pymavlink reading the rover mission, MCP never dearer, and
+/// the figures, pymavlink reading the rover mission, the optimum of an
+/// independent Dijkstra (Python), MCP never dearer, and
 /// a D* Lite replan after blocking 20 m of the route equal to a search
 /// from scratch and clear of the blocked area.
 #[test]
@@ -195,6 +206,18 @@ fn dtm_route_files_and_replan() {
         "{theirs} vs {path_cost}"
     );
     assert!(path_cost <= theirs * 1.10, "{path_cost} vs MCP {theirs}");
+    // An independent Dijkstra with terraplan's rules: the same optimum.
+    let dijkstra = mcp(&[
+        "dijkstra",
+        cm.tif.to_str().unwrap(),
+        &cell(&picked["start"]),
+        &cell(&picked["goal"]),
+    ]);
+    let dijkstra = dijkstra["cost"].as_f64().unwrap();
+    assert!(
+        (path_cost - dijkstra).abs() <= 1e-9 * dijkstra,
+        "{path_cost} vs Dijkstra's {dijkstra}"
+    );
 
     // GeoJSON with heights; CSV of UTM waypoints.
     let gj = read_json(&out.join("route.geojson"));

@@ -10,6 +10,11 @@ terraplan's route planner against.
     mcp_route.py cost COSTMAP.tif ROW,COL ROW,COL
         MCP_Geometric's cost between two cells of a costmap GeoTIFF, and
         the seconds it took (JSON on stdout).
+    mcp_route.py dijkstra COSTMAP.tif ROW,COL ROW,COL
+        the cheapest cost between two cells by a plain Dijkstra with
+        terraplan's rules (8-connected, a diagonal step only when both
+        cells it passes between are traversable, step length × the mean
+        of the two costs), written here independently (JSON).
     mcp_route.py pick COSTMAP.tif
         the traversable cells nearest the top-left and bottom-right corners
         within the largest 8-connected traversable region, a cell of class
@@ -182,6 +187,39 @@ def block(route_path, out_path, length=20.0, half_width=2.0):
     }
 
 
+def dijkstra(path, start, goal):
+    import heapq
+
+    cost, (sx, sy), _ = read_costmap(path)
+    h, w = cost.shape
+    ok = np.isfinite(cost)
+    dist = np.full((h, w), np.inf)
+    dist[start] = 0.0
+    heap = [(0.0, start)]
+    diag = (sx * sx + sy * sy) ** 0.5
+    while heap:
+        d, (r, c) = heapq.heappop(heap)
+        if (r, c) == goal:
+            return d
+        if d > dist[r, c]:
+            continue
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr == 0 and dc == 0:
+                    continue
+                nr, nc = r + dr, c + dc
+                if not (0 <= nr < h and 0 <= nc < w) or not ok[nr, nc]:
+                    continue
+                if dr != 0 and dc != 0 and not (ok[r, nc] and ok[nr, c]):
+                    continue
+                step = diag if dr and dc else (sx if dc else sy)
+                nd = d + step * (cost[r, c] + cost[nr, nc]) / 2.0
+                if nd < dist[nr, nc]:
+                    dist[nr, nc] = nd
+                    heapq.heappush(heap, (nd, (nr, nc)))
+    return float("inf")
+
+
 def cell(text):
     r, c = text.split(",")
     return int(r), int(c)
@@ -196,6 +234,8 @@ def main(argv):
         cost, size, _ = read_costmap(argv[2])
         value, seconds = mcp_cost(cost, size, cell(argv[3]), cell(argv[4]))
         print(json.dumps({"cost": value, "seconds": seconds, "cells": int(cost.size)}))
+    elif argv[1] == "dijkstra":
+        print(json.dumps({"cost": dijkstra(argv[2], cell(argv[3]), cell(argv[4]))}))
     elif argv[1] == "block":
         extra = [float(v) for v in argv[4:6]]
         print(json.dumps(block(argv[2], argv[3], *extra)))
