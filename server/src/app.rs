@@ -48,6 +48,8 @@ pub struct AppState {
     pub costmaps: Arc<CostmapJobs>,
     /// Route search limits and the searches kept for replanning.
     pub routes: Arc<RouteStore>,
+    /// The browser front end, served outside `/api`.
+    pub web: Arc<crate::web_ui::WebUi>,
 }
 
 /// DEM upload limits and the parsed DEMs kept ready for sampling.
@@ -469,12 +471,18 @@ async fn reject_declared_oversize(req: Request, next: Next, limit: usize) -> Res
     }
 }
 
-async fn not_found(req: Request) -> ApiError {
-    ApiError::NotFound(format!(
-        "there is no resource at {} {}",
-        req.method(),
-        req.uri().path()
-    ))
+/// Unknown `/api` paths are problem+json 404s; every other path is the
+/// web page's.
+async fn not_found(
+    axum::extract::State(state): axum::extract::State<AppState>,
+    req: Request,
+) -> Response {
+    let path = req.uri().path();
+    if path == "/api" || path.starts_with("/api/") {
+        return ApiError::NotFound(format!("there is no resource at {} {}", req.method(), path))
+            .into_response();
+    }
+    state.web.serve(req).await
 }
 
 async fn method_not_allowed(req: Request) -> ApiError {

@@ -17,6 +17,9 @@ pub struct ServeConfig {
     /// Directory for the embedded SQLite database and stored files.
     #[arg(long, env = "TERRAPLAN_DATA_DIR", default_value = "terraplan-data")]
     pub data_dir: PathBuf,
+    /// The built web UI (`npm run build` in web-ui/), served at `/`.
+    #[arg(long, env = "TERRAPLAN_WEB_DIR", default_value = "web-ui/dist")]
+    pub web_dir: PathBuf,
     /// `postgres://…` to use PostgreSQL instead of the embedded SQLite
     /// (`sqlite:PATH` is accepted too).
     #[arg(long, env = "DATABASE_URL")]

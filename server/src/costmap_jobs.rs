@@ -802,6 +802,7 @@ mod tests {
                 dems: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
                 costmaps: Arc::new(CostmapJobs::new(1)),
                 routes: Arc::new(crate::app::RouteStore::default()),
+                web: Arc::new(crate::web_ui::WebUi::new(&dir)),
             };
             TestServer { state, dir }
         }

@@ -10,6 +10,7 @@ mod db;
 mod error;
 mod experiment;
 mod serve;
+mod web_ui;
 
 fn main() -> std::process::ExitCode {
     cli::run()

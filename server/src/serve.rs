@@ -51,7 +51,13 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         dems: Arc::new(crate::app::DemStore::from_config(&config)),
         costmaps: jobs.clone(),
         routes: Arc::new(crate::app::RouteStore::from_config(&config)),
+        web: Arc::new(crate::web_ui::WebUi::new(&config.web_dir)),
     };
+    if state.web.is_built() {
+        tracing::info!(dir = %config.web_dir.display(), "serving the web page at /");
+    } else {
+        tracing::warn!(dir = %config.web_dir.display(), "the web page is not built: / explains how to build it");
+    }
     // Jobs a previous server left queued or running are queued again.
     let recovered = jobs.recover(&state).await;
     if recovered > 0 {
