@@ -1,6 +1,7 @@
 //! The application: shared state, the router with its middleware, and the
 //! OpenAPI document generated from the handlers.
 
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -87,6 +88,28 @@ pub struct RouteStore {
     /// Longest a search may run (`--route-timeout-s`).
     pub timeout: Duration,
     pub searches: SearchCache,
+    /// Routes whose D* Lite search is being built in the background: a
+    /// receiver that turns true when it is done (or dropped if it failed).
+    warming: Mutex<HashMap<String, tokio::sync::watch::Receiver<bool>>>,
+}
+
+/// Marks route `id`'s search as being built until dropped.
+pub struct Warming {
+    store: Arc<RouteStore>,
+    id: String,
+    done: tokio::sync::watch::Sender<bool>,
+}
+
+impl Drop for Warming {
+    fn drop(&mut self) {
+        let _ = self.done.send(true);
+        lock(&self.store.warming).remove(&self.id);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // The maps guard no invariant a panic could break half-way.
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// `--route-timeout-s` and `--route-cache-mb` by default.
@@ -98,6 +121,29 @@ impl RouteStore {
         RouteStore {
             timeout,
             searches: SearchCache::new(cache_bytes),
+            warming: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Route `id`'s search is being built: replans of `id` wait for it
+    /// (see [`warmed`](Self::warmed)) until the returned guard is dropped.
+    pub fn begin_warming(self: &Arc<Self>, id: &str) -> Warming {
+        let (done, rx) = tokio::sync::watch::channel(false);
+        lock(&self.warming).insert(id.to_string(), rx);
+        Warming {
+            store: self.clone(),
+            id: id.to_string(),
+            done,
+        }
+    }
+
+    /// Wait until no search of route `id` is being built. The one being
+    /// built started earlier than a rebuild would, so it is never slower
+    /// to wait for it.
+    pub async fn warmed(&self, id: &str) {
+        let rx = lock(&self.warming).get(id).cloned();
+        if let Some(mut rx) = rx {
+            let _ = rx.wait_for(|done| *done).await;
         }
     }
 

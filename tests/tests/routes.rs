@@ -466,7 +466,10 @@ fn route_end_to_end() {
     assert_eq!(route["name"], "across");
     assert_eq!(route["costmap_id"], map.id.as_str());
     assert!(route["parent_id"].is_null());
-    assert_eq!(route["planner"], "dstar_lite");
+    assert_eq!(
+        route["planner"], "astar",
+        "a new route: A*, its D* Lite search built after"
+    );
     assert_eq!(
         route["options"],
         json!({"arc_cost": {"mode": "integrated"}, "epsilon": 1.0, "smooth": true})

@@ -8,13 +8,15 @@
 //! guard sets their cancel flag) or after `--route-timeout-s` (503);
 //! `max_expansions` (4 per costmap cell) bounds them besides.
 //!
-//! With `epsilon` = 1 (the default) a route is planned with D* Lite and
-//! its search is kept in memory ([`crate::app::SearchCache`]), so that a
-//! replan from it repairs that search instead of starting over; a replan
-//! whose parent's search is no longer held (evicted, or the server
-//! restarted) rebuilds it from the costmap with every change made so far.
-//! With `epsilon` > 1 routes and their replans are planned from scratch
-//! with weighted A*.
+//! A new route is planned with A*. With `epsilon` = 1 (the default) a
+//! D* Lite search for it is then built in the background (its first
+//! search runs backwards from the goal and costs several times A*'s) and
+//! kept in memory ([`crate::app::SearchCache`]), so that a replan from it
+//! repairs that search instead of starting over; a replan arriving while
+//! it is being built waits for it, and a replan whose parent's search is
+//! no longer held (evicted, or the server restarted) rebuilds it from the
+//! costmap with every change made so far. With `epsilon` > 1 routes and
+//! their replans are planned from scratch with weighted A*.
 //!
 //! Changes of the costmap are cumulative over a chain of replans: blocked
 //! areas make their cells obstacles, cost changes set their cells' cost.
@@ -79,11 +81,12 @@ const POSITION_FORMS: &str =
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Planner {
-    /// D* Lite (`epsilon` = 1): the optimum; its search is kept for
-    /// replanning.
+    /// D* Lite (replans with `epsilon` = 1): the optimum, repairing the
+    /// parent route's search.
     DstarLite,
-    /// Weighted A* (`epsilon` > 1): at most `epsilon` × the optimum,
-    /// planned from scratch every time.
+    /// A*: every new route (the optimum with `epsilon` = 1, while its D*
+    /// Lite search is built in the background for replans), and replans
+    /// with `epsilon` > 1 (at most `epsilon` × the optimum, from scratch).
     Astar,
 }
 
@@ -172,8 +175,8 @@ pub struct CreateRoute {
     /// mean cost of the two cells) or `{"mode": "thesis", "d_max": 10}`
     /// (the thesis' Algorithm 1, d_max in [1, 1000]).
     arc_cost: Option<ArcCost>,
-    /// Heuristic weight in [1, 10], default 1 (the optimum, planned with
-    /// D* Lite and kept for fast replanning); above 1 weighted A*, whose
+    /// Heuristic weight in [1, 10], default 1 (the optimum; a D* Lite
+    /// search is kept for fast replanning); above 1 weighted A*, whose
     /// route costs at most `epsilon` × the optimum and is found faster on
     /// large maps.
     #[schema(minimum = 1, maximum = 10, default = 1)]
@@ -856,12 +859,15 @@ fn locate(
     }
 }
 
-/// A route found, and the D* Lite search that found it.
+/// A route found, and the D* Lite search that found it (a replan's).
 struct Planned {
     route: MapRoute,
     planner: Planner,
     reused_search: bool,
     search: Option<DStarLite>,
+    /// A new route's start and goal cells, when a D* Lite search is to be
+    /// built for its replans.
+    warm: Option<(Cell, Cell)>,
 }
 
 /// A new route, on a planner thread.
@@ -883,24 +889,38 @@ fn plan_route(
     let opts = options.route_options(map.grid().cell_count());
     let fault = |e: RouteError| search_fault(from_search(e), ends, stop);
     let check = || stop.now();
+    // A* answers at once; D* Lite's first search runs backwards from the
+    // goal and costs several times as much (about 10× on a 4000² terrain
+    // costmap), so it is built afterwards, in the background.
     let began = Instant::now();
-    let (route, search) = match options.planner() {
-        Planner::DstarLite => {
-            let mut search = DStarLite::new(map.grid().clone(), s, g, opts).map_err(fault)?;
-            (search.plan(&check).map_err(fault)?, Some(search))
-        }
-        Planner::Astar => (astar(map.grid(), s, g, &opts, &check).map_err(fault)?, None),
-    };
+    let route = astar(map.grid(), s, g, &opts, &check).map_err(fault)?;
     let ms = began.elapsed().as_secs_f64() * 1e3;
     let route = map
         .describe(&route, ms)
         .map_err(|e| ApiError::Internal(format!("describing a route: {e}")))?;
     Ok(Planned {
         route,
-        planner: options.planner(),
+        planner: Planner::Astar,
         reused_search: false,
-        search,
+        search: None,
+        warm: (options.planner() == Planner::DstarLite).then_some((s, g)),
     })
+}
+
+/// The D* Lite search of a new route, for its replans (on a planner
+/// thread, in the background).
+fn warm_search(
+    src: &MapSource,
+    (start, goal): (Cell, Cell),
+    options: &SearchOptions,
+    stop: &Stop,
+) -> Result<DStarLite, String> {
+    let map = build_map(src).map_err(|e| e.to_string())?;
+    let opts = options.route_options(map.grid().cell_count());
+    let mut search =
+        DStarLite::new(map.grid().clone(), start, goal, opts).map_err(|e| e.to_string())?;
+    search.plan(&|| stop.now()).map_err(|e| e.to_string())?;
+    Ok(search)
 }
 
 /// The cells of `areas` (their union), a fault named at the area's pointer.
@@ -1150,6 +1170,7 @@ fn replan(input: &ReplanInput, cached: Option<DStarLite>, stop: &Stop) -> Result
                 planner: Planner::DstarLite,
                 reused_search: reused,
                 search: Some(search),
+                warm: None,
             })
         }
         Planner::Astar => {
@@ -1168,6 +1189,7 @@ fn replan(input: &ReplanInput, cached: Option<DStarLite>, stop: &Stop) -> Result
                     planner: Planner::Astar,
                     reused_search: false,
                     search: None,
+                    warm: None,
                 })
             };
             attempt().map_err(|e| failed(e, None))
@@ -1301,18 +1323,19 @@ pub async fn create_route(
         .ok_or_else(|| costmap_not_found(&costmap_id))?;
     ready(&state, &costmap)?;
     let req = parse_create(&doc)?;
-    let src = map_source(&state, &costmap).await?;
+    let src = Arc::new(map_source(&state, &costmap).await?);
     let gone = Arc::new(AtomicBool::new(false));
     let _cancel = CancelOnDrop(gone.clone());
     let limit = state.routes.timeout;
     let (start, goal, options) = (req.start, req.goal, req.options.clone());
+    let source = src.clone();
     let planned = state
-        .run_planner(move || plan_route(&src, &start, &goal, &options, &Stop::new(gone, limit)))
+        .run_planner(move || plan_route(&source, &start, &goal, &options, &Stop::new(gone, limit)))
         .await??;
     let stored_request = StoredRequest {
         start: req.start,
         goal: req.goal,
-        options: req.options,
+        options: req.options.clone(),
         speed_m_s: req.speed_m_s,
     };
     let row = RouteRow {
@@ -1330,8 +1353,21 @@ pub async fn create_route(
         })?,
     };
     insert(&state, &row).await?;
-    if let Some(search) = planned.search {
-        state.routes.searches.put(&row.id, search);
+    if let Some(ends) = planned.warm {
+        let warming = state.routes.begin_warming(&row.id);
+        let (held, id, options) = (state.clone(), row.id.clone(), req.options.clone());
+        tokio::spawn(async move {
+            let _warming = warming;
+            let stop = Stop::new(Arc::new(AtomicBool::new(false)), limit);
+            let built = held
+                .run_planner(move || warm_search(&src, ends, &options, &stop))
+                .await;
+            match built {
+                Ok(Ok(search)) => held.routes.searches.put(&id, search),
+                Ok(Err(e)) => tracing::warn!(route = %id, error = %e, "no D* Lite search kept"),
+                Err(e) => tracing::warn!(route = %id, error = %e, "no D* Lite search kept"),
+            }
+        });
     }
     created(&row)
 }
@@ -1447,6 +1483,8 @@ pub async fn replan_route(
         blocked: req.blocked,
         cost_changes: req.cost_changes,
     };
+    // A search of the parent still being built is worth waiting for.
+    state.routes.warmed(&id).await;
     let held = state.clone();
     let parent_id = id.clone();
     let planned = state
