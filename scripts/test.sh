@@ -2,8 +2,8 @@
 # Sets up a fresh machine and runs every test: formatting, unit and property
 # tests, end-to-end tests of the real binary (CLI and HTTP service, with the
 # external validators pymavlink, shapely and pyproj inside them) on SQLite,
-# the service suite again on a throwaway PostgreSQL, and schemathesis
-# against the live OpenAPI document.
+# the service suite again on a throwaway PostgreSQL, schemathesis against
+# the live OpenAPI document, and the web page's unit and browser tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --with-validators
@@ -25,3 +25,6 @@ unset TERRAPLAN_TEST_DATABASE_URL
 
 echo "== contract tests (schemathesis)"
 bash scripts/schemathesis.sh
+
+echo "== web page: unit tests (Vitest) and browser tests (Chromium)"
+(cd web-ui && npm test --silent && npm run --silent test:browser)

@@ -1,0 +1,36 @@
+// Small DOM helpers shared by the panels.
+
+/** The element with this id; throws early when the page and the code disagree. */
+export function byId<T extends HTMLElement = HTMLElement>(id: string): T {
+  const el = document.getElementById(id);
+  if (!el) throw new Error(`missing element #${id}`);
+  return el as T;
+}
+
+export function numberValue(id: string): number {
+  return Number(byId<HTMLInputElement>(id).value);
+}
+
+/** Creates an element with text and attributes. */
+export function h<K extends keyof HTMLElementTagNameMap>(
+  tag: K,
+  attrs: Record<string, string> = {},
+  ...children: (Node | string)[]
+): HTMLElementTagNameMap[K] {
+  const el = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) el.setAttribute(k, v);
+  el.append(...children);
+  return el;
+}
+
+/** "lon, lat" text from a point, 6 decimals (≈ 0.1 m). */
+export function formatLonLat(p: [number, number]): string {
+  return `${p[0].toFixed(6)}, ${p[1].toFixed(6)}`;
+}
+
+/** Parses "lon, lat" (comma or space separated); null when it is not two numbers. */
+export function parseLonLat(text: string): [number, number] | null {
+  const parts = text.trim().split(/[\s,;]+/).filter(Boolean).map(Number);
+  if (parts.length !== 2 || !parts.every(Number.isFinite)) return null;
+  return [parts[0], parts[1]];
+}

@@ -1,0 +1,112 @@
+// Entry point: builds the map and the panels and wires them together.
+
+import 'ol/ol.css';
+import './style.css';
+import { api } from './api';
+import { DemPanel } from './dem-panel';
+import { byId } from './dom';
+import { MapView } from './map';
+import { RoutePanel } from './route-panel';
+import { SavedPanel } from './saved-panel';
+import { DemSelection } from './state';
+import { SurveyPanel } from './survey-panel';
+
+/**
+ * The online tile layer is off by default (the page must work offline). The
+ * checkbox turns it on and is remembered; `?tiles=URL-template` sets another
+ * XYZ source (e.g. a local tile server).
+ */
+const OSM_TILES = 'https://tile.openstreetmap.org/{z}/{x}/{y}.png';
+const params = new URLSearchParams(location.search);
+const tileUrl = params.get('tiles') ?? localStorage.getItem('terraplan.tiles') ?? OSM_TILES;
+
+const selection = new DemSelection();
+let survey: SurveyPanel;
+let route: RoutePanel;
+
+const map = new MapView(byId('map'), byId('map-hint'), {
+  areasChanged: (roi, nfz) => survey.areasChanged(roi, nfz),
+  blockedChanged: (blocked) => route.blockedChanged(blocked),
+  picked: (mode, at) => {
+    if (mode === 'place-uav') survey.placeUav(at);
+    else route.picked(mode, at);
+  },
+  modeChanged: (mode) => survey?.modeChanged(mode),
+});
+
+const dems = new DemPanel(map, selection);
+survey = new SurveyPanel(map, selection);
+route = new RoutePanel(map, selection, (id, fit) => dems.choose(id, fit));
+const saved = new SavedPanel({
+  openSurvey: async (id) => {
+    survey.show(await api.getSurvey(id), true);
+    selectTab('survey');
+  },
+  openCostmap: async (id) => {
+    selectTab('route');
+    await route.openCostmap(id);
+  },
+  openRoute: async (id) => {
+    selectTab('route');
+    await route.openRoute(id);
+  },
+  openDem: async (id) => {
+    await dems.choose(id);
+  },
+  deleted: (kind, id) => {
+    // Take what was deleted off the map too.
+    if (kind === 'survey') survey.forget(id);
+    else if (kind === 'costmap' || kind === 'route') route.forget(kind, id);
+    else {
+      if (selection.current?.id === id) void dems.choose(null);
+      void dems.refresh();
+    }
+  },
+});
+
+// ---- tabs (WAI-ARIA tabs: arrow keys move between them) ----
+const TABS = ['survey', 'route', 'saved'] as const;
+type Tab = (typeof TABS)[number];
+
+function selectTab(tab: Tab, focus = false): void {
+  for (const t of TABS) {
+    const button = byId(`tab-${t}`);
+    const selected = t === tab;
+    button.setAttribute('aria-selected', String(selected));
+    button.tabIndex = selected ? 0 : -1;
+    byId(`${t}-panel`).hidden = !selected;
+    if (selected && focus) button.focus();
+  }
+  if (map.getMode() !== 'browse') map.setMode('browse');
+  map.showTask(tab === 'saved' ? 'all' : tab);
+  if (tab === 'saved') void saved.refresh();
+}
+
+for (const [i, t] of TABS.entries()) {
+  const button = byId(`tab-${t}`);
+  button.addEventListener('click', () => selectTab(t));
+  button.addEventListener('keydown', (e) => {
+    const step = e.key === 'ArrowRight' ? 1 : e.key === 'ArrowLeft' ? -1 : 0;
+    if (step) selectTab(TABS[(i + step + TABS.length) % TABS.length], true);
+  });
+}
+
+// ---- online base map ----
+const online = byId<HTMLInputElement>('online-tiles');
+online.checked = params.get('online') === '1' || (params.get('online') !== '0' && localStorage.getItem('terraplan.online') === '1');
+const applyOnline = () => {
+  map.setOnlineTiles(online.checked ? tileUrl : null);
+  localStorage.setItem('terraplan.online', online.checked ? '1' : '0');
+};
+online.addEventListener('change', applyOnline);
+if (online.checked) applyOnline();
+
+// First complete drawing of the map: the page's "first render" (measured by the browser tests).
+map.map.once('rendercomplete', () => performance.mark('terraplan:map-rendered'));
+
+// Hook for the browser tests: where a lon/lat point is on the screen.
+(window as unknown as { terraplan: unknown }).terraplan = { pixelFor: (lon: number, lat: number) => map.pixelFor(lon, lat) };
+
+void Promise.all([dems.refresh(), route.loadVehicles()]).then(() => {
+  document.body.dataset.ready = 'true';
+});

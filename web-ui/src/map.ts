@@ -1,0 +1,369 @@
+// The map: base layers (DEM hillshade, optional online tiles), the drawn
+// areas (ROI, no-fly zones, blocked areas), plan results (cells, UAV routes,
+// ground routes) and the click modes that place things on it. Everything
+// crossing this module's boundary is WGS84 lon/lat; the view is Web Mercator.
+
+import OlMap from 'ol/Map';
+import View from 'ol/View';
+import Feature from 'ol/Feature';
+import ImageLayer from 'ol/layer/Image';
+import TileLayer from 'ol/layer/Tile';
+import VectorLayer from 'ol/layer/Vector';
+import VectorSource from 'ol/source/Vector';
+import ImageStatic from 'ol/source/ImageStatic';
+import XYZ from 'ol/source/XYZ';
+import Draw from 'ol/interaction/Draw';
+import Modify from 'ol/interaction/Modify';
+import Snap from 'ol/interaction/Snap';
+import { LineString, Point, Polygon, MultiPolygon } from 'ol/geom';
+import type Geometry from 'ol/geom/Geometry';
+import { Fill, Stroke, Style, Circle as CircleStyle, Text, RegularShape } from 'ol/style';
+import { fromLonLat, toLonLat, transformExtent } from 'ol/proj';
+import { defaults as defaultControls, ScaleLine, Attribution } from 'ol/control';
+import type { Coordinate } from 'ol/coordinate';
+import type { LonLat, Route, Survey } from './api';
+import type { PolygonRings } from './geo-import';
+import type { ImagePlacement } from './projection';
+import type { UavStart } from './survey-form';
+
+export type MapMode =
+  | 'browse'
+  | 'draw-roi'
+  | 'draw-nfz'
+  | 'place-uav'
+  | 'pick-start'
+  | 'pick-goal'
+  | 'pick-position'
+  | 'draw-block';
+
+type AreaKind = 'roi' | 'nfz' | 'blocked';
+
+export interface MapEvents {
+  /** The ROI or the no-fly zones changed (drawn, edited, removed). */
+  areasChanged(roi: PolygonRings | null, noFlyZones: PolygonRings[]): void;
+  /** A blocked area for the ground route was drawn. */
+  blockedChanged(blocked: PolygonRings[]): void;
+  /** A point was picked in one of the click modes. */
+  picked(mode: MapMode, at: LonLat): void;
+  /** The mode changed (a drawing finished, or Escape). */
+  modeChanged(mode: MapMode): void;
+}
+
+const MODE_HINTS: Record<MapMode, string> = {
+  browse: 'Drag to pan, scroll to zoom. Drag a corner of an area to edit it.',
+  'draw-roi': 'Click the corners of the survey area; click the first corner or double-click to finish. Backspace removes the last corner, Escape cancels.',
+  'draw-nfz': 'Click the corners of a no-fly zone; click the first corner or double-click to finish. Escape cancels.',
+  'place-uav': 'Click where each UAV takes off. Escape when done.',
+  'pick-start': 'Click the ground route’s start.',
+  'pick-goal': 'Click the ground route’s goal.',
+  'pick-position': 'Click where the rover is now (the replan starts there).',
+  'draw-block': 'Click the corners of the blocked area; click the first corner or double-click to finish.',
+};
+
+const areaStyles: Record<AreaKind, Style> = {
+  roi: new Style({ stroke: new Stroke({ color: '#0050d0', width: 2.5 }), fill: new Fill({ color: 'rgba(0, 80, 208, 0.10)' }) }),
+  nfz: new Style({ stroke: new Stroke({ color: '#c00000', width: 2, lineDash: [6, 4] }), fill: new Fill({ color: 'rgba(200, 0, 0, 0.25)' }) }),
+  blocked: new Style({ stroke: new Stroke({ color: '#000', width: 2 }), fill: new Fill({ color: 'rgba(0, 0, 0, 0.45)' }) }),
+};
+
+const cellStyle = new Style({ stroke: new Stroke({ color: 'rgba(40, 40, 40, 0.8)', width: 1, lineDash: [3, 3] }), fill: new Fill({ color: 'rgba(255, 255, 255, 0.12)' }) });
+
+function markerStyle(colour: string, label: string, shape: 'circle' | 'square' = 'circle'): Style {
+  const fill = new Fill({ color: colour });
+  const stroke = new Stroke({ color: '#fff', width: 2 });
+  return new Style({
+    image: shape === 'circle' ? new CircleStyle({ radius: 8, fill, stroke }) : new RegularShape({ points: 4, radius: 10, angle: Math.PI / 4, fill, stroke }),
+    text: new Text({ text: label, offsetY: -16, font: 'bold 12px system-ui, sans-serif', fill: new Fill({ color: '#111' }), stroke: new Stroke({ color: '#fff', width: 3 }) }),
+  });
+}
+
+function lineStyles(colour: string, width = 3, dashed = false): Style[] {
+  return [
+    new Style({ stroke: new Stroke({ color: 'rgba(255, 255, 255, 0.9)', width: width + 2.5 }) }),
+    new Style({ stroke: new Stroke({ color: colour, width, lineDash: dashed ? [8, 6] : undefined }) }),
+  ];
+}
+
+const toMap = (p: LonLat | number[]) => fromLonLat([p[0], p[1]]);
+const ringsToMap = (rings: PolygonRings) => rings.map((r) => r.map(toMap));
+
+function polygonRings(geom: Geometry): PolygonRings[] {
+  const g = geom.clone().transform('EPSG:3857', 'EPSG:4326');
+  if (g instanceof Polygon) return [g.getCoordinates() as PolygonRings];
+  if (g instanceof MultiPolygon) return g.getCoordinates() as PolygonRings[];
+  return [];
+}
+
+export class MapView {
+  readonly map: OlMap;
+  private mode: MapMode = 'browse';
+  private readonly areas = new VectorSource<Feature<Geometry>>();
+  private readonly cells = new VectorSource<Feature<Geometry>>();
+  private readonly flights = new VectorSource<Feature<Geometry>>();
+  private readonly ground = new VectorSource<Feature<Geometry>>();
+  private readonly hillshade = new ImageLayer({ visible: false, zIndex: 1 });
+  private readonly costmap = new ImageLayer({ visible: false, zIndex: 2, opacity: 0.7 });
+  private readonly surveyLayers: VectorLayer[] = [];
+  private readonly groundLayer: VectorLayer;
+  private tiles: TileLayer<XYZ> | null = null;
+  private draw: Draw | null = null;
+  private readonly modify: Modify;
+  private readonly snap: Snap;
+
+  constructor(
+    target: HTMLElement,
+    private readonly hint: HTMLElement,
+    private readonly events: MapEvents,
+  ) {
+    this.surveyLayers = [
+      new VectorLayer({ source: this.cells, style: cellStyle, zIndex: 3 }),
+      new VectorLayer({ source: this.areas, style: (f) => areaStyles[f.get('kind') as AreaKind], zIndex: 4 }),
+      new VectorLayer({ source: this.flights, style: (f) => f.get('style') as Style | Style[], zIndex: 5 }),
+    ];
+    this.groundLayer = new VectorLayer({ source: this.ground, style: (f) => f.get('style') as Style | Style[], zIndex: 6 });
+    this.map = new OlMap({
+      target,
+      controls: defaultControls({ attribution: false }).extend([new ScaleLine(), new Attribution({ collapsible: true })]),
+      layers: [this.hillshade, this.costmap, ...this.surveyLayers, this.groundLayer],
+      view: new View({ center: fromLonLat([-77.0525, 38.8106]), zoom: 16, maxZoom: 22 }),
+      keyboardEventTarget: target,
+    });
+    target.tabIndex = 0;
+
+    // Drawn areas stay editable: drag a vertex, click an edge to add one.
+    this.modify = new Modify({ source: this.areas });
+    this.modify.on('modifyend', () => this.emitAreas());
+    this.snap = new Snap({ source: this.areas });
+    this.map.addInteraction(this.modify);
+
+    this.map.on('click', (e) => {
+      if (this.mode === 'place-uav' || this.mode === 'pick-start' || this.mode === 'pick-goal' || this.mode === 'pick-position') {
+        const [lon, lat] = toLonLat(e.coordinate);
+        this.events.picked(this.mode, [lon, lat]);
+      }
+    });
+    target.addEventListener('keydown', (e) => this.onKey(e));
+    this.setHint();
+  }
+
+  getMode(): MapMode {
+    return this.mode;
+  }
+
+  /** Switches what a click on the map does. Drawing modes add a Draw interaction. */
+  setMode(mode: MapMode): void {
+    if (this.draw) {
+      this.map.removeInteraction(this.draw);
+      this.map.removeInteraction(this.snap);
+      this.draw = null;
+    }
+    this.mode = mode;
+    const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : null;
+    this.modify.setActive(kind === null);
+    if (kind) {
+      // stopClick keeps the finishing double-click from zooming the map.
+      this.draw = new Draw({ type: 'Polygon', stopClick: true });
+      this.draw.on('drawend', (e) => {
+        const feature = e.feature as Feature<Geometry>;
+        feature.set('kind', kind);
+        if (kind === 'blocked') {
+          feature.set('style', areaStyles.blocked);
+          this.ground.addFeature(feature);
+          this.emitBlocked();
+        } else {
+          if (kind === 'roi') for (const f of this.areaFeatures('roi')) this.areas.removeFeature(f);
+          this.areas.addFeature(feature);
+          this.emitAreas();
+        }
+        // Back to browsing after one area; the panel buttons start another.
+        setTimeout(() => this.setMode('browse'));
+      });
+      this.map.addInteraction(this.draw);
+      this.map.addInteraction(this.snap);
+    }
+    this.map.getTargetElement()?.classList.toggle('picking', mode !== 'browse');
+    this.setHint();
+    this.events.modeChanged(mode);
+  }
+
+  private onKey(e: KeyboardEvent): void {
+    if (e.key === 'Escape' && this.mode !== 'browse') {
+      this.draw?.abortDrawing();
+      this.setMode('browse');
+      e.preventDefault();
+    } else if (e.key === 'Backspace' && this.draw) {
+      this.draw.removeLastPoint();
+      e.preventDefault();
+    } else if (e.key === 'Enter' && this.draw) {
+      this.draw.finishDrawing();
+      e.preventDefault();
+    }
+  }
+
+  private setHint(): void {
+    this.hint.textContent = MODE_HINTS[this.mode];
+  }
+
+  /** Shows the layers of one task (the other's would clutter the map), or all. */
+  showTask(task: 'survey' | 'route' | 'all'): void {
+    for (const l of this.surveyLayers) l.setVisible(task !== 'route');
+    this.groundLayer.setVisible(task !== 'survey');
+    this.costmap.setOpacity(task === 'survey' ? 0 : this.costmapOpacity);
+  }
+
+  // ---- base layers ----
+
+  /** Shows a DEM's hillshade as the base layer (null hides it). */
+  setHillshade(url: string | null, placement?: ImagePlacement): void {
+    if (!url || !placement) {
+      this.hillshade.setVisible(false);
+      return;
+    }
+    this.hillshade.setSource(new ImageStatic({ url, imageExtent: placement.extent, projection: placement.projection }));
+    this.hillshade.setVisible(true);
+  }
+
+  /** Turns the online tile layer on or off; it is created only when first wanted, so no request is made otherwise. */
+  setOnlineTiles(urlTemplate: string | null): void {
+    if (!urlTemplate) {
+      this.tiles?.setVisible(false);
+      return;
+    }
+    if (!this.tiles) {
+      this.tiles = new TileLayer({ zIndex: 0 });
+      this.map.addLayer(this.tiles);
+    }
+    this.tiles.setSource(new XYZ({ url: urlTemplate, attributions: '© OpenStreetMap contributors', crossOrigin: 'anonymous' }));
+    this.tiles.setVisible(true);
+  }
+
+  setCostmapOverlay(url: string | null, placement?: ImagePlacement): void {
+    if (!url || !placement) {
+      this.costmap.setVisible(false);
+      return;
+    }
+    // No interpolation: class colours must stay crisp at any zoom.
+    this.costmap.setSource(new ImageStatic({ url, imageExtent: placement.extent, projection: placement.projection, interpolate: false }));
+    this.costmap.setVisible(true);
+  }
+
+  private costmapOpacity = 0.7;
+
+  setCostmapOpacity(opacity: number): void {
+    this.costmapOpacity = opacity;
+    this.costmap.setOpacity(opacity);
+  }
+
+  /** Zooms to a lon/lat extent [west, south, east, north]. */
+  fitLonLat(extent: [number, number, number, number]): void {
+    const e = transformExtent(extent, 'EPSG:4326', 'EPSG:3857');
+    this.map.getView().fit(e, { padding: [30, 30, 30, 30], maxZoom: 19 });
+  }
+
+  // ---- ROI and no-fly zones ----
+
+  private areaFeatures(kind: AreaKind): Feature<Geometry>[] {
+    return this.areas.getFeatures().filter((f) => f.get('kind') === kind);
+  }
+
+  private emitAreas(): void {
+    const roi = this.areaFeatures('roi').flatMap((f) => polygonRings(f.getGeometry()!))[0] ?? null;
+    const nfz = this.areaFeatures('nfz').flatMap((f) => polygonRings(f.getGeometry()!));
+    this.events.areasChanged(roi, nfz);
+  }
+
+  setRoi(rings: PolygonRings | null): void {
+    for (const f of this.areaFeatures('roi')) this.areas.removeFeature(f);
+    if (rings) this.areas.addFeature(new Feature({ geometry: new Polygon(ringsToMap(rings)), kind: 'roi' }));
+    this.emitAreas();
+  }
+
+  addNoFlyZones(zones: PolygonRings[]): void {
+    for (const z of zones) this.areas.addFeature(new Feature({ geometry: new Polygon(ringsToMap(z)), kind: 'nfz' }));
+    this.emitAreas();
+  }
+
+  removeNoFlyZone(index: number): void {
+    const f = this.areaFeatures('nfz')[index];
+    if (f) this.areas.removeFeature(f);
+    this.emitAreas();
+  }
+
+  clearNoFlyZones(): void {
+    for (const f of this.areaFeatures('nfz')) this.areas.removeFeature(f);
+    this.emitAreas();
+  }
+
+  // ---- survey results ----
+
+  setUavStarts(starts: UavStart[], colours: (i: number) => string): void {
+    for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'start')) this.flights.removeFeature(f);
+    starts.forEach((u, i) => {
+      this.flights.addFeature(new Feature({ geometry: new Point(toMap(u.start)), kind: 'start', style: markerStyle(colours(i), u.id) }));
+    });
+  }
+
+  /** Shows a planned survey: cells, and each UAV's route in its colour. */
+  showSurvey(survey: Survey | null, colours: (i: number) => string): void {
+    this.cells.clear();
+    for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'route')) this.flights.removeFeature(f);
+    if (!survey) return;
+    for (const cell of survey.cells.features) {
+      const g = cell.geometry;
+      const geom = g.type === 'Polygon'
+        ? new Polygon((g.coordinates as number[][][]).map((r) => r.map(toMap)))
+        : new MultiPolygon((g.coordinates as number[][][][]).map((p) => p.map((r) => r.map(toMap))));
+      this.cells.addFeature(new Feature({ geometry: geom }));
+    }
+    survey.uavs.forEach((uav, i) => {
+      for (const sortie of uav.sorties) {
+        const line = new LineString(sortie.route.coordinates.map(toMap));
+        this.flights.addFeature(new Feature({ geometry: line, kind: 'route', uav: uav.id, colour: colours(i), style: lineStyles(colours(i), 2.5) }));
+      }
+    });
+  }
+
+  // ---- ground routes ----
+
+  private groundFeatures(kind: string): Feature<Geometry>[] {
+    return this.ground.getFeatures().filter((f) => f.get('kind') === kind);
+  }
+
+  private emitBlocked(): void {
+    this.events.blockedChanged(this.groundFeatures('blocked').flatMap((f) => polygonRings(f.getGeometry()!)));
+  }
+
+  /** Shows the route's start, goal and replan position markers (null removes one). */
+  setGroundPoints(points: { start: LonLat | null; goal: LonLat | null; position: LonLat | null }): void {
+    for (const kind of ['start', 'goal', 'position']) for (const f of this.groundFeatures(kind)) this.ground.removeFeature(f);
+    if (points.start) this.ground.addFeature(new Feature({ geometry: new Point(toMap(points.start)), kind: 'start', style: markerStyle('#1a9641', 'start') }));
+    if (points.goal) this.ground.addFeature(new Feature({ geometry: new Point(toMap(points.goal)), kind: 'goal', style: markerStyle('#d7191c', 'goal', 'square') }));
+    if (points.position) this.ground.addFeature(new Feature({ geometry: new Point(toMap(points.position)), kind: 'position', style: markerStyle('#f0a000', 'rover') }));
+  }
+
+  /** Shows the current route (solid) and the one it replaced (dashed, grey). */
+  showGroundRoute(route: Route | null, previous: Route | null = null): void {
+    for (const kind of ['route', 'previous']) for (const f of this.groundFeatures(kind)) this.ground.removeFeature(f);
+    if (previous) {
+      const line = new LineString(previous.geometry.coordinates.map(toMap));
+      this.ground.addFeature(new Feature({ geometry: line, kind: 'previous', style: lineStyles('#777', 2.5, true) }));
+    }
+    if (route) {
+      const line = new LineString(route.geometry.coordinates.map(toMap));
+      this.ground.addFeature(new Feature({ geometry: line, kind: 'route', style: lineStyles('#00b4ff', 3.5) }));
+    }
+  }
+
+  setBlocked(areas: PolygonRings[]): void {
+    for (const f of this.groundFeatures('blocked')) this.ground.removeFeature(f);
+    for (const a of areas) this.ground.addFeature(new Feature({ geometry: new Polygon(ringsToMap(a)), kind: 'blocked', style: areaStyles.blocked }));
+  }
+
+  /** Page coordinates of a lon/lat point (for tests that click on the map). */
+  pixelFor(lon: number, lat: number): [number, number] | null {
+    const px = this.map.getPixelFromCoordinate(fromLonLat([lon, lat]) as Coordinate);
+    if (!px) return null;
+    const rect = this.map.getTargetElement()!.getBoundingClientRect();
+    return [rect.left + px[0], rect.top + px[1]];
+  }
+}

@@ -1,0 +1,62 @@
+// Placing raster images (DEM hillshades, costmap previews) on the map. They
+// are drawn in the raster's own CRS, so OpenLayers needs that projection:
+// proj4 definitions are built here for the common projected families (UTM
+// on WGS84, NAD83, ETRS89); any other CRS falls back to the WGS84 bounds,
+// which is only approximate (the API gives no proj4/WKT definition).
+
+import proj4 from 'proj4';
+import { register } from 'ol/proj/proj4';
+import { get as getProjection } from 'ol/proj';
+import type { Dem } from './api';
+
+/** A proj4 definition for an EPSG code, or null when we cannot build one. */
+export function proj4Definition(epsg: number): string | null {
+  if (epsg === 4326) return '+proj=longlat +datum=WGS84 +no_defs';
+  if (epsg >= 32601 && epsg <= 32660) return `+proj=utm +zone=${epsg - 32600} +datum=WGS84 +units=m +no_defs`;
+  if (epsg >= 32701 && epsg <= 32760) return `+proj=utm +zone=${epsg - 32700} +south +datum=WGS84 +units=m +no_defs`;
+  if (epsg >= 26901 && epsg <= 26923) return `+proj=utm +zone=${epsg - 26900} +datum=NAD83 +units=m +no_defs`;
+  if (epsg >= 25828 && epsg <= 25838) return `+proj=utm +zone=${epsg - 25800} +ellps=GRS80 +towgs84=0,0,0,0,0,0,0 +units=m +no_defs`;
+  if (epsg === 3857) return '+proj=merc +a=6378137 +b=6378137 +lat_ts=0 +lon_0=0 +x_0=0 +y_0=0 +k=1 +units=m +nadgrids=@null +no_defs';
+  return null;
+}
+
+export interface ImagePlacement {
+  /** An OpenLayers projection code the image is drawn in. */
+  projection: string;
+  extent: [number, number, number, number];
+  /** False when the placement is the approximate WGS84 fallback. */
+  exact: boolean;
+}
+
+/** Where a raster lying on the DEM's grid goes, given its extent in the DEM's CRS. */
+export function placeRaster(dem: Dem, nativeExtent: [number, number, number, number] = dem.bounds): ImagePlacement {
+  const epsg = dem.crs.epsg;
+  if (epsg != null) {
+    const code = `EPSG:${epsg}`;
+    if (getProjection(code)) return { projection: code, extent: nativeExtent, exact: true };
+    const def = proj4Definition(epsg);
+    if (def) {
+      proj4.defs(code, def);
+      register(proj4);
+      return { projection: code, extent: nativeExtent, exact: true };
+    }
+  }
+  return { projection: 'EPSG:4326', extent: dem.bounds_wgs84, exact: false };
+}
+
+/**
+ * The native extent of a costmap on a DEM: the DEM's grid, or blocks of
+ * `factor` cells from its top-left corner (the API drops short edge blocks
+ * and does not report the costmap's bounds).
+ */
+export function costmapExtent(
+  dem: Dem,
+  width: number,
+  height: number,
+  factor: [number, number] = [1, 1],
+): [number, number, number, number] {
+  const [minX, , , maxY] = dem.bounds;
+  const cellX = (dem.bounds[2] - dem.bounds[0]) / dem.width;
+  const cellY = (dem.bounds[3] - dem.bounds[1]) / dem.height;
+  return [minX, maxY - height * factor[1] * cellY, minX + width * factor[0] * cellX, maxY];
+}

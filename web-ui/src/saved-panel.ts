@@ -1,0 +1,108 @@
+// Saved work: the surveys, costmaps, routes and DEMs stored on the server,
+// newest first, each with Open and Delete.
+
+import { api } from './api';
+import { byId, h } from './dom';
+import { ErrorSlots } from './errors-ui';
+import { formatArea, formatDate, formatDuration, formatLength } from './format';
+
+export interface SavedActions {
+  openSurvey(id: string): Promise<void>;
+  openCostmap(id: string): Promise<void>;
+  openRoute(id: string): Promise<void>;
+  openDem(id: string): Promise<void>;
+  /** Something was deleted: lists elsewhere on the page may be stale. */
+  deleted(kind: 'survey' | 'costmap' | 'route' | 'dem', id: string): void;
+}
+
+interface Entry {
+  id: string;
+  title: string;
+  detail: string;
+}
+
+export class SavedPanel {
+  private readonly errors = new ErrorSlots(byId('saved-panel'), 'saved', []);
+
+  constructor(private readonly actions: SavedActions) {
+    byId('saved-refresh').addEventListener('click', () => void this.refresh());
+  }
+
+  async refresh(): Promise<void> {
+    this.errors.clear();
+    const status = byId('saved-status');
+    status.textContent = 'Loading…';
+    try {
+      const [surveys, costmaps, routes, dems] = await Promise.all([api.listSurveys(), api.listCostmaps(), api.listRoutes(), api.listDems()]);
+      this.fill('saved-surveys', 'survey', surveys.items.map((s) => ({
+        id: s.id,
+        title: s.name ?? `Survey ${s.id.slice(0, 8)}`,
+        detail: `${formatDate(s.created_at)} · ${formatArea(s.area_m2)} · ${s.uav_count} UAV${s.uav_count === 1 ? '' : 's'} · ${formatDuration(s.makespan_s)}`,
+      })));
+      this.fill('saved-costmaps', 'costmap', costmaps.items.map((c) => ({
+        id: c.id,
+        title: c.name ?? `Costmap ${c.id.slice(0, 8)}`,
+        detail: `${formatDate(c.created_at)} · ${c.vehicle.name} · ${c.status}`,
+      })));
+      this.fill('saved-routes', 'route', routes.items.map((r) => ({
+        id: r.id,
+        title: r.name ?? `Route ${r.id.slice(0, 8)}`,
+        detail: `${formatDate(r.created_at)} · ${formatLength(r.length_2d_m)}${r.parent_id ? ' · replanned' : ''}`,
+      })));
+      this.fill('saved-dems', 'dem', dems.items.map((d) => ({
+        id: d.id,
+        title: d.name ?? d.file_name ?? d.id.slice(0, 8),
+        detail: `${formatDate(d.created_at)} · ${d.width}×${d.height} · ${d.crs.name}`,
+      })));
+      status.textContent = '';
+    } catch (err) {
+      status.textContent = '';
+      this.errors.showError(err);
+    }
+  }
+
+  private fill(listId: string, kind: 'survey' | 'costmap' | 'route' | 'dem', entries: Entry[]): void {
+    const list = byId(listId);
+    if (entries.length === 0) {
+      list.replaceChildren(h('li', { class: 'empty' }, 'None yet.'));
+      return;
+    }
+    list.replaceChildren(
+      ...entries.map((e) => {
+        const open = h('button', { type: 'button', 'aria-label': `Open ${e.title}` }, 'Open');
+        open.addEventListener('click', () => void this.open(kind, e.id));
+        const del = h('button', { type: 'button', class: 'danger', 'aria-label': `Delete ${e.title}` }, 'Delete');
+        del.addEventListener('click', () => void this.remove(kind, e));
+        return h('li', {}, h('div', {}, h('strong', {}, e.title), h('br'), h('small', {}, e.detail)), h('div', { class: 'buttons' }, open, del));
+      }),
+    );
+  }
+
+  private async open(kind: 'survey' | 'costmap' | 'route' | 'dem', id: string): Promise<void> {
+    this.errors.clear();
+    try {
+      if (kind === 'survey') await this.actions.openSurvey(id);
+      else if (kind === 'costmap') await this.actions.openCostmap(id);
+      else if (kind === 'route') await this.actions.openRoute(id);
+      else await this.actions.openDem(id);
+    } catch (err) {
+      this.errors.showError(err);
+    }
+  }
+
+  private async remove(kind: 'survey' | 'costmap' | 'route' | 'dem', e: Entry): Promise<void> {
+    const extra = kind === 'costmap' ? ' Its routes are deleted with it.' : '';
+    if (!window.confirm(`Delete “${e.title}”?${extra}`)) return;
+    this.errors.clear();
+    try {
+      if (kind === 'survey') await api.deleteSurvey(e.id);
+      else if (kind === 'costmap') await api.deleteCostmap(e.id);
+      else if (kind === 'route') await api.deleteRoute(e.id);
+      else await api.deleteDem(e.id);
+      this.actions.deleted(kind, e.id);
+      await this.refresh();
+    } catch (err) {
+      this.errors.showError(err);
+    }
+  }
+}
