@@ -27,7 +27,7 @@ use utoipa_axum::routes;
 use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::routes as route_api;
-use crate::api::{costmaps, dems, health, surveys, vehicles};
+use crate::api::{cameras, costmaps, dems, health, surveys, vehicles};
 use crate::config::ServeConfig;
 use crate::costmap_jobs::CostmapJobs;
 use crate::db::Db;
@@ -419,6 +419,7 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .routes(routes!(costmaps::legend))
         .routes(routes!(costmaps::layer))
         .routes(routes!(vehicles::list_vehicles))
+        .routes(routes!(cameras::list_cameras))
         .routes(routes!(route_api::create_route))
         .routes(routes!(route_api::list_routes))
         .routes(routes!(route_api::get_route, route_api::delete_route))

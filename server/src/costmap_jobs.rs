@@ -136,6 +136,12 @@ pub struct CostmapResult {
     pub crs: Crs,
     /// The layers kept, each with a file.
     pub layers: Vec<Layer>,
+    /// [min x, min y, max x, max y] of the working grid in `crs`, and in
+    /// WGS84 lon/lat (absent from costmaps built before they were kept).
+    #[serde(default)]
+    pub bounds: Option<[f64; 4]>,
+    #[serde(default)]
+    pub bounds_wgs84: Option<[f64; 4]>,
 }
 
 /// What a job was asked for, stored as JSON.
@@ -716,7 +722,16 @@ fn encode(costmap: &Costmap) -> std::io::Result<Built> {
             });
         }
     }
+    let (bounds, bounds_wgs84) = planner_core::terrain::raster_bounds(
+        &costmap.transform,
+        costmap.width,
+        costmap.height,
+        &costmap.crs,
+    )
+    .map_err(std::io::Error::other)?;
     let result = CostmapResult {
+        bounds: Some(bounds),
+        bounds_wgs84: Some(bounds_wgs84),
         vehicle: costmap.vehicle.clone(),
         params: costmap.params.clone(),
         stats: costmap.stats.clone(),

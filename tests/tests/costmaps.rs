@@ -339,6 +339,16 @@ fn dtm_costmap_end_to_end() {
     assert_eq!(done["width"], 283);
     assert_eq!(done["height"], 259);
     assert_eq!(done["crs"]["epsg"], 26918);
+    // The DTM's own extent (2 m cells from (321498, 4298018)).
+    assert_eq!(
+        done["bounds"],
+        json!([321_498.0, 4_297_500.0, 322_064.0, 4_298_018.0])
+    );
+    let ll = done["bounds_wgs84"].as_array().unwrap();
+    let dem_ll = [-77.0559199, 38.8081989, -77.0492711, 38.8129784];
+    for (a, b) in ll.iter().zip(dem_ll) {
+        assert!((a.as_f64().unwrap() - b).abs() < 1e-6, "{ll:?}");
+    }
     assert_eq!(done["options"]["layers"], json!(["zcomp", "slope", "step"]));
     assert_eq!(done["layers"], json!(["slope", "zcomp", "step"]));
     assert_eq!(done["params"]["resolution_m"], json!([2.0, 2.0]));

@@ -45,6 +45,10 @@ fn create_get_list_download_delete() {
     let r = get(&server.url(&format!("/api/v1/surveys/{id}")));
     assert_eq!(r.status, 200);
     assert_eq!(r.json(), created);
+    // The request comes back (without its name), so a client can reopen it.
+    let mut asked = example_request();
+    asked.as_object_mut().unwrap().remove("name");
+    assert_eq!(created["request"], asked);
 
     let r = get(&server.url("/api/v1/surveys?limit=10"));
     assert_eq!(r.status, 200);
@@ -143,6 +147,27 @@ fn create_get_list_download_delete() {
     assert!(server.stop().success());
 }
 
+/// The camera presets a survey may name, with their numbers; each is
+/// accepted by `POST /api/v1/surveys`.
+#[test]
+fn camera_presets_are_listed_and_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    let r = get(&server.url("/api/v1/cameras"));
+    assert_eq!(r.status, 200);
+    let items = r.json()["items"].as_array().unwrap().clone();
+    assert_eq!(items.len(), 7);
+    assert_eq!(items[0]["name"], "dji_phantom4_pro");
+    assert_eq!(items[0]["camera"]["sensor_width_mm"], 13.2);
+    for item in &items {
+        assert!(item["camera"]["focal_length_mm"].as_f64().unwrap() > 0.0);
+        let mut req = example_request();
+        req["camera_preset"] = item["name"].clone();
+        let r = post_json(&server.url("/api/v1/surveys"), &req);
+        assert_eq!(r.status, 201, "{}: {}", item["name"], r.text());
+    }
+}
+
 #[test]
 fn surveys_survive_a_restart() {
     let dir = tempfile::tempdir().unwrap();
@@ -157,6 +182,10 @@ fn surveys_survive_a_restart() {
     let r = get(&server.url(&format!("/api/v1/surveys/{id}")));
     assert_eq!(r.status, 200);
     assert_eq!(r.json(), created);
+    // The request comes back (without its name), so a client can reopen it.
+    let mut asked = example_request();
+    asked.as_object_mut().unwrap().remove("name");
+    assert_eq!(created["request"], asked);
     let wp = get(&server.url(
         created["uavs"][0]["sorties"][0]["files"]["waypoints"]
             .as_str()

@@ -5,7 +5,7 @@ use std::sync::{Mutex, OnceLock};
 
 use proj::Proj;
 
-use super::{Dem, DemInfo, TerrainError};
+use super::{Crs, Dem, DemInfo, GeoTransform, TerrainError};
 
 /// Points per raster edge transformed to find the WGS84 bounds (the edges
 /// of a projected raster are curves in lon/lat).
@@ -15,9 +15,16 @@ const EDGE_POINTS: usize = 21;
 const WGS84_A: f64 = 6_378_137.0;
 const WGS84_E2: f64 = 0.006_694_379_990_141_317;
 
-pub(super) fn dem_info(dem: &Dem) -> Result<DemInfo, TerrainError> {
-    let (w, h) = (dem.width as f64, dem.height as f64);
-    let t = &dem.transform;
+/// The bounds [min x, min y, max x, max y] of a `width` × `height`
+/// raster georeferenced by `t` in `crs`, and in WGS84 lon/lat (its edges
+/// sampled, since a projected raster's edges are curves in lon/lat).
+pub fn raster_bounds(
+    t: &GeoTransform,
+    width: usize,
+    height: usize,
+    crs: &Crs,
+) -> Result<([f64; 4], [f64; 4]), TerrainError> {
+    let (w, h) = (width as f64, height as f64);
     let corners = [
         t.apply(0.0, 0.0),
         t.apply(w, 0.0),
@@ -25,9 +32,8 @@ pub(super) fn dem_info(dem: &Dem) -> Result<DemInfo, TerrainError> {
         t.apply(w, h),
     ];
     let bounds = bbox(corners.iter().copied()).ok_or_else(|| {
-        TerrainError::Invalid("the DEM's georeferencing gives non-finite bounds".into())
+        TerrainError::Invalid("the raster's georeferencing gives non-finite bounds".into())
     })?;
-
     // The outline: EDGE_POINTS per edge, corners included.
     let mut outline = Vec::with_capacity(4 * EDGE_POINTS);
     for i in 0..EDGE_POINTS {
@@ -37,24 +43,25 @@ pub(super) fn dem_info(dem: &Dem) -> Result<DemInfo, TerrainError> {
         outline.push(t.apply(0.0, f * h));
         outline.push(t.apply(w, f * h));
     }
-    let bounds_wgs84 = if dem.crs.epsg == 4326 {
+    let bounds_wgs84 = if crs.epsg == 4326 {
         bounds
     } else {
-        let to_wgs84 = Proj::new_known_crs(&dem.crs.proj_id(), "EPSG:4326", None).map_err(|e| {
-            TerrainError::Crs(format!(
-                "cannot transform {} to WGS84: {e}",
-                dem.crs.proj_id()
-            ))
+        let to_wgs84 = Proj::new_known_crs(&crs.proj_id(), "EPSG:4326", None).map_err(|e| {
+            TerrainError::Crs(format!("cannot transform {} to WGS84: {e}", crs.proj_id()))
         })?;
         let lonlat = outline.iter().filter_map(|&p| to_wgs84.convert(p).ok());
         bbox(lonlat).ok_or_else(|| {
             TerrainError::Crs(format!(
-                "the DEM's outline cannot be transformed from {} to WGS84",
-                dem.crs.proj_id()
+                "the raster's outline cannot be transformed from {} to WGS84",
+                crs.proj_id()
             ))
         })?
     };
+    Ok((bounds, bounds_wgs84))
+}
 
+pub(super) fn dem_info(dem: &Dem) -> Result<DemInfo, TerrainError> {
+    let (bounds, bounds_wgs84) = raster_bounds(&dem.transform, dem.width, dem.height, &dem.crs)?;
     let (mut min, mut max, mut nodata) = (f64::INFINITY, f64::NEG_INFINITY, 0usize);
     for &v in &dem.values {
         if v.is_nan() {

@@ -21,6 +21,7 @@ pub use crs::Crs;
 pub use dilate::dilate;
 pub use follow::{HeightRule, Point3, TerrainModel, length_3d};
 pub use hillshade::hillshade_png;
+pub use info::raster_bounds;
 pub use read::{read_dem, read_geotiff_band};
 pub use sample::TerrainSampler;
 

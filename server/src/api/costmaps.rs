@@ -126,6 +126,13 @@ pub struct CostmapResponse {
     /// CRS of the costmap (the DEM's), once done.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     crs: Option<Crs>,
+    /// [min x, min y, max x, max y] of the costmap's cells in `crs` (the
+    /// extent of `preview.png` and `costmap.tif`), once done.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bounds: Option<[f64; 4]>,
+    /// The same extent in WGS84 [west, south, east, north], once done.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bounds_wgs84: Option<[f64; 4]>,
     /// The per-layer rasters kept (once done) or to be kept.
     layers: Vec<Layer>,
     urls: CostmapUrls,
@@ -367,7 +374,7 @@ fn response(row: &CostmapRow, live: Option<Live>) -> Result<CostmapResponse, Api
             .collect(),
         this: base,
     };
-    let (params, stats, warnings, width, height, crs) = match result {
+    let (params, stats, warnings, width, height, crs, bounds, bounds_wgs84) = match result {
         Some(r) => (
             Some(r.params),
             Some(r.stats),
@@ -375,8 +382,10 @@ fn response(row: &CostmapRow, live: Option<Live>) -> Result<CostmapResponse, Api
             Some(r.width),
             Some(r.height),
             Some(r.crs),
+            r.bounds,
+            r.bounds_wgs84,
         ),
-        None => (None, None, Vec::new(), None, None, None),
+        None => (None, None, Vec::new(), None, None, None, None, None),
     };
     Ok(CostmapResponse {
         id: id.clone(),
@@ -396,6 +405,8 @@ fn response(row: &CostmapRow, live: Option<Live>) -> Result<CostmapResponse, Api
         width,
         height,
         crs,
+        bounds,
+        bounds_wgs84,
         layers,
         urls,
     })

@@ -170,6 +170,10 @@ pub struct SurveyResponse {
     fences: Vec<FencePolygon>,
     warnings: Vec<String>,
     files: SurveyFiles,
+    /// The request as it was made, without `name` (roi, no_fly_zones,
+    /// dem_id and the parameters), so a client can reopen and edit it.
+    #[schema(value_type = Object)]
+    request: Value,
 }
 
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -287,6 +291,7 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
         files: SurveyFiles {
             cells: format!("{base}/cells.geojson"),
         },
+        request: serde_json::from_str(&row.request).unwrap_or(Value::Null),
     }
 }
 
