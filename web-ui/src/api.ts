@@ -100,6 +100,19 @@ export interface SurveyStats {
   makespan_s?: number;
   uav_count?: number;
 }
+export interface Camera {
+  sensor_width_mm: number;
+  sensor_height_mm: number;
+  focal_length_mm: number;
+  image_width_px: number;
+  image_height_px: number;
+  orientation: 'landscape' | 'portrait';
+}
+export interface CameraPreset {
+  name: string;
+  camera: Camera;
+}
+
 export interface Survey {
   id: string;
   name: string | null;
@@ -111,6 +124,8 @@ export interface Survey {
   fences: { inclusion: boolean; vertices: LonLat[] }[];
   warnings: string[];
   files: { cells: string };
+  /** The request as made, without `name` (absent from surveys of older servers). */
+  request?: Record<string, unknown> | null;
 }
 export interface SurveySummary {
   id: string;
@@ -144,6 +159,10 @@ export interface Costmap {
   width?: number;
   height?: number;
   params?: { resample_factor: [number, number]; resolution_m: [number, number] } | null;
+  /** Once done: the exact extent of `preview.png` in `crs`, and in WGS84 (absent from older servers' costmaps). */
+  crs?: Dem['crs'] | null;
+  bounds?: [number, number, number, number] | null;
+  bounds_wgs84?: [number, number, number, number] | null;
   warnings: string[];
   urls: { self: string; events: string; preview_png: string; legend_svg: string; costmap_tif: string };
 }
@@ -215,6 +234,7 @@ export const api = {
   getDem: (id: string) => request<Dem>('GET', `/api/v1/dems/${id}`),
   deleteDem: (id: string) => request<void>('DELETE', `/api/v1/dems/${id}`),
 
+  listCameras: () => request<{ items: CameraPreset[] }>('GET', '/api/v1/cameras'),
   createSurvey: (body: unknown) => request<Survey>('POST', '/api/v1/surveys', body),
   listSurveys: () => list<SurveySummary>('/api/v1/surveys'),
   getSurvey: (id: string) => request<Survey>('GET', `/api/v1/surveys/${id}`),

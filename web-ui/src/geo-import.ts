@@ -31,6 +31,13 @@ export function parseGeoJson(text: string): PolygonRings[] {
   return out;
 }
 
+/** The polygons of a parsed GeoJSON object (geometry, Feature or collection). */
+export function polygonsOf(geojson: unknown): PolygonRings[] {
+  const out: PolygonRings[] = [];
+  collectGeoJson(geojson, out);
+  return out;
+}
+
 function collectGeoJson(node: unknown, out: PolygonRings[]): void {
   if (!node || typeof node !== 'object') return;
   const g = node as { type?: string; coordinates?: unknown; geometry?: unknown; features?: unknown[]; geometries?: unknown[] };

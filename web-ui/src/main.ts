@@ -35,12 +35,13 @@ const map = new MapView(byId('map'), byId('map-hint'), {
 });
 
 const dems = new DemPanel(map, selection);
-survey = new SurveyPanel(map, selection);
+survey = new SurveyPanel(map, selection, (id, fit) => dems.choose(id, fit));
 route = new RoutePanel(map, selection, (id, fit) => dems.choose(id, fit));
 const saved = new SavedPanel({
   openSurvey: async (id) => {
-    survey.show(await api.getSurvey(id), true);
+    const saved = await api.getSurvey(id);
     selectTab('survey');
+    await survey.open(saved);
   },
   openCostmap: async (id) => {
     selectTab('route');
@@ -104,9 +105,12 @@ if (online.checked) applyOnline();
 // First complete drawing of the map: the page's "first render" (measured by the browser tests).
 map.map.once('rendercomplete', () => performance.mark('terraplan:map-rendered'));
 
-// Hook for the browser tests: where a lon/lat point is on the screen.
-(window as unknown as { terraplan: unknown }).terraplan = { pixelFor: (lon: number, lat: number) => map.pixelFor(lon, lat) };
+// Hooks for the browser tests: where a lon/lat point is on the screen; the drawn areas.
+(window as unknown as { terraplan: unknown }).terraplan = {
+  pixelFor: (lon: number, lat: number) => map.pixelFor(lon, lat),
+  areas: () => map.getAreas(),
+};
 
-void Promise.all([dems.refresh(), route.loadVehicles()]).then(() => {
+void Promise.all([dems.refresh(), route.loadVehicles(), survey.loadCameras()]).then(() => {
   document.body.dataset.ready = 'true';
 });

@@ -266,9 +266,15 @@ export class MapView {
     return this.areas.getFeatures().filter((f) => f.get('kind') === kind);
   }
 
-  private emitAreas(): void {
+  /** The ROI and no-fly zones on the map, in lon/lat. */
+  getAreas(): { roi: PolygonRings | null; nfz: PolygonRings[] } {
     const roi = this.areaFeatures('roi').flatMap((f) => polygonRings(f.getGeometry()!))[0] ?? null;
     const nfz = this.areaFeatures('nfz').flatMap((f) => polygonRings(f.getGeometry()!));
+    return { roi, nfz };
+  }
+
+  private emitAreas(): void {
+    const { roi, nfz } = this.getAreas();
     this.events.areasChanged(roi, nfz);
   }
 

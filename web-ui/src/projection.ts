@@ -7,7 +7,7 @@
 import proj4 from 'proj4';
 import { register } from 'ol/proj/proj4';
 import { get as getProjection } from 'ol/proj';
-import type { Dem } from './api';
+import type { Costmap, Dem } from './api';
 
 /** A proj4 definition for an EPSG code, or null when we cannot build one. */
 export function proj4Definition(epsg: number): string | null {
@@ -28,33 +28,59 @@ export interface ImagePlacement {
   exact: boolean;
 }
 
-/** Where a raster lying on the DEM's grid goes, given its extent in the DEM's CRS. */
-export function placeRaster(dem: Dem, nativeExtent: [number, number, number, number] = dem.bounds): ImagePlacement {
-  const epsg = dem.crs.epsg;
+type Extent = [number, number, number, number];
+
+/**
+ * Where an image goes, given its extent in its CRS and its WGS84 envelope
+ * (the approximate fallback when the CRS is not one we can define).
+ */
+export function placeImage(crs: { epsg: number | null } | null | undefined, extent: Extent, wgs84: Extent): ImagePlacement {
+  const epsg = crs?.epsg;
   if (epsg != null) {
     const code = `EPSG:${epsg}`;
-    if (getProjection(code)) return { projection: code, extent: nativeExtent, exact: true };
+    if (getProjection(code)) return { projection: code, extent, exact: true };
     const def = proj4Definition(epsg);
     if (def) {
       proj4.defs(code, def);
       register(proj4);
-      return { projection: code, extent: nativeExtent, exact: true };
+      return { projection: code, extent, exact: true };
     }
   }
-  return { projection: 'EPSG:4326', extent: dem.bounds_wgs84, exact: false };
+  return { projection: 'EPSG:4326', extent: wgs84, exact: false };
+}
+
+/** Where a raster lying on the DEM's grid goes, given its extent in the DEM's CRS. */
+export function placeRaster(dem: Dem, nativeExtent: Extent = dem.bounds): ImagePlacement {
+  return placeImage(dem.crs, nativeExtent, dem.bounds_wgs84);
 }
 
 /**
- * The native extent of a costmap on a DEM: the DEM's grid, or blocks of
- * `factor` cells from its top-left corner (the API drops short edge blocks
- * and does not report the costmap's bounds).
+ * Where a costmap's `preview.png` goes: its own `bounds` (exact), or for
+ * costmaps of older servers, which do not report them, derived from its
+ * DEM (`dem` is needed only then; null when it is missing).
+ */
+export function placeCostmap(cm: Costmap, dem: Dem | null): ImagePlacement | null {
+  if (cm.bounds && cm.bounds_wgs84) return placeImage(cm.crs ?? dem?.crs, cm.bounds, cm.bounds_wgs84);
+  if (!dem) return null;
+  return placeRaster(dem, costmapExtent(dem, cm.width ?? dem.width, cm.height ?? dem.height, cm.params?.resample_factor));
+}
+
+/** Whether placing this costmap needs its DEM (older servers did not report costmap bounds). */
+export function costmapNeedsDem(cm: Costmap): boolean {
+  return !cm.bounds || !cm.bounds_wgs84;
+}
+
+/**
+ * The native extent of a costmap on a DEM, for costmaps without `bounds`
+ * (built by older servers): the DEM's grid, or blocks of `factor` cells from
+ * its top-left corner (short edge blocks are dropped).
  */
 export function costmapExtent(
   dem: Dem,
   width: number,
   height: number,
   factor: [number, number] = [1, 1],
-): [number, number, number, number] {
+): Extent {
   const [minX, , , maxY] = dem.bounds;
   const cellX = (dem.bounds[2] - dem.bounds[0]) / dem.width;
   const cellY = (dem.bounds[3] - dem.bounds[1]) / dem.height;

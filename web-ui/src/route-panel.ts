@@ -9,7 +9,7 @@ import { formatDate, formatDegrees, formatDuration, formatLength, formatNumber }
 import type { PolygonRings } from './geo-import';
 import type { MapMode, MapView } from './map';
 import { COSTMAP_FIELDS, ROUTE_FIELDS } from './problems';
-import { costmapExtent, placeRaster } from './projection';
+import { costmapNeedsDem, placeCostmap } from './projection';
 import type { DemSelection } from './state';
 
 export class RoutePanel {
@@ -168,9 +168,9 @@ export class RoutePanel {
       byId<HTMLSelectElement>('costmap-select').value = '';
       return;
     }
-    const dem = this.dem.current?.id === cm.dem_id ? this.dem.current : await api.getDem(cm.dem_id);
-    const extent = costmapExtent(dem, cm.width ?? dem.width, cm.height ?? dem.height, cm.params?.resample_factor);
-    this.map.setCostmapOverlay(cm.urls.preview_png, placeRaster(dem, extent));
+    // The costmap's own bounds place it; only costmaps of older servers need their DEM.
+    const dem = !costmapNeedsDem(cm) ? null : this.dem.current?.id === cm.dem_id ? this.dem.current : await api.getDem(cm.dem_id);
+    this.map.setCostmapOverlay(cm.urls.preview_png, placeCostmap(cm, dem) ?? undefined);
     this.map.setCostmapOpacity(Number(byId<HTMLInputElement>('costmap-opacity').value));
     byId<HTMLImageElement>('costmap-legend').src = cm.urls.legend_svg;
     byId('costmap-warnings').replaceChildren(...cm.warnings.map((w) => h('li', {}, w)));

@@ -1,36 +1,31 @@
-// The survey form's values and how they become a `POST /api/v1/surveys`
-// body. Pure (no DOM) so it is unit-tested.
+// The survey form's values, how they become a `POST /api/v1/surveys` body,
+// and how a saved survey's request becomes them again. Pure (no DOM) so it is
+// unit-tested.
 
-import type { LonLat } from './api';
-import type { PolygonRings } from './geo-import';
+import type { Camera, LonLat } from './api';
+import { polygonsOf, type PolygonRings } from './geo-import';
 import type { FieldMessage } from './problems';
 
-/**
- * Camera presets the API accepts as `camera_preset` (planner_core::coverage::PRESETS).
- * The API does not list them, so they are repeated here with their specs for display.
- */
-export const CAMERA_PRESETS: { id: string; label: string }[] = [
-  { id: 'dji_phantom4_pro', label: 'DJI Phantom 4 Pro (1″ 20 MP, 8.8 mm)' },
-  { id: 'dji_phantom4_rtk', label: 'DJI Phantom 4 RTK (1″ 20 MP, 8.8 mm)' },
-  { id: 'dji_phantom3_pro', label: 'DJI Phantom 3 Pro (1/2.3″ 12 MP, 3.61 mm)' },
-  { id: 'dji_mavic2_pro', label: 'DJI Mavic 2 Pro (1″ 20 MP, 10.26 mm)' },
-  { id: 'dji_mavic3_enterprise', label: 'DJI Mavic 3 Enterprise (4/3 20 MP, 12.29 mm)' },
-  { id: 'dji_zenmuse_p1_35mm', label: 'DJI Zenmuse P1, 35 mm (FF 45 MP)' },
-  { id: 'sony_rx1r2', label: 'Sony RX1R II (FF 42 MP, 35 mm)' },
-];
+/** A camera's numbers (the API's `Camera`), as sent for a custom camera. */
+export type CustomCamera = Camera;
 
-export interface CustomCamera {
-  sensor_width_mm: number;
-  sensor_height_mm: number;
-  focal_length_mm: number;
-  image_width_px: number;
-  image_height_px: number;
-  orientation: 'landscape' | 'portrait';
+/** The numbers of a camera in a sentence, shown under the chooser. */
+export function cameraSummary(c: Camera): string {
+  return (
+    `Sensor ${trim(c.sensor_width_mm)} × ${trim(c.sensor_height_mm)} mm, focal length ${trim(c.focal_length_mm)} mm, ` +
+    `${c.image_width_px} × ${c.image_height_px} px (${megapixels(c)} MP), ${c.orientation}.`
+  );
 }
+
+const megapixels = (c: Camera) => ((c.image_width_px * c.image_height_px) / 1e6).toFixed(1);
+const trim = (x: number) => String(Math.round(x * 1000) / 1000);
 
 export interface UavStart {
   id: string;
   start: LonLat;
+  /** Kept from a reopened survey (the form has no control for them). */
+  speed_m_s?: number;
+  max_flight_time_s?: number;
 }
 
 export interface SurveyFormValues {
@@ -53,6 +48,8 @@ export interface SurveyFormValues {
   altitudeFrame: 'relative' | 'amsl' | 'terrain';
   assignment: 'balanced' | 'competition' | 'min_reach';
   uavs: UavStart[];
+  /** Members of a reopened survey's request the form has no control for (sent again as they were). */
+  extra: Record<string, unknown>;
 }
 
 export interface SurveyRequest {
@@ -77,6 +74,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   if (errors.length > 0) return { body: null, errors };
 
   const body: Record<string, unknown> = {
+    ...v.extra,
     roi: polygon(v.roi!),
     no_fly_zones: v.noFlyZones.map(polygon),
     front_overlap: round(v.frontOverlapPct / 100, 4),
@@ -96,8 +94,111 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     if (v.allowPartialDem) body.allow_partial_dem = true;
   }
   // No UAVs placed: the server puts one at the ROI's first vertex.
-  if (v.uavs.length > 0) body.uavs = v.uavs.map((u) => ({ id: u.id, start: u.start }));
+  if (v.uavs.length > 0) {
+    body.uavs = v.uavs.map((u) => {
+      const uav: Record<string, unknown> = { id: u.id, start: u.start };
+      if (u.speed_m_s != null) uav.speed_m_s = u.speed_m_s;
+      if (u.max_flight_time_s != null) uav.max_flight_time_s = u.max_flight_time_s;
+      return uav;
+    });
+  }
   return { body, errors };
+}
+
+/** The form's values before anything is changed: the API's defaults (index.html shows the same). */
+export const FORM_DEFAULTS = {
+  heightMode: 'altitude',
+  altitudeM: 60,
+  gsdCmPx: 1.5,
+  frontOverlapPct: 80,
+  sideOverlapPct: 70,
+  sliceAngle: 'auto',
+  speedMS: 10,
+  altitudeFrame: 'relative',
+  assignment: 'balanced',
+} as const satisfies Partial<SurveyFormValues>;
+
+/** Request members the form has controls for (the rest are kept as `extra`). */
+const FORM_MEMBERS = new Set([
+  'name', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
+  'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'altitude_frame', 'assignment', 'uavs',
+]);
+
+export interface RestoredForm {
+  values: SurveyFormValues;
+  /** What could not be put back as it was, in plain words. */
+  notes: string[];
+}
+
+/**
+ * The form's values from a saved survey's `request` (as made; members left
+ * out took the API's defaults, so the form shows those). `base` gives the
+ * camera when the request names none (the default preset) and the custom
+ * camera's numbers when it used a preset.
+ */
+export function formFromRequest(
+  request: Record<string, unknown>,
+  name: string | null,
+  base: { camera: string; customCamera: CustomCamera },
+): RestoredForm {
+  const notes: string[] = [];
+  const r = request;
+  const num = (x: unknown, fallback: number) => (typeof x === 'number' && Number.isFinite(x) ? x : fallback);
+  const pct = (x: unknown, fallback: number) => (typeof x === 'number' ? round(x * 100, 2) : fallback);
+  const oneOf = <T extends string>(x: unknown, allowed: readonly T[], fallback: T): T => (allowed.includes(x as T) ? (x as T) : fallback);
+
+  const rois = polygonsOf(r.roi);
+  if (rois.length > 1) notes.push(`The saved area has ${rois.length} parts; only the first is shown and planned again.`);
+  const noFlyZones = Array.isArray(r.no_fly_zones) ? r.no_fly_zones.flatMap((z) => polygonsOf(z)) : [];
+
+  const custom = r.camera && typeof r.camera === 'object' ? (r.camera as CustomCamera) : null;
+  const camera = custom ? 'custom' : typeof r.camera_preset === 'string' ? r.camera_preset : base.camera;
+  const gsd = typeof r.gsd_cm_px === 'number';
+
+  const uavs: UavStart[] = [];
+  for (const u of Array.isArray(r.uavs) ? r.uavs : []) {
+    const spec = u as Partial<UavStart> | null;
+    if (!spec || typeof spec.id !== 'string' || !Array.isArray(spec.start)) continue;
+    const uav: UavStart = { id: spec.id, start: [Number(spec.start[0]), Number(spec.start[1])] };
+    if (typeof spec.speed_m_s === 'number') uav.speed_m_s = spec.speed_m_s;
+    if (typeof spec.max_flight_time_s === 'number') uav.max_flight_time_s = spec.max_flight_time_s;
+    uavs.push(uav);
+  }
+
+  const extra: Record<string, unknown> = {};
+  for (const [k, v] of Object.entries(r)) if (!FORM_MEMBERS.has(k) && v !== null && v !== undefined) extra[k] = v;
+
+  const d = FORM_DEFAULTS;
+  return {
+    values: {
+      name: name ?? '',
+      roi: rois[0] ?? null,
+      noFlyZones,
+      demId: typeof r.dem_id === 'string' ? r.dem_id : null,
+      allowPartialDem: r.allow_partial_dem === true,
+      camera,
+      customCamera: custom ? { ...base.customCamera, ...custom } : base.customCamera,
+      heightMode: gsd ? 'gsd' : 'altitude',
+      altitudeM: num(r.altitude_m, d.altitudeM),
+      gsdCmPx: num(r.gsd_cm_px, d.gsdCmPx),
+      frontOverlapPct: pct(r.front_overlap, d.frontOverlapPct),
+      sideOverlapPct: pct(r.side_overlap, d.sideOverlapPct),
+      sliceAngle: typeof r.slice_angle_deg === 'number' ? String(r.slice_angle_deg) : d.sliceAngle,
+      speedMS: num(r.speed_m_s, d.speedMS),
+      altitudeFrame: oneOf(r.altitude_frame, ['relative', 'amsl', 'terrain'] as const, d.altitudeFrame),
+      assignment: oneOf(r.assignment, ['balanced', 'competition', 'min_reach'] as const, d.assignment),
+      uavs,
+      extra,
+    },
+    notes,
+  };
+}
+
+/** The kept members in a line ("line_spacing_m 25, turn_penalty_s 3"). */
+export function describeExtra(extra: Record<string, unknown>): string {
+  return Object.entries(extra)
+    .map(([k, v]) => `${k} ${typeof v === 'object' ? JSON.stringify(v) : String(v)}`)
+    .join(', ');
 }
 
 function round(x: number, digits: number): number {

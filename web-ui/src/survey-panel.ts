@@ -2,7 +2,7 @@
 // take-off points, and the planned survey (totals, per-UAV table, altitude
 // profile, downloads).
 
-import { api, type Survey } from './api';
+import { api, type CameraPreset, type Survey } from './api';
 import { byId, formatLonLat, h, numberValue, parseLonLat } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDuration, formatLength, formatNumber, formatPercent } from './format';
@@ -11,7 +11,17 @@ import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
 import { profileFromRoute, renderProfileChart } from './profile-chart';
 import type { DemSelection } from './state';
-import { buildSurveyRequest, CAMERA_PRESETS, nextUavId, uavColour, type SurveyFormValues, type UavStart } from './survey-form';
+import {
+  buildSurveyRequest,
+  cameraSummary,
+  describeExtra,
+  formFromRequest,
+  nextUavId,
+  uavColour,
+  type CustomCamera,
+  type SurveyFormValues,
+  type UavStart,
+} from './survey-form';
 
 export class SurveyPanel {
   private readonly root = byId('survey-panel');
@@ -20,22 +30,27 @@ export class SurveyPanel {
   private noFlyZones: PolygonRings[] = [];
   private uavs: UavStart[] = [];
   private survey: Survey | null = null;
+  private cameras: CameraPreset[] = [];
+  /** The preset chosen last: "custom" starts from its numbers. */
+  private lastPreset: CameraPreset | null = null;
+  /** Request members of a reopened survey the form has no control for. */
+  private extra: Record<string, unknown> = {};
 
   constructor(
     private readonly map: MapView,
     private readonly dem: DemSelection,
+    private readonly chooseDem: (id: string, fit: boolean) => Promise<void>,
   ) {
-    const camera = byId<HTMLSelectElement>('camera');
-    for (const c of CAMERA_PRESETS) camera.append(h('option', { value: c.id }, c.label));
-    camera.append(h('option', { value: 'custom' }, 'Custom camera…'));
-    camera.addEventListener('change', () => (byId('custom-camera').hidden = camera.value !== 'custom'));
+    byId<HTMLSelectElement>('camera').addEventListener('change', () => this.cameraChanged());
 
     for (const mode of ['altitude', 'gsd'] as const) {
-      byId(`height-mode-${mode}`).addEventListener('change', () => {
-        byId<HTMLInputElement>('altitude').disabled = mode !== 'altitude';
-        byId<HTMLInputElement>('gsd').disabled = mode !== 'gsd';
-      });
+      byId(`height-mode-${mode}`).addEventListener('change', () => this.setHeightMode(mode));
     }
+    byId('drop-extra').addEventListener('click', () => {
+      this.extra = {};
+      byId('survey-extra').hidden = true;
+      byId('survey-reopened').hidden = !byId('survey-reopened-text').textContent;
+    });
 
     byId('draw-roi').addEventListener('click', () => this.map.setMode('draw-roi'));
     byId('draw-nfz').addEventListener('click', () => this.map.setMode('draw-nfz'));
@@ -50,6 +65,48 @@ export class SurveyPanel {
       void this.plan();
     });
     byId<HTMLSelectElement>('profile-uav').addEventListener('change', () => this.renderProfile());
+  }
+
+  /** Fills the camera chooser from the API's presets (the default first); their numbers show below it. */
+  async loadCameras(): Promise<void> {
+    try {
+      this.cameras = (await api.listCameras()).items;
+    } catch (err) {
+      this.errors.showError(err);
+    }
+    const select = byId<HTMLSelectElement>('camera');
+    select.replaceChildren(
+      ...this.cameras.map((c) => h('option', { value: c.name }, c.name)),
+      h('option', { value: 'custom' }, 'Custom camera…'),
+    );
+    this.cameraChanged();
+  }
+
+  /** Shows the chosen preset's numbers; "custom" starts from the preset chosen before. */
+  private cameraChanged(): void {
+    const value = byId<HTMLSelectElement>('camera').value;
+    const custom = value === 'custom';
+    byId('custom-camera').hidden = !custom;
+    const preset = this.cameras.find((c) => c.name === value) ?? null;
+    if (preset) this.lastPreset = preset;
+    else if (custom && this.lastPreset) this.setCustomCamera(this.lastPreset.camera);
+    byId('camera-numbers').textContent = preset ? cameraSummary(preset.camera) : '';
+  }
+
+  private setCustomCamera(c: CustomCamera): void {
+    const set = (id: string, v: number | string) => (byId<HTMLInputElement | HTMLSelectElement>(id).value = String(v));
+    set('cam-sw', c.sensor_width_mm);
+    set('cam-sh', c.sensor_height_mm);
+    set('cam-f', c.focal_length_mm);
+    set('cam-iw', c.image_width_px);
+    set('cam-ih', c.image_height_px);
+    set('cam-orient', c.orientation);
+  }
+
+  private setHeightMode(mode: 'altitude' | 'gsd'): void {
+    byId<HTMLInputElement>(`height-mode-${mode}`).checked = true;
+    byId<HTMLInputElement>('altitude').disabled = mode !== 'altitude';
+    byId<HTMLInputElement>('gsd').disabled = mode !== 'gsd';
   }
 
   // ---- map events ----
@@ -149,6 +206,7 @@ export class SurveyPanel {
       altitudeFrame: val('altitude-frame') as SurveyFormValues['altitudeFrame'],
       assignment: val('assignment') as SurveyFormValues['assignment'],
       uavs: this.uavs,
+      extra: this.extra,
     };
   }
 
@@ -163,6 +221,9 @@ export class SurveyPanel {
     try {
       this.show(await api.createSurvey(body));
       byId('survey-busy').textContent = 'Planned.';
+      // A new survey now: the "reopened" note is stale; the kept settings stay (and stay said).
+      byId('survey-reopened-text').textContent = '';
+      byId('survey-reopened').hidden = byId('survey-extra').hidden;
       byId('survey-results').scrollIntoView({ block: 'start' });
     } catch (err) {
       byId('survey-busy').textContent = '';
@@ -172,16 +233,80 @@ export class SurveyPanel {
     }
   }
 
+  /**
+   * Reopens a saved survey: its area, no-fly zones, form values and UAV
+   * take-off points come back (editable, to plan again), with its results.
+   */
+  async open(survey: Survey): Promise<void> {
+    this.errors.clear();
+    const notes: string[] = [];
+    const request = survey.request;
+    if (request) {
+      const current = this.formValues();
+      const restored = formFromRequest(request, survey.name, {
+        camera: this.cameras[0]?.name ?? 'custom',
+        customCamera: current.customCamera,
+      });
+      notes.push(...restored.notes);
+      const v = restored.values;
+      const field = (id: string, value: string | number) => (byId<HTMLInputElement | HTMLSelectElement>(id).value = String(value));
+      field('survey-name', v.name);
+      this.map.clearNoFlyZones();
+      this.map.addNoFlyZones(v.noFlyZones);
+      this.map.setRoi(v.roi);
+
+      const select = byId<HTMLSelectElement>('camera');
+      if (v.camera !== 'custom' && ![...select.options].some((o) => o.value === v.camera)) {
+        // A preset this server no longer lists: kept by name so the request is the same.
+        select.prepend(h('option', { value: v.camera }, v.camera));
+      }
+      select.value = v.camera;
+      if (v.camera === 'custom') this.setCustomCamera(v.customCamera);
+      this.cameraChanged();
+
+      this.setHeightMode(v.heightMode);
+      field('altitude', v.altitudeM);
+      field('gsd', v.gsdCmPx);
+      field('front-overlap', v.frontOverlapPct);
+      field('side-overlap', v.sideOverlapPct);
+      field('slice-angle', v.sliceAngle);
+      field('speed', v.speedMS);
+      field('altitude-frame', v.altitudeFrame);
+      field('assignment', v.assignment);
+      byId<HTMLInputElement>('allow-partial-dem').checked = v.allowPartialDem;
+
+      let follow = false;
+      if (v.demId) {
+        if (this.dem.current?.id !== v.demId) await this.chooseDem(v.demId, false);
+        follow = this.dem.current?.id === v.demId;
+        if (!follow) notes.push('Its terrain model (DEM) is no longer stored: choose one, or plan without terrain.');
+      }
+      byId<HTMLInputElement>('follow-terrain').checked = follow;
+
+      this.setUavs(v.uavs);
+      this.extra = v.extra;
+    } else {
+      // Surveys saved by older servers do not keep their request: only the take-off points come back.
+      this.setUavs(survey.uavs.map((u) => ({ id: u.id, start: u.start })));
+      this.extra = {};
+      notes.push('This survey was saved without its settings: only its take-off points are restored.');
+    }
+    const label = survey.name ? `“${survey.name}”` : 'the survey';
+    byId('survey-reopened-text').textContent = `Reopened ${label}: change the area or the settings and plan it again. ${notes.join(' ')}`.trim();
+    byId('survey-reopened').hidden = false;
+    const kept = describeExtra(this.extra);
+    byId('survey-extra').hidden = !kept;
+    byId('survey-extra-text').textContent = kept ? `Settings without a control here, kept from it: ${kept}.` : '';
+
+    this.show(survey);
+    const pts = [...(this.roi?.[0] ?? []), ...survey.uavs.map((u) => u.start), ...survey.fences.flatMap((f) => f.vertices)];
+    if (pts.length) this.map.fitLonLat(extentOf([pts]));
+  }
+
   /** Shows a planned survey (just planned, or reopened from the saved list). */
-  show(survey: Survey, fit = false): void {
+  show(survey: Survey): void {
     this.survey = survey;
     this.map.showSurvey(survey, uavColour);
-    if (fit) {
-      const starts = survey.uavs.map((u) => u.start);
-      this.map.setUavStarts(survey.uavs.map((u) => ({ id: u.id, start: u.start })), uavColour);
-      const pts = [...starts, ...survey.fences.flatMap((f) => f.vertices)];
-      if (pts.length) this.map.fitLonLat(extentOf([pts]));
-    }
     byId('survey-results').hidden = false;
     byId('results-heading').textContent = `Plan${survey.name ? `: ${survey.name}` : ''}`;
 
