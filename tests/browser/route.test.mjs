@@ -1,6 +1,7 @@
 // Ground routes end to end in the browser: build a costmap of the real DTM
 // (progress over SSE), click start and goal on the map, plan, check the route
-// and its statistics; block part of it and replan; download the rover mission.
+// and its statistics; block part of it and replan; make part of it costlier and
+// replan again; download the rover mission.
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
@@ -73,6 +74,54 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   const costOf = (text) => Number(/Cost([\d,.]+)/.exec(text)?.[1].replace(/,/g, ''));
   assert.ok(costOf(replanned) > costOf(before), `the detour costs ${costOf(replanned)}, the blocked route ${costOf(before)}`);
   await screenshot(page, 'route-replanned');
+
+  // A costlier area across the detour: the cost is checked before drawing, sent with the replan
+  // (only the new area: the earlier blocked square stays with the route), and shown on the map.
+  const detour = (await (await fetch(`${server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  assert.equal(detour.blocked.length, 1);
+  assert.equal(detour.cost_changes.length, 0);
+  assert.match(await page.textContent('#block-status'), /1 area blocked by earlier replans/);
+  await page.fill('#cost-value', '0');
+  await page.click('#draw-costlier');
+  await page.waitForSelector('#route-cost-error:not([hidden])');
+  assert.match(await page.textContent('#route-cost-error'), /greater than 0/);
+  assert.equal(await page.getAttribute('#cost-value', 'aria-invalid'), 'true');
+  await page.fill('#cost-value', '15');
+  const third = detour.waypoints[Math.floor(detour.waypoints.length / 3)];
+  const c = 0.00018; // about 15 m
+  await drawPolygon(page, '#draw-costlier', [
+    [third.lon - c, third.lat - c], [third.lon + c, third.lat - c], [third.lon + c, third.lat + c], [third.lon - c, third.lat + c],
+  ]);
+  assert.ok(await page.locator('#route-cost-error').isHidden(), 'the error went with a valid cost');
+  await page.waitForFunction(() => /1 costlier area to send \(cost 15\)/.test(document.querySelector('#costlier-status').textContent));
+  const beforeCostlier = replanned;
+  const [replanRequest] = await Promise.all([
+    page.waitForRequest((r) => r.method() === 'POST' && r.url().endsWith('/replan')),
+    page.click('#replan-route'),
+  ]);
+  const sent = replanRequest.postDataJSON();
+  assert.equal(sent.blocked, undefined, 'the earlier blocked area is not sent again');
+  assert.equal(sent.cost_changes.length, 1);
+  assert.equal(sent.cost_changes[0].cost, 15);
+  assert.equal(sent.cost_changes[0].area.type, 'Polygon');
+  await page.waitForFunction((old) => document.querySelector('#route-stats').textContent !== old, beforeCostlier, { timeout: 60_000 });
+  const costlier = (await (await fetch(`${server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  assert.equal(costlier.parent_id, detour.id);
+  assert.equal(costlier.cost_changes.length, 1, 'the new route carries the cost change');
+  assert.equal(costlier.cost_changes[0].cost, 15);
+  assert.equal(costlier.blocked.length, 1, 'the blocked area is not doubled');
+  const moved = JSON.stringify(costlier.geometry.coordinates) !== JSON.stringify(detour.geometry.coordinates);
+  assert.ok(moved || costlier.cost > detour.cost, `the route avoids the costlier area (moved: ${moved}) or costs more (${costlier.cost} > ${detour.cost})`);
+  assert.match(await page.textContent('#costlier-status'), /No costlier area\. 1 area made costlier by earlier replans/);
+  await screenshot(page, 'route-costlier');
+
+  // "Clear" takes the costlier areas not yet sent off the map.
+  await drawPolygon(page, '#draw-costlier', [
+    [third.lon - c, third.lat - c], [third.lon + c, third.lat - c], [third.lon + c, third.lat + c],
+  ]);
+  await page.waitForFunction(() => /1 costlier area to send/.test(document.querySelector('#costlier-status').textContent));
+  await page.click('#clear-costlier');
+  assert.match(await page.textContent('#costlier-status'), /^No costlier area\./);
 
   // The rover mission loads in pymavlink.
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#route-downloads a[href$="mission.waypoints"]')]);

@@ -86,6 +86,13 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   // The altitude profile over the terrain.
   assert.equal(await page.locator('#profile-chart svg path.terrain').count(), 1);
   assert.equal(await page.locator('#profile-chart svg path.flown').count(), 1);
+  // The sortie chooser shows only for a UAV flying several sorties.
+  const newest = (await (await fetch(`${server.url}/api/v1/surveys?limit=1`)).json()).items[0];
+  const planned = await (await fetch(`${server.url}/api/v1/surveys/${newest.id}`)).json();
+  const charted = await page.inputValue('#profile-uav');
+  const sorties = planned.uavs.find((u) => u.id === charted).sorties.length;
+  assert.equal(await page.locator('#profile-sortie-field').isVisible(), sorties > 1, `${sorties} sortie(s)`);
+  assert.equal(await page.locator('#profile-sortie option').count(), sorties);
 
   await screenshot(page, 'survey-3-uavs');
 

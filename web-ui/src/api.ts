@@ -197,6 +197,8 @@ export interface Route {
   descent_m: number;
   search_ms: number;
   blocked: unknown[];
+  /** Every cost change of the chain of replans so far (absent from older servers). */
+  cost_changes?: { area: unknown; cost: number }[];
   urls: { geojson: string; csv: string; waypoints: string; replan: string };
 }
 

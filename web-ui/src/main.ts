@@ -27,6 +27,7 @@ let route: RoutePanel;
 const map = new MapView(byId('map'), byId('map-hint'), {
   areasChanged: (roi, nfz) => survey.areasChanged(roi, nfz),
   blockedChanged: (blocked) => route.blockedChanged(blocked),
+  costlierDrawn: (areas) => route.costlierDrawn(areas),
   picked: (mode, at) => {
     if (mode === 'place-uav') survey.placeUav(at);
     else route.picked(mode, at);

@@ -34,15 +34,18 @@ export type MapMode =
   | 'pick-start'
   | 'pick-goal'
   | 'pick-position'
-  | 'draw-block';
+  | 'draw-block'
+  | 'draw-costlier';
 
-type AreaKind = 'roi' | 'nfz' | 'blocked';
+type AreaKind = 'roi' | 'nfz' | 'blocked' | 'costlier';
 
 export interface MapEvents {
   /** The ROI or the no-fly zones changed (drawn, edited, removed). */
   areasChanged(roi: PolygonRings | null, noFlyZones: PolygonRings[]): void;
   /** A blocked area for the ground route was drawn. */
   blockedChanged(blocked: PolygonRings[]): void;
+  /** A costlier area for the ground route was drawn (the panel knows its cost and shows it with setCostlier). */
+  costlierDrawn(areas: PolygonRings[]): void;
   /** A point was picked in one of the click modes. */
   picked(mode: MapMode, at: LonLat): void;
   /** The mode changed (a drawing finished, or Escape). */
@@ -58,13 +61,24 @@ const MODE_HINTS: Record<MapMode, string> = {
   'pick-goal': 'Click the ground route’s goal.',
   'pick-position': 'Click where the rover is now (the replan starts there).',
   'draw-block': 'Click the corners of the blocked area; click the first corner or double-click to finish.',
+  'draw-costlier': 'Click the corners of the costlier area; click the first corner or double-click to finish.',
 };
 
 const areaStyles: Record<AreaKind, Style> = {
   roi: new Style({ stroke: new Stroke({ color: '#0050d0', width: 2.5 }), fill: new Fill({ color: 'rgba(0, 80, 208, 0.10)' }) }),
   nfz: new Style({ stroke: new Stroke({ color: '#c00000', width: 2, lineDash: [6, 4] }), fill: new Fill({ color: 'rgba(200, 0, 0, 0.25)' }) }),
   blocked: new Style({ stroke: new Stroke({ color: '#000', width: 2 }), fill: new Fill({ color: 'rgba(0, 0, 0, 0.45)' }) }),
+  costlier: new Style({ stroke: new Stroke({ color: '#b35806', width: 2, lineDash: [4, 4] }), fill: new Fill({ color: 'rgba(253, 184, 99, 0.45)' }) }),
 };
+
+/** A costlier area: dashed orange, labelled with its cost (unlike the black blocked areas). */
+function costlierStyle(cost: number): Style {
+  return new Style({
+    stroke: new Stroke({ color: '#b35806', width: 2, lineDash: [4, 4] }),
+    fill: new Fill({ color: 'rgba(253, 184, 99, 0.45)' }),
+    text: new Text({ text: `cost ${cost}`, font: 'bold 12px system-ui, sans-serif', fill: new Fill({ color: '#6b3000' }), stroke: new Stroke({ color: '#fff', width: 3 }), overflow: true }),
+  });
+}
 
 const cellStyle = new Style({ stroke: new Stroke({ color: 'rgba(40, 40, 40, 0.8)', width: 1, lineDash: [3, 3] }), fill: new Fill({ color: 'rgba(255, 255, 255, 0.12)' }) });
 
@@ -158,7 +172,7 @@ export class MapView {
       this.draw = null;
     }
     this.mode = mode;
-    const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : null;
+    const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : mode === 'draw-costlier' ? 'costlier' : null;
     this.modify.setActive(kind === null);
     if (kind) {
       // stopClick keeps the finishing double-click from zooming the map.
@@ -170,6 +184,8 @@ export class MapView {
           feature.set('style', areaStyles.blocked);
           this.ground.addFeature(feature);
           this.emitBlocked();
+        } else if (kind === 'costlier') {
+          this.events.costlierDrawn(polygonRings(feature.getGeometry()!));
         } else {
           if (kind === 'roi') for (const f of this.areaFeatures('roi')) this.areas.removeFeature(f);
           this.areas.addFeature(feature);
@@ -335,8 +351,9 @@ export class MapView {
     return this.ground.getFeatures().filter((f) => f.get('kind') === kind);
   }
 
+  /** The blocked areas drawn since the route was shown (not those it inherited). */
   private emitBlocked(): void {
-    this.events.blockedChanged(this.groundFeatures('blocked').flatMap((f) => polygonRings(f.getGeometry()!)));
+    this.events.blockedChanged(this.groundFeatures('blocked').filter((f) => !f.get('inherited')).flatMap((f) => polygonRings(f.getGeometry()!)));
   }
 
   /** Shows the route's start, goal and replan position markers (null removes one). */
@@ -360,9 +377,21 @@ export class MapView {
     }
   }
 
-  setBlocked(areas: PolygonRings[]): void {
-    for (const f of this.groundFeatures('blocked')) this.ground.removeFeature(f);
-    for (const a of areas) this.ground.addFeature(new Feature({ geometry: new Polygon(ringsToMap(a)), kind: 'blocked', style: areaStyles.blocked }));
+  /**
+   * Replaces the blocked areas drawn since the route was shown, or (with
+   * `inherited`) those of the route itself, from its earlier replans.
+   */
+  setBlocked(areas: PolygonRings[], inherited = false): void {
+    for (const f of this.groundFeatures('blocked')) if (!!f.get('inherited') === inherited) this.ground.removeFeature(f);
+    for (const a of areas) this.ground.addFeature(new Feature({ geometry: new Polygon(ringsToMap(a)), kind: 'blocked', inherited, style: areaStyles.blocked }));
+  }
+
+  /** Like setBlocked, for the costlier areas (each labelled with its cost). */
+  setCostlier(areas: { rings: PolygonRings; cost: number }[], inherited = false): void {
+    for (const f of this.groundFeatures('costlier')) if (!!f.get('inherited') === inherited) this.ground.removeFeature(f);
+    for (const a of areas) {
+      this.ground.addFeature(new Feature({ geometry: new Polygon(ringsToMap(a.rings)), kind: 'costlier', inherited, cost: a.cost, style: costlierStyle(a.cost) }));
+    }
   }
 
   /** Page coordinates of a lon/lat point (for tests that click on the map). */

@@ -52,7 +52,7 @@ export const ROUTE_FIELDS: FieldRule[] = [
   { prefix: '/goal', field: 'goal', label: 'Goal' },
   { prefix: '/position', field: 'position', label: 'Replan position' },
   { prefix: '/blocked', field: 'blocked', label: 'Blocked area' },
-  { prefix: '/cost_changes', field: 'blocked', label: 'Cost change' },
+  { prefix: '/cost_changes', field: 'cost', label: 'Costlier area' },
   { prefix: '/speed_m_s', field: 'route-speed', label: 'Speed' },
 ];
 
@@ -82,7 +82,7 @@ export function plainMessage(pointer: string, message: string, rule?: FieldRule)
   if (/fewer than|at least (3|4) (distinct )?(points|positions|vertices)/i.test(message)) {
     return `${label}: the outline needs at least three distinct corners. ${capitalise(message)}.`;
   }
-  const uav = /^\/uavs\/(\d+)/.exec(pointer);
+  const uav = /^\/(?:uavs|cost_changes)\/(\d+)/.exec(pointer);
   const which = uav ? ` ${Number(uav[1]) + 1}` : '';
   return `${label}${which}: ${message.replace(/^\/[\w/]+:\s*/, '')}`;
 }

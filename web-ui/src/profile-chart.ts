@@ -1,7 +1,7 @@
 // The altitude profile of a UAV's flight over the terrain: a small SVG line
 // chart (a chart library would weigh more than the rest of the page).
 
-import type { ProfilePoint } from './api';
+import type { ProfilePoint, Uav } from './api';
 
 export interface ChartBox {
   width: number;
@@ -84,6 +84,36 @@ export function profileFromRoute(coords: number[][]): ProfilePoint[] {
     out.push({ distance_m: dist, altitude_m: coords[i][2] ?? 0, terrain_m: null });
   }
   return out;
+}
+
+/** What the chart shows for one sortie of a UAV. */
+export interface SortieProfile {
+  /** The sortie charted (0-based), clamped to the UAV's sorties. */
+  index: number;
+  /** How many sorties the UAV flies (the sortie chooser shows when more than one). */
+  count: number;
+  points: ProfilePoint[];
+  /** Whether the points are the server's terrain profile (AMSL, with the DEM under them). */
+  overTerrain: boolean;
+}
+
+/**
+ * The profile of one sortie of a UAV: its terrain profile when the survey
+ * followed a DEM, else one derived from the route's altitudes.
+ *
+ * One sortie at a time, chosen by the user, rather than all of them one after
+ * another: each sortie starts again from the take-off point (distance 0,
+ * climb and descent at home), so chained profiles would show saw-teeth that
+ * are not flown in one go, and would squeeze each sortie's detail into a
+ * fraction of the chart's width. It also matches the per-sortie downloads.
+ */
+export function sortieProfile(uav: Uav, sortie: number): SortieProfile {
+  const count = uav.sorties.length;
+  const index = Math.min(Math.max(0, Math.trunc(sortie) || 0), Math.max(0, count - 1));
+  const s = uav.sorties[index];
+  const terrain = s?.terrain?.profile;
+  if (terrain && terrain.length > 1) return { index, count, points: terrain, overTerrain: true };
+  return { index, count, points: profileFromRoute(s?.route.coordinates ?? []), overTerrain: false };
 }
 
 function haversine(a: number[], b: number[]): number {

@@ -10,6 +10,7 @@ import type { PolygonRings } from './geo-import';
 import type { MapMode, MapView } from './map';
 import { COSTMAP_FIELDS, ROUTE_FIELDS } from './problems';
 import { costmapNeedsDem, placeCostmap } from './projection';
+import { areaRings, blockedStatus, costlierOfRoute, costlierStatus, parseCost, replanBody, type CostlierArea } from './route-changes';
 import type { DemSelection } from './state';
 
 export class RoutePanel {
@@ -19,7 +20,11 @@ export class RoutePanel {
   private vehicles: Vehicle[] = [];
   private costmap: Costmap | null = null;
   private route: Route | null = null;
+  /** Areas drawn since the route was shown: what the next replan sends. */
   private blocked: PolygonRings[] = [];
+  private costlier: CostlierArea[] = [];
+  /** The cost of the costlier area being drawn (checked when its drawing starts). */
+  private drawingCost = 0;
   /** Set while the panel itself switches the DEM, so the costmap is kept. */
   private switchingDem = false;
 
@@ -46,6 +51,8 @@ export class RoutePanel {
       this.map.setBlocked([]);
       this.blockedChanged([]);
     });
+    byId('draw-costlier').addEventListener('click', () => this.drawCostlier());
+    byId('clear-costlier').addEventListener('click', () => this.setCostlier([]));
     byId('replan-route').addEventListener('click', () => void this.replan());
     dem.onChange((d) => {
       if (!this.switchingDem) void this.demChanged(d);
@@ -193,7 +200,28 @@ export class RoutePanel {
 
   blockedChanged(blocked: PolygonRings[]): void {
     this.blocked = blocked;
-    byId('block-status').textContent = blocked.length ? `${blocked.length} blocked area${blocked.length > 1 ? 's' : ''}.` : 'No blocked area.';
+    byId('block-status').textContent = blockedStatus(blocked.length, this.route?.blocked.flatMap(areaRings).length ?? 0);
+  }
+
+  private drawCostlier(): void {
+    this.routeErrors.clear();
+    const parsed = parseCost(byId<HTMLInputElement>('cost-value').value);
+    if ('error' in parsed) {
+      this.routeErrors.show('cost', parsed.error);
+      return;
+    }
+    this.drawingCost = parsed.cost;
+    this.map.setMode('draw-costlier');
+  }
+
+  costlierDrawn(areas: PolygonRings[]): void {
+    this.setCostlier([...this.costlier, ...areas.map((rings) => ({ rings, cost: this.drawingCost }))]);
+  }
+
+  private setCostlier(areas: CostlierArea[]): void {
+    this.costlier = areas;
+    this.map.setCostlier(areas);
+    byId('costlier-status').textContent = costlierStatus(areas, costlierOfRoute(this.route?.cost_changes).length);
   }
 
   private showPoints(): void {
@@ -222,10 +250,7 @@ export class RoutePanel {
     const speed = byId<HTMLInputElement>('route-speed').value;
     if (speed !== '') body.speed_m_s = Number(speed);
     await this.busy('Planning…', async () => {
-      const route = await api.createRoute(this.costmap!.id, body);
-      this.map.setBlocked([]);
-      this.blockedChanged([]);
-      this.setRoute(route);
+      this.setRoute(await api.createRoute(this.costmap!.id, body));
     });
   }
 
@@ -237,14 +262,14 @@ export class RoutePanel {
       this.routeErrors.show('position', 'Rover position: pick it on the map or type “lon, lat”.');
       return;
     }
-    if (this.blocked.length === 0) {
-      this.routeErrors.show('blocked', 'Blocked area: draw at least one on the map first.');
+    const request = replanBody(position, this.blocked, this.costlier);
+    if ('error' in request) {
+      this.routeErrors.show('blocked', request.error);
       return;
     }
     const previous = this.route;
     await this.busy('Replanning…', async () => {
-      const body = { position, blocked: this.blocked.map((rings) => ({ type: 'Polygon', coordinates: rings })) };
-      this.setRoute(await api.replanRoute(previous.id, body), previous);
+      this.setRoute(await api.replanRoute(previous.id, request.body), previous);
     });
   }
 
@@ -268,6 +293,12 @@ export class RoutePanel {
   setRoute(route: Route | null, previous: Route | null = null): void {
     this.route = route;
     this.map.showGroundRoute(route, previous);
+    // The route's own changes (of its earlier replans) are shown, not sent again; new ones start empty.
+    this.map.setBlocked(route?.blocked.flatMap(areaRings) ?? [], true);
+    this.map.setCostlier(costlierOfRoute(route?.cost_changes), true);
+    this.map.setBlocked([]);
+    this.blockedChanged([]);
+    this.setCostlier([]);
     byId('route-result').hidden = !route;
     if (!route) {
       this.showPoints();
@@ -302,11 +333,6 @@ export class RoutePanel {
       ' · ',
       h('a', { href: route.urls.geojson, download: '' }, 'GeoJSON'),
     );
-    if (route.blocked.length) {
-      const areas = route.blocked.flatMap((b) => blockedRings(b));
-      this.map.setBlocked(areas);
-      this.blockedChanged(areas);
-    }
   }
 
   /** Takes a deleted costmap or route off the page if it is the one shown. */
@@ -330,13 +356,4 @@ export class RoutePanel {
       this.routeErrors.showError(err);
     }
   }
-}
-
-/** Polygon rings of a stored blocked area (a Polygon, MultiPolygon or Feature). */
-function blockedRings(area: unknown): PolygonRings[] {
-  const g = area as { type?: string; coordinates?: unknown; geometry?: unknown };
-  if (g?.type === 'Feature') return blockedRings(g.geometry);
-  if (g?.type === 'Polygon') return [g.coordinates as PolygonRings];
-  if (g?.type === 'MultiPolygon') return g.coordinates as PolygonRings[];
-  return [];
 }

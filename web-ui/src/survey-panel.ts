@@ -9,7 +9,7 @@ import { formatArea, formatDuration, formatLength, formatNumber, formatPercent }
 import { ImportError, parsePolygons, type PolygonRings } from './geo-import';
 import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
-import { profileFromRoute, renderProfileChart } from './profile-chart';
+import { renderProfileChart, sortieProfile } from './profile-chart';
 import type { DemSelection } from './state';
 import {
   buildSurveyRequest,
@@ -64,7 +64,8 @@ export class SurveyPanel {
       e.preventDefault();
       void this.plan();
     });
-    byId<HTMLSelectElement>('profile-uav').addEventListener('change', () => this.renderProfile());
+    byId<HTMLSelectElement>('profile-uav').addEventListener('change', () => this.renderProfile(true));
+    byId<HTMLSelectElement>('profile-sortie').addEventListener('change', () => this.renderProfile());
   }
 
   /** Fills the camera chooser from the API's presets (the default first); their numbers show below it. */
@@ -359,7 +360,7 @@ export class SurveyPanel {
 
     const select = byId<HTMLSelectElement>('profile-uav');
     select.replaceChildren(...survey.uavs.map((u) => h('option', { value: u.id }, u.id)));
-    this.renderProfile();
+    this.renderProfile(true);
   }
 
   /** Takes a deleted survey off the page if it is the one shown. */
@@ -370,21 +371,27 @@ export class SurveyPanel {
     byId('survey-results').hidden = true;
   }
 
-  private renderProfile(): void {
+  /** Charts the chosen UAV's chosen sortie (`uavChanged`: the UAV changed, so its first sortie). */
+  private renderProfile(uavChanged = false): void {
     const survey = this.survey;
     if (!survey) return;
     const id = byId<HTMLSelectElement>('profile-uav').value;
     const index = Math.max(0, survey.uavs.findIndex((u) => u.id === id));
     const uav = survey.uavs[index];
     if (!uav) return;
-    // Profiles of several sorties are shown one after the other.
-    const sortie = uav.sorties[0];
-    const terrain = sortie?.terrain?.profile;
-    const points = terrain && terrain.length > 1 ? terrain : profileFromRoute(sortie?.route.coordinates ?? []);
-    renderProfileChart(byId('profile-chart'), points, {
+    const sortieSelect = byId<HTMLSelectElement>('profile-sortie');
+    const p = sortieProfile(uav, uavChanged ? 0 : Number(sortieSelect.value));
+    // The sortie chooser only for UAVs flying more than one.
+    byId('profile-sortie-field').hidden = p.count < 2;
+    if (uavChanged) {
+      sortieSelect.replaceChildren(...uav.sorties.map((s, i) => h('option', { value: String(i) }, `Sortie ${s.number ?? i + 1} of ${p.count}`)));
+    }
+    sortieSelect.value = String(p.index);
+    const number = uav.sorties[p.index]?.number ?? p.index + 1;
+    renderProfileChart(byId('profile-chart'), p.points, {
       colour: uavColour(index),
-      title: `Altitude profile of ${uav.id}${uav.sorties.length > 1 ? ' (sortie 1)' : ''}`,
-      altitudeLabel: terrain ? 'flown altitude (AMSL)' : `flown altitude (${survey.altitude_frame})`,
+      title: `Altitude profile of ${uav.id}${p.count > 1 ? ` (sortie ${number} of ${p.count})` : ''}`,
+      altitudeLabel: p.overTerrain ? 'flown altitude (AMSL)' : `flown altitude (${survey.altitude_frame})`,
     });
   }
 }

@@ -1,5 +1,6 @@
 import { describe, expect, it } from 'vitest';
-import { DEFAULT_BOX, niceStep, profileFromRoute, profileScale } from '../src/profile-chart';
+import type { Uav } from '../src/api';
+import { DEFAULT_BOX, niceStep, profileFromRoute, profileScale, sortieProfile } from '../src/profile-chart';
 
 describe('niceStep', () => {
   it('rounds to 1, 2 or 5 × 10^k', () => {
@@ -53,5 +54,54 @@ describe('profileFromRoute', () => {
     expect(p[1].distance_m).toBeCloseTo(111.2, 0);
     expect(p[2].distance_m).toBeCloseTo(222.4, 0);
     expect(p[0].terrain_m).toBeNull();
+  });
+});
+
+describe('sortieProfile', () => {
+  const stats = { length_m: 0, length_3d_m: 0, turns: 0, flight_time_s: 0, photos: 0, cells: 0 };
+  const files = { waypoints: '', plan: '', route: '', fence: '', kml: '' };
+  const terrain = (alt: number) => ({
+    home_amsl_m: 10,
+    profile: [
+      { distance_m: 0, altitude_m: alt, terrain_m: 10 },
+      { distance_m: 100, altitude_m: alt + 1, terrain_m: 12 },
+    ],
+  });
+  const uav: Uav = {
+    id: 'uav1',
+    start: [0, 0],
+    speed_m_s: 10,
+    stats,
+    sorties: [
+      { number: 1, stats, files, route: { type: 'LineString', coordinates: [] }, terrain: terrain(70) },
+      { number: 2, stats, files, route: { type: 'LineString', coordinates: [] }, terrain: terrain(90) },
+      // Without a DEM: the route's altitudes, no terrain.
+      { number: 3, stats, files, route: { type: 'LineString', coordinates: [[0, 0, 60], [0, 0.001, 60]] }, terrain: null },
+    ],
+  };
+
+  it('charts the chosen sortie only', () => {
+    expect(sortieProfile(uav, 0)).toEqual({ index: 0, count: 3, points: terrain(70).profile, overTerrain: true });
+    const second = sortieProfile(uav, 1);
+    expect(second.index).toBe(1);
+    expect(second.points.map((p) => p.altitude_m)).toEqual([90, 91]);
+  });
+
+  it('falls back to the route altitudes without a terrain profile', () => {
+    const third = sortieProfile(uav, 2);
+    expect(third.overTerrain).toBe(false);
+    expect(third.points.map((p) => p.altitude_m)).toEqual([60, 60]);
+    expect(third.points[1].distance_m).toBeCloseTo(111.2, 0);
+    expect(third.points[1].terrain_m).toBeNull();
+  });
+
+  it('clamps an out-of-range or missing choice to a sortie the UAV has', () => {
+    expect(sortieProfile(uav, 7).index).toBe(2);
+    expect(sortieProfile(uav, -1).index).toBe(0);
+    expect(sortieProfile(uav, NaN).index).toBe(0);
+    const single = sortieProfile({ ...uav, sorties: [uav.sorties[1]] }, 1);
+    expect(single).toMatchObject({ index: 0, count: 1 });
+    expect(single.points[0].altitude_m).toBe(90);
+    expect(sortieProfile({ ...uav, sorties: [] }, 0)).toEqual({ index: 0, count: 0, points: [], overTerrain: false });
   });
 });
