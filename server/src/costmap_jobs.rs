@@ -291,12 +291,23 @@ impl CostmapJobs {
         }
         self.lock().insert(id.to_string(), handle.clone());
         self.active.send_modify(|n| *n += 1);
+        // Join the queue for a slot now, in the order jobs are enqueued: the
+        // task's own first poll may come after the next job's (tokio's
+        // semaphore serves waiters in the order they first asked).
+        let mut wait: SlotWait = Box::pin(self.slots.clone().acquire_owned());
+        let slot = match wait
+            .as_mut()
+            .poll(&mut std::task::Context::from_waker(std::task::Waker::noop()))
+        {
+            std::task::Poll::Ready(permit) => Slot::Held(permit.ok()),
+            std::task::Poll::Pending => Slot::Waiting(wait),
+        };
         let state = state.clone();
         let id = id.to_string();
         tokio::spawn(async move {
             let jobs = state.costmaps.clone();
             let _active = ActiveGuard(&jobs.active);
-            run_job(&state, &id, &handle).await;
+            run_job(&state, &id, &handle, slot).await;
             let mut map = jobs.lock();
             if map.get(&id).is_some_and(|h| Arc::ptr_eq(h, &handle)) {
                 map.remove(&id);
@@ -417,13 +428,32 @@ struct Built {
     files: Vec<CostmapFileRow>,
 }
 
-async fn run_job(state: &AppState, id: &str, handle: &Arc<JobHandle>) {
+/// A job's request for a slot, made when it was enqueued.
+type SlotWait = std::pin::Pin<
+    Box<
+        dyn std::future::Future<
+                Output = Result<tokio::sync::OwnedSemaphorePermit, tokio::sync::AcquireError>,
+            > + Send,
+    >,
+>;
+
+enum Slot {
+    /// Granted at once (`None`: the semaphore is closed).
+    Held(Option<tokio::sync::OwnedSemaphorePermit>),
+    /// In the queue.
+    Waiting(SlotWait),
+}
+
+async fn run_job(state: &AppState, id: &str, handle: &Arc<JobHandle>, slot: Slot) {
     let jobs = &state.costmaps;
     let owner = jobs.instance.clone();
-    let permit = tokio::select! {
-        p = jobs.slots.clone().acquire_owned() => p.ok(),
-        () = jobs.shutdown_signal() => None,
-        () = handle.cancelled.notified() => None,
+    let permit = match slot {
+        Slot::Held(permit) => permit,
+        Slot::Waiting(wait) => tokio::select! {
+            p = wait => p.ok(),
+            () = jobs.shutdown_signal() => None,
+            () = handle.cancelled.notified() => None,
+        },
     };
     let Some(_permit) = permit.filter(|_| !handle.is_cancelled()) else {
         if jobs.is_shutting_down() {
