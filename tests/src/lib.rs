@@ -397,3 +397,113 @@ pub fn png_size(png: &[u8]) -> (u32, u32) {
 pub fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol
 }
+
+// ------------------------------------------------- costmaps and GDAL
+
+/// Long enough for any costmap job of the tests, on a loaded machine.
+pub const JOB_DEADLINE: std::time::Duration = std::time::Duration::from_secs(300);
+
+/// The real DTM most costmap and route tests use (283 × 259 cells of 2 m,
+/// NAD83 / UTM 18N).
+pub fn dtm() -> PathBuf {
+    shared_data("dems/opengeos_data__elevation_dtm.tif")
+}
+
+/// Options that make the DTM's costmap job take seconds (PCA
+/// neighbourhoods of 50 cells' radius, the most allowed: about 1.8 s on
+/// the 2-core machine), so it is still running when looked at right away
+/// and holds its slot while a test queues and breaks another job behind it.
+pub fn slow_costmap_options() -> serde_json::Value {
+    serde_json::json!({"pca_radius_m": 100})
+}
+
+/// Upload a DEM file (a GeoTIFF); its id.
+pub fn upload_dem(server: &Server, path: &Path) -> String {
+    let data = std::fs::read(path).unwrap();
+    let r = post(&server.url("/api/v1/dems"), "image/tiff", &data);
+    assert_eq!(r.status, 201, "{}", r.text());
+    r.json()["id"].as_str().unwrap().to_string()
+}
+
+/// The costmap job `id`, which must exist.
+pub fn costmap_job(server: &Server, id: &str) -> serde_json::Value {
+    let r = get(&server.url(&format!("/api/v1/costmaps/{id}")));
+    assert_eq!(r.status, 200, "{}", r.text());
+    r.json()
+}
+
+/// Poll until the costmap job is done or failed, checking its status and
+/// progress on the way.
+pub fn wait_costmap_finished(server: &Server, id: &str) -> serde_json::Value {
+    let start = std::time::Instant::now();
+    loop {
+        let job = costmap_job(server, id);
+        let status = job["status"].as_str().unwrap().to_string();
+        let p = job["progress"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&p), "{job}");
+        assert!(
+            ["queued", "running", "done", "failed"].contains(&status.as_str()),
+            "{job}"
+        );
+        if status == "done" || status == "failed" {
+            return job;
+        }
+        assert!(
+            start.elapsed() < JOB_DEADLINE,
+            "costmap {id} unfinished: {job}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+/// `gdalinfo -json` of a raster.
+pub fn gdalinfo(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&run_tool(
+        "gdalinfo",
+        &["-json", path.to_str().unwrap()],
+        None,
+    ))
+    .expect("gdalinfo JSON")
+}
+
+/// Every value of band `band`, row-major from the top row (NaN for nan),
+/// as `gdal_translate -of XYZ` reads them.
+pub fn band_values(path: &Path, band: usize) -> Vec<f64> {
+    let b = band.to_string();
+    run_tool(
+        "gdal_translate",
+        &[
+            "-q",
+            "-b",
+            &b,
+            "-of",
+            "XYZ",
+            path.to_str().unwrap(),
+            "/vsistdout/",
+        ],
+        None,
+    )
+    .lines()
+    .map(|l| {
+        let z = l.split_whitespace().nth(2).unwrap();
+        z.parse::<f64>().unwrap_or(f64::NAN)
+    })
+    .collect()
+}
+
+/// `gdallocationinfo -valonly -b band` of each (col, row).
+pub fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<f64> {
+    let input: String = pixels.iter().map(|(c, r)| format!("{c} {r}\n")).collect();
+    let b = band.to_string();
+    let out = run_tool(
+        "gdallocationinfo",
+        &["-valonly", "-b", &b, path.to_str().unwrap()],
+        Some(&input),
+    );
+    let values: Vec<f64> = out
+        .lines()
+        .map(|l| l.trim().parse().unwrap_or(f64::NAN))
+        .collect();
+    assert_eq!(values.len(), pixels.len(), "{out}");
+    values
+}

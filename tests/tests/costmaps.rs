@@ -13,32 +13,11 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_invalid_at, assert_problem, close, delete, get, get_with_headers,
-    get_with_timeout, png_size, post, post_json, run_tool, shared_data, sse_events, terraplan,
-    text,
+    JOB_DEADLINE, Reply, Server, assert_invalid_at, assert_problem, band_values, close,
+    costmap_job, delete, dtm, gdalinfo, get, get_with_headers, get_with_timeout, pixel_values,
+    png_size, post, post_json, slow_costmap_options, sse_events, terraplan, text, upload_dem,
+    wait_costmap_finished,
 };
-
-/// Long enough for any job here, on a loaded machine.
-const JOB_DEADLINE: Duration = Duration::from_secs(300);
-
-fn dtm() -> PathBuf {
-    shared_data("dems/opengeos_data__elevation_dtm.tif")
-}
-
-/// Options that make the DTM's job take seconds (PCA neighbourhoods of
-/// 50 cells' radius, the most allowed: about 1.8 s on the 2-core machine),
-/// so it is still running when looked at right away and holds its slot
-/// while a test queues and breaks another job behind it.
-fn slow_options() -> Value {
-    json!({"pca_radius_m": 100})
-}
-
-fn upload(server: &Server, path: &Path) -> String {
-    let data = std::fs::read(path).unwrap();
-    let r = post(&server.url("/api/v1/dems"), "image/tiff", &data);
-    assert_eq!(r.status, 201, "{}", r.text());
-    r.json()["id"].as_str().unwrap().to_string()
-}
 
 /// POST a costmap request: 202 with a Location and the job.
 fn create(server: &Server, body: &Value) -> Value {
@@ -53,37 +32,8 @@ fn create(server: &Server, body: &Value) -> Value {
     job
 }
 
-fn costmap(server: &Server, id: &str) -> Value {
-    let r = get(&server.url(&format!("/api/v1/costmaps/{id}")));
-    assert_eq!(r.status, 200, "{}", r.text());
-    r.json()
-}
-
-/// Poll until the job is done or failed.
-fn wait_finished(server: &Server, id: &str) -> Value {
-    let start = Instant::now();
-    loop {
-        let job = costmap(server, id);
-        let status = job["status"].as_str().unwrap().to_string();
-        let p = job["progress"].as_f64().unwrap();
-        assert!((0.0..=1.0).contains(&p), "{job}");
-        assert!(
-            ["queued", "running", "done", "failed"].contains(&status.as_str()),
-            "{job}"
-        );
-        if status == "done" || status == "failed" {
-            return job;
-        }
-        assert!(
-            start.elapsed() < JOB_DEADLINE,
-            "costmap {id} unfinished: {job}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-}
-
 fn wait_done(server: &Server, id: &str) -> Value {
-    let job = wait_finished(server, id);
+    let job = wait_costmap_finished(server, id);
     assert_eq!(job["status"], "done", "{job}");
     job
 }
@@ -93,56 +43,6 @@ fn file(server: &Server, url: &str) -> Reply {
 }
 
 // ---------------------------------------------------------------- GDAL
-
-fn gdalinfo(path: &Path) -> Value {
-    serde_json::from_str(&run_tool(
-        "gdalinfo",
-        &["-json", path.to_str().unwrap()],
-        None,
-    ))
-    .expect("gdalinfo JSON")
-}
-
-/// Every value of band `band`, row-major from the top row (NaN for nan).
-fn band_values(path: &Path, band: usize) -> Vec<f64> {
-    let b = band.to_string();
-    run_tool(
-        "gdal_translate",
-        &[
-            "-q",
-            "-b",
-            &b,
-            "-of",
-            "XYZ",
-            path.to_str().unwrap(),
-            "/vsistdout/",
-        ],
-        None,
-    )
-    .lines()
-    .map(|l| {
-        let z = l.split_whitespace().nth(2).unwrap();
-        z.parse::<f64>().unwrap_or(f64::NAN)
-    })
-    .collect()
-}
-
-/// `gdallocationinfo -valonly -b band` of each (col, row).
-fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<f64> {
-    let input: String = pixels.iter().map(|(c, r)| format!("{c} {r}\n")).collect();
-    let b = band.to_string();
-    let out = run_tool(
-        "gdallocationinfo",
-        &["-valonly", "-b", &b, path.to_str().unwrap()],
-        Some(&input),
-    );
-    let values: Vec<f64> = out
-        .lines()
-        .map(|l| l.trim().parse().unwrap_or(f64::NAN))
-        .collect();
-    assert_eq!(values.len(), pixels.len(), "{out}");
-    values
-}
 
 fn epsg_of(info: &Value) -> Option<u64> {
     info["stac"]["proj:epsg"].as_u64()
@@ -301,7 +201,7 @@ fn check_geotiff(dir: &Path, server: &Server, job: &Value) {
 fn dtm_costmap_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(&dir.path().join("data"), &[]);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let job = create(
         &server,
         &json!({
@@ -448,7 +348,7 @@ fn dtm_costmap_end_to_end() {
         }
         offset += 100;
     };
-    assert_eq!(listed, costmap(&server, &id));
+    assert_eq!(listed, costmap_job(&server, &id));
     assert_problem(
         &get(&server.url("/api/v1/costmaps?limit=0")),
         400,
@@ -476,10 +376,10 @@ fn dtm_costmap_end_to_end() {
 fn progress_events_conflicts_cancel_and_failure() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(dir.path(), &["--costmap-jobs", "1"]);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let slow = create(
         &server,
-        &json!({"dem_id": dem_id, "options": slow_options()}),
+        &json!({"dem_id": dem_id, "options": slow_costmap_options()}),
     );
     let slow_id = slow["id"].as_str().unwrap().to_string();
     let events_url = server.url(&format!("/api/v1/costmaps/{slow_id}/events"));
@@ -532,7 +432,7 @@ fn progress_events_conflicts_cancel_and_failure() {
     // One slot: a slow job runs, the next waits queued (409 "queued").
     let first = create(
         &server,
-        &json!({"dem_id": dem_id, "options": slow_options()}),
+        &json!({"dem_id": dem_id, "options": slow_costmap_options()}),
     );
     let first_id = first["id"].as_str().unwrap().to_string();
     let second = create(&server, &json!({"dem_id": dem_id, "name": "second"}));
@@ -540,7 +440,7 @@ fn progress_events_conflicts_cancel_and_failure() {
     let r = file(&server, second["urls"]["preview_png"].as_str().unwrap());
     if r.status == 409 {
         assert_problem(&r, 409, "queued");
-        assert_eq!(costmap(&server, &second_id)["status"], "queued");
+        assert_eq!(costmap_job(&server, &second_id)["status"], "queued");
     }
     // Delete the running job: cancelled, gone, and the queued one runs.
     let events_url = server.url(&format!("/api/v1/costmaps/{first_id}/events"));
@@ -572,10 +472,10 @@ fn progress_events_conflicts_cancel_and_failure() {
     );
 
     // A job whose DEM is gone before it runs fails, saying so.
-    let other_dem = upload(&server, &dtm());
+    let other_dem = upload_dem(&server, &dtm());
     let blocker = create(
         &server,
-        &json!({"dem_id": dem_id, "options": slow_options()}),
+        &json!({"dem_id": dem_id, "options": slow_costmap_options()}),
     );
     let doomed = create(&server, &json!({"dem_id": other_dem}));
     let doomed_id = doomed["id"].as_str().unwrap().to_string();
@@ -585,7 +485,7 @@ fn progress_events_conflicts_cancel_and_failure() {
     );
     // The slow job holds the only slot for seconds: this one is still
     // queued when its DEM goes.
-    let job = wait_finished(&server, &doomed_id);
+    let job = wait_costmap_finished(&server, &doomed_id);
     assert_eq!(job["status"], "failed", "{job}");
     let error = job["error"].as_str().unwrap();
     assert!(
@@ -617,7 +517,7 @@ fn progress_events_conflicts_cancel_and_failure() {
 fn landcover_raster_costs_and_lethal_classes() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(&dir.path().join("data"), &[]);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let grid = "ncols 2\nnrows 2\nxllcorner 321498\nyllcorner 4297500\ncellsize 283\n\
                 NODATA_value -9999\n1 9\n1 9\n";
     let r = post(
@@ -706,7 +606,7 @@ fn vehicle_presets_are_listed_and_accepted() {
     assert_eq!(items[0]["max_slope_deg"], 25.0);
     assert_eq!(items[0]["w_infl"], 10.0);
     assert_eq!(items[0]["w_slope"], 1.0);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     for name in names {
         let job = create(
             &server,
@@ -720,7 +620,7 @@ fn vehicle_presets_are_listed_and_accepted() {
 fn costmap_request_faults() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(dir.path(), &[]);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let url = server.url("/api/v1/costmaps");
     let invalid = |what: &str, body: Value, pointer: &str, says: &str| {
         assert_invalid_at(&post_json(&url, &body), what, pointer, says);
@@ -872,10 +772,14 @@ fn unfinished_jobs_survive_a_crash_and_a_stop() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let server = Server::start(&data, &["--costmap-jobs", "1"]);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let mut ids = Vec::new();
     for i in 0..3 {
-        let options = if i == 0 { slow_options() } else { json!({}) };
+        let options = if i == 0 {
+            slow_costmap_options()
+        } else {
+            json!({})
+        };
         let job = create(
             &server,
             &json!({"dem_id": dem_id, "name": format!("job {i}"), "options": options}),
@@ -884,7 +788,12 @@ fn unfinished_jobs_survive_a_crash_and_a_stop() {
     }
     let before: Vec<String> = ids
         .iter()
-        .map(|id| costmap(&server, id)["status"].as_str().unwrap().to_string())
+        .map(|id| {
+            costmap_job(&server, id)["status"]
+                .as_str()
+                .unwrap()
+                .to_string()
+        })
         .collect();
     assert!(
         before.iter().any(|s| s == "queued"),
@@ -906,11 +815,11 @@ fn unfinished_jobs_survive_a_crash_and_a_stop() {
     // finished by the next server.
     let job = create(
         &server,
-        &json!({"dem_id": dem_id, "options": slow_options()}),
+        &json!({"dem_id": dem_id, "options": slow_costmap_options()}),
     );
     let id = job["id"].as_str().unwrap().to_string();
     let start = Instant::now();
-    while costmap(&server, &id)["status"] == "queued" && start.elapsed() < JOB_DEADLINE {
+    while costmap_job(&server, &id)["status"] == "queued" && start.elapsed() < JOB_DEADLINE {
         std::thread::sleep(Duration::from_millis(20));
     }
     let stopping = Instant::now();

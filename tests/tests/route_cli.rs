@@ -9,7 +9,7 @@ use std::process::Command;
 use geo::Intersects;
 use geo_types::{Coord, LineString, Polygon};
 use serde_json::{Value, json};
-use terraplan_e2e::{shared_data, terraplan, text, validator, venv_python, workspace};
+use terraplan_e2e::{dtm, shared_data, terraplan, text, validator, venv_python, workspace};
 
 fn mcp(args: &[&str]) -> Value {
     let out = Command::new(venv_python())
@@ -103,10 +103,6 @@ struct DtmCostmap {
     _dir: tempfile::TempDir,
     dir: PathBuf,
     tif: PathBuf,
-}
-
-fn dtm() -> PathBuf {
-    shared_data("dems/opengeos_data__elevation_dtm.tif")
 }
 
 fn dtm_costmap() -> DtmCostmap {

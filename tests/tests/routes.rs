@@ -11,32 +11,19 @@
 //! when the test command sets `TERRAPLAN_TEST_DATABASE_URL`.
 
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::path::Path;
 
 use geo::Intersects;
 use geo_types::{Coord, Line, LineString, Polygon};
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_invalid_at, assert_problem, close, delete, get, post, post_json,
-    run_tool, shared_data, text, validator,
+    Reply, Server, assert_invalid_at, assert_problem, band_values, close, delete, dtm, gdalinfo,
+    get, pixel_values, post, post_json, run_tool, slow_costmap_options, text, upload_dem,
+    validator, wait_costmap_finished,
 };
 
-/// Long enough for any costmap job here, on a loaded machine.
-const JOB_DEADLINE: Duration = Duration::from_secs(300);
 /// Metres per degree of latitude, near enough for one-cell tolerances.
 const M_PER_DEG: f64 = 111_320.0;
-
-fn dtm() -> PathBuf {
-    shared_data("dems/opengeos_data__elevation_dtm.tif")
-}
-
-fn upload(server: &Server, path: &Path) -> String {
-    let data = std::fs::read(path).unwrap();
-    let r = post(&server.url("/api/v1/dems"), "image/tiff", &data);
-    assert_eq!(r.status, 201, "{}", r.text());
-    r.json()["id"].as_str().unwrap().to_string()
-}
 
 fn create_costmap(server: &Server, body: &Value) -> String {
     let r = post_json(&server.url("/api/v1/costmaps"), body);
@@ -44,79 +31,7 @@ fn create_costmap(server: &Server, body: &Value) -> String {
     r.json()["id"].as_str().unwrap().to_string()
 }
 
-/// Poll until the job is done or failed.
-fn wait_finished(server: &Server, id: &str) -> Value {
-    let start = Instant::now();
-    loop {
-        let r = get(&server.url(&format!("/api/v1/costmaps/{id}")));
-        assert_eq!(r.status, 200, "{}", r.text());
-        let job = r.json();
-        if job["status"] == "done" || job["status"] == "failed" {
-            return job;
-        }
-        assert!(
-            start.elapsed() < JOB_DEADLINE,
-            "costmap {id} unfinished: {job}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-}
-
-/// Options that make the DTM's costmap job take seconds (see costmaps.rs).
-fn slow_options() -> Value {
-    json!({"pca_radius_m": 100})
-}
-
 // ---------------------------------------------------------------- GDAL
-
-fn gdalinfo(path: &Path) -> Value {
-    serde_json::from_str(&run_tool(
-        "gdalinfo",
-        &["-json", path.to_str().unwrap()],
-        None,
-    ))
-    .expect("gdalinfo JSON")
-}
-
-/// Every value of band `band`, row-major from the top row (NaN for nan).
-fn band_values(path: &Path, band: usize) -> Vec<f64> {
-    let b = band.to_string();
-    run_tool(
-        "gdal_translate",
-        &[
-            "-q",
-            "-b",
-            &b,
-            "-of",
-            "XYZ",
-            path.to_str().unwrap(),
-            "/vsistdout/",
-        ],
-        None,
-    )
-    .lines()
-    .map(|l| {
-        let z = l.split_whitespace().nth(2).unwrap();
-        z.parse::<f64>().unwrap_or(f64::NAN)
-    })
-    .collect()
-}
-
-/// `gdallocationinfo -valonly` of each (col, row) of band 1.
-fn pixel_values(path: &Path, pixels: &[(usize, usize)]) -> Vec<f64> {
-    let input: String = pixels.iter().map(|(c, r)| format!("{c} {r}\n")).collect();
-    let out = run_tool(
-        "gdallocationinfo",
-        &["-valonly", path.to_str().unwrap()],
-        Some(&input),
-    );
-    let values: Vec<f64> = out
-        .lines()
-        .map(|l| l.trim().parse().unwrap_or(f64::NAN))
-        .collect();
-    assert_eq!(values.len(), pixels.len(), "{out}");
-    values
-}
 
 /// The costmap as the test sees it: GDAL's reading of its GeoTIFF.
 struct Costmap {
@@ -271,9 +186,9 @@ fn regions(cost: &[f64], w: usize, h: usize) -> (Vec<i64>, Vec<usize>) {
 /// A server, the DTM uploaded and its costmap done.
 fn setup(dir: &Path, args: &[&str]) -> (Server, String, Costmap) {
     let server = Server::start(&dir.join("data"), args);
-    let dem_id = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
     let id = create_costmap(&server, &json!({"dem_id": dem_id}));
-    let job = wait_finished(&server, &id);
+    let job = wait_costmap_finished(&server, &id);
     assert_eq!(job["status"], "done", "{job}");
     let map = Costmap::read(&server, dir, &id);
     (server, dem_id, map)
@@ -501,7 +416,7 @@ fn route_end_to_end() {
         assert!(map.traversable(r, c), "waypoint on ({r}, {c})");
     }
     let pixels: Vec<(usize, usize)> = cells.iter().map(|&(r, c)| (c, r)).collect();
-    for (p, z) in wp.iter().zip(pixel_values(&dtm(), &pixels)) {
+    for (p, z) in wp.iter().zip(pixel_values(&dtm(), 1, &pixels)) {
         assert!(close(num(&p["height_m"]), z, 1e-3), "{p} vs DEM {z}");
     }
     let base = format!("/api/v1/routes/{id}");
@@ -945,11 +860,11 @@ fn unfinished_costmaps_and_the_time_limit() {
         &dir.path().join("data"),
         &["--costmap-jobs", "1", "--route-timeout-s", "0.001"],
     );
-    let dem_id = upload(&server, &dtm());
-    let other_dem = upload(&server, &dtm());
+    let dem_id = upload_dem(&server, &dtm());
+    let other_dem = upload_dem(&server, &dtm());
     let blocker = create_costmap(
         &server,
-        &json!({"dem_id": dem_id, "options": slow_options()}),
+        &json!({"dem_id": dem_id, "options": slow_costmap_options()}),
     );
     let doomed = create_costmap(&server, &json!({"dem_id": other_dem}));
     let body = json!({"start": [-77.054, 38.811], "goal": [-77.051, 38.809]});
@@ -977,9 +892,9 @@ fn unfinished_costmaps_and_the_time_limit() {
         delete(&server.url(&format!("/api/v1/dems/{other_dem}"))).status,
         204
     );
-    assert_eq!(wait_finished(&server, &doomed)["status"], "failed");
+    assert_eq!(wait_costmap_finished(&server, &doomed)["status"], "failed");
     assert_problem(&plan(&server, &doomed, &body), 409, "failed");
-    assert_eq!(wait_finished(&server, &blocker)["status"], "done");
+    assert_eq!(wait_costmap_finished(&server, &blocker)["status"], "done");
 
     // A search across the map takes more than a millisecond.
     let map = Costmap::read(&server, dir.path(), &blocker);
