@@ -2,23 +2,14 @@
 // drawn with the mouse → the server's 422 (/roi/...) → a plain-words message
 // in the survey-area section. Also: a route start outside the costmap.
 
-import { test, before, after } from 'node:test';
+import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { startServer, launchBrowser, openPage, drawPolygon, uploadDtm, screenshot } from './helpers.mjs';
+import { withServerAndBrowser, openPage, drawPolygon, uploadDtm, screenshot } from './helpers.mjs';
 
-let server;
-let browser;
-before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-});
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+const env = withServerAndBrowser();
 
 test('a self-intersecting ROI gets a plain-words error next to the area controls', async () => {
-  const { page, context, problems } = await openPage(browser, server.url);
+  const { page, context, problems } = await openPage(env.browser, env.server.url);
   await uploadDtm(page);
   // A bow tie: the edge from the first to the second corner crosses the third edge.
   await drawPolygon(page, '#draw-roi', [[-77.0545, 38.8090], [-77.0515, 38.8115], [-77.0515, 38.8090], [-77.0545, 38.8115]]);
@@ -42,7 +33,7 @@ test('a self-intersecting ROI gets a plain-words error next to the area controls
 });
 
 test('planning with nothing drawn says what to do, without asking the server', async () => {
-  const { page, context } = await openPage(browser, server.url);
+  const { page, context } = await openPage(env.browser, env.server.url);
   await page.click('#plan-survey');
   await page.locator('#survey-roi-error').waitFor({ state: 'visible' });
   assert.match(await page.textContent('#survey-roi-error'), /draw it on the map or import a file/);
@@ -50,7 +41,7 @@ test('planning with nothing drawn says what to do, without asking the server', a
 });
 
 test('the page is usable with the keyboard alone: tabs, labels, survey form', async () => {
-  const { page, context } = await openPage(browser, server.url);
+  const { page, context } = await openPage(env.browser, env.server.url);
   // Every form control has a label.
   const unlabelled = await page.$$eval('input, select, textarea', (els) =>
     els.filter((e) => e.type !== 'hidden' && !e.labels?.length && !e.getAttribute('aria-label')).map((e) => e.id || e.outerHTML));

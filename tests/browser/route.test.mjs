@@ -3,30 +3,21 @@
 // and its statistics; block part of it and replan; make part of it costlier and
 // replan again; download the rover mission.
 
-import { test, before, after } from 'node:test';
+import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { mkdtempSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
-import { startServer, launchBrowser, openPage, clickLonLat, drawPolygon, uploadDtm, screenshot, loadWaypoints } from './helpers.mjs';
+import { withServerAndBrowser, openPage, clickLonLat, drawPolygon, uploadDtm, screenshot, loadWaypoints } from './helpers.mjs';
 
 // Traversable ground for the default vehicle (u-go) on the DTM's costmap (see README: Ground routes).
 const START = [-77.05430, 38.81068];
 const GOAL = [-77.05512, 38.80874];
 
-let server;
-let browser;
-before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-});
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+const env = withServerAndBrowser();
 
 test('build a costmap, click start and goal, plan, block and replan', async () => {
-  const { page, context, problems, outside } = await openPage(browser, server.url);
+  const { page, context, problems, outside } = await openPage(env.browser, env.server.url);
   await uploadDtm(page);
   await page.click('#tab-route');
   assert.equal(await page.inputValue('#vehicle'), 'u-go');
@@ -56,7 +47,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   await screenshot(page, 'route-planned');
 
   // Block a square across the middle of the route (its waypoints from the API), replan from the start.
-  const routes = await (await fetch(`${server.url}/api/v1/routes?limit=1`)).json();
+  const routes = await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json();
   const wps = routes.items[0].waypoints;
   const mid = wps[Math.floor(wps.length / 2)];
   const d = 0.00012; // about 10 m
@@ -77,7 +68,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
 
   // A costlier area across the detour: the cost is checked before drawing, sent with the replan
   // (only the new area: the earlier blocked square stays with the route), and shown on the map.
-  const detour = (await (await fetch(`${server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  const detour = (await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json()).items[0];
   assert.equal(detour.blocked.length, 1);
   assert.equal(detour.cost_changes.length, 0);
   assert.match(await page.textContent('#block-status'), /1 area blocked by earlier replans/);
@@ -105,7 +96,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   assert.equal(sent.cost_changes[0].cost, 15);
   assert.equal(sent.cost_changes[0].area.type, 'Polygon');
   await page.waitForFunction((old) => document.querySelector('#route-stats').textContent !== old, beforeCostlier, { timeout: 60_000 });
-  const costlier = (await (await fetch(`${server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  const costlier = (await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json()).items[0];
   assert.equal(costlier.parent_id, detour.id);
   assert.equal(costlier.cost_changes.length, 1, 'the new route carries the cost change');
   assert.equal(costlier.cost_changes[0].cost, 15);

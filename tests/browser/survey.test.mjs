@@ -3,13 +3,13 @@
 // routes, the table and the profile, download a mission and load it with
 // pymavlink.
 
-import { test, before, after } from 'node:test';
+import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { mkdtempSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
 import {
-  startServer, launchBrowser, openPage, drawPolygon, clickLonLat, uploadDtm, screenshot, loadWaypoints, countMapPixels, SCREENSHOTS,
+  withServerAndBrowser, openPage, drawPolygon, clickLonLat, uploadDtm, screenshot, loadWaypoints, countMapPixels, SCREENSHOTS,
 } from './helpers.mjs';
 
 // Inside the DTM (lon −77.0559…−77.0493, lat 38.8082…38.8130), clear of its nodata cells.
@@ -17,19 +17,10 @@ const ROI = [[-77.0550, 38.8090], [-77.0527, 38.8090], [-77.0527, 38.8114], [-77
 const NFZ = [[-77.0542, 38.8100], [-77.0535, 38.8100], [-77.0535, 38.8106], [-77.0542, 38.8106]];
 const STARTS = [[-77.0551, 38.8089], [-77.0526, 38.8089], [-77.0540, 38.8115]];
 
-let server;
-let browser;
-before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-});
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+const env = withServerAndBrowser();
 
 test('first render of the planner', async () => {
-  const { page, context } = await openPage(browser, server.url);
+  const { page, context } = await openPage(env.browser, env.server.url);
   // A second, warm load (assets cached, as for a returning user) and the cold one above both count.
   const timing = await page.evaluate(() => {
     const nav = performance.getEntriesByType('navigation')[0];
@@ -45,7 +36,7 @@ test('first render of the planner', async () => {
 });
 
 test('plan a survey with 3 UAVs over the DTM and download a mission', async () => {
-  const { page, context, problems, outside } = await openPage(browser, server.url);
+  const { page, context, problems, outside } = await openPage(env.browser, env.server.url);
 
   await uploadDtm(page);
   assert.match(await page.textContent('#dem-status'), /283 × 259 cells/);
@@ -87,8 +78,8 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   assert.equal(await page.locator('#profile-chart svg path.terrain').count(), 1);
   assert.equal(await page.locator('#profile-chart svg path.flown').count(), 1);
   // The sortie chooser shows only for a UAV flying several sorties.
-  const newest = (await (await fetch(`${server.url}/api/v1/surveys?limit=1`)).json()).items[0];
-  const planned = await (await fetch(`${server.url}/api/v1/surveys/${newest.id}`)).json();
+  const newest = (await (await fetch(`${env.server.url}/api/v1/surveys?limit=1`)).json()).items[0];
+  const planned = await (await fetch(`${env.server.url}/api/v1/surveys/${newest.id}`)).json();
   const charted = await page.inputValue('#profile-uav');
   const sorties = planned.uavs.find((u) => u.id === charted).sorties.length;
   assert.equal(await page.locator('#profile-sortie-field').isVisible(), sorties > 1, `${sorties} sortie(s)`);
@@ -128,7 +119,7 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
 });
 
 test('import the area from GeoJSON and no-fly zones from KML', async () => {
-  const { page, context, problems } = await openPage(browser, server.url);
+  const { page, context, problems } = await openPage(env.browser, env.server.url);
   const dir = mkdtempSync(path.join(tmpdir(), 'terraplan-import-'));
   const roiFile = path.join(dir, 'field.geojson');
   writeFileSync(roiFile, JSON.stringify({
