@@ -31,6 +31,7 @@ use utoipa::ToSchema;
 use super::dems::BinaryFile;
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, page};
+use super::{rfc3339, short_id};
 use crate::app::AppState;
 use crate::costmap_jobs::{
     COSTMAP_TIF, CostmapResult, JobStatus, LEASE_MS, LEGEND_SVG, Live, PREVIEW_PNG, StoredRequest,
@@ -166,16 +167,6 @@ pub fn costmap_url(id: &str) -> String {
 
 fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("there is no costmap with id {id:?}"))
-}
-
-/// Unix milliseconds as RFC 3339 UTC.
-fn rfc3339(millis: i64) -> String {
-    let t = std::time::UNIX_EPOCH + std::time::Duration::from_millis(millis.max(0) as u64);
-    humantime::format_rfc3339_millis(t).to_string()
-}
-
-fn short(id: &str) -> &str {
-    id.get(..8).unwrap_or(id)
 }
 
 fn to_json<T: Serialize>(value: &T) -> Result<String, ApiError> {
@@ -850,7 +841,7 @@ pub async fn costmap_tif(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let row = stored(&state, &id).await?;
-    let name = format!("terraplan-{}-costmap.tif", short(&id));
+    let name = format!("terraplan-{}-costmap.tif", short_id(&id));
     download(&state, &row, COSTMAP_TIF, Some(name), &headers).await
 }
 
@@ -956,7 +947,7 @@ pub async fn layer(
             "costmap {id} has no layer file {file:?}: {list}"
         )));
     };
-    let name = format!("terraplan-{}-{}.tif", short(&id), layer.name());
+    let name = format!("terraplan-{}-{}.tif", short_id(&id), layer.name());
     download(&state, &row, &layer_file(layer), Some(name), &headers).await
 }
 

@@ -25,7 +25,9 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::json_body::{JsonBody, media_type};
 use super::paging::{ListQuery, page};
+use super::rfc3339;
 use crate::app::AppState;
+use crate::costmap_jobs::now_millis;
 use crate::db::DemMetaRow;
 use crate::error::{ApiError, Problem};
 
@@ -159,18 +161,6 @@ pub fn dem_url(id: &str) -> String {
 
 pub fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("there is no DEM with id {id:?}"))
-}
-
-fn now_millis() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
-}
-
-/// Unix milliseconds as RFC 3339 UTC.
-fn rfc3339(millis: i64) -> String {
-    let t = std::time::UNIX_EPOCH + std::time::Duration::from_millis(millis.max(0) as u64);
-    humantime::format_rfc3339_millis(t).to_string()
 }
 
 /// An EPSG code from `EPSG:32633` (any case) or `32633`.

@@ -49,6 +49,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::costmaps::{costmap_url, deserialize_at};
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, page};
+use super::{rfc3339, short_id};
 use crate::app::AppState;
 use crate::costmap_jobs::{COSTMAP_TIF, JobStatus, now_millis};
 use crate::db::{CostmapRow, RouteRow};
@@ -300,16 +301,6 @@ fn not_found(id: &str) -> ApiError {
 
 fn costmap_not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("there is no costmap with id {id:?}"))
-}
-
-/// Unix milliseconds as RFC 3339 UTC.
-fn rfc3339(millis: i64) -> String {
-    let t = std::time::UNIX_EPOCH + Duration::from_millis(millis.max(0) as u64);
-    humantime::format_rfc3339_millis(t).to_string()
-}
-
-fn short(id: &str) -> &str {
-    id.get(..8).unwrap_or(id)
 }
 
 fn to_json<T: Serialize>(value: &T) -> Result<String, ApiError> {
@@ -1630,7 +1621,7 @@ async fn route_file(
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     let disposition = format!(
         "attachment; filename=\"terraplan-route-{}.{extension}\"",
-        short(id)
+        short_id(id)
     );
     if let Ok(v) = HeaderValue::from_str(&disposition) {
         headers.insert(header::CONTENT_DISPOSITION, v);

@@ -18,7 +18,9 @@ use utoipa::ToSchema;
 
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, page};
+use super::{rfc3339, short_id};
 use crate::app::AppState;
+use crate::costmap_jobs::now_millis;
 use crate::db::{SurveyRow, SurveySummaryRow};
 use crate::error::{ApiError, Problem};
 
@@ -208,18 +210,6 @@ fn survey_url(id: &str) -> String {
 
 fn not_found(id: &str) -> ApiError {
     ApiError::NotFound(format!("there is no survey with id {id:?}"))
-}
-
-fn now_millis() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
-}
-
-/// Unix milliseconds as RFC 3339 UTC.
-fn rfc3339(millis: i64) -> String {
-    let t = std::time::UNIX_EPOCH + std::time::Duration::from_millis(millis.max(0) as u64);
-    humantime::format_rfc3339_millis(t).to_string()
 }
 
 fn parse_plan(row_plan: &str) -> Result<SurveyPlan, ApiError> {
@@ -509,10 +499,6 @@ async fn download(
     Ok(res)
 }
 
-fn short(id: &str) -> &str {
-    id.get(..8).unwrap_or(id)
-}
-
 /// Which sortie of a UAV a file belongs to.
 #[derive(Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
@@ -588,7 +574,7 @@ pub async fn uav_file(
         Some(k) => format!("{uav}.sortie{k}"),
         None => uav.clone(),
     };
-    let download_name = format!("terraplan-{}-{stem}.{ext}", short(&id));
+    let download_name = format!("terraplan-{}-{stem}.{ext}", short_id(&id));
     download(
         &state,
         &id,
@@ -623,7 +609,7 @@ pub async fn cells_file(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    let name = format!("terraplan-{}-cells.geojson", short(&id));
+    let name = format!("terraplan-{}-cells.geojson", short_id(&id));
     download(&state, &id, "cells.geojson", &name, || {
         format!("survey {id} has no cells file")
     })
