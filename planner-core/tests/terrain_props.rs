@@ -65,6 +65,7 @@ fn terrain(
             epsg: EPSG,
             name: "WGS 84 / UTM zone 32N".into(),
             geographic: false,
+            proj4: String::new(),
         },
         format: DemFormat::GeoTiff,
     }

@@ -571,6 +571,7 @@ mod tests {
                 epsg: 32633,
                 name: "WGS 84 / UTM zone 33N".into(),
                 geographic: false,
+                proj4: String::new(),
             },
             format: DemFormat::Asc,
         })

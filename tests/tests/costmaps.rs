@@ -239,6 +239,15 @@ fn dtm_costmap_end_to_end() {
     assert_eq!(done["width"], 283);
     assert_eq!(done["height"], 259);
     assert_eq!(done["crs"]["epsg"], 26918);
+    // The PROJ.4 definition the web page places the preview with: the DEM's.
+    let dem = get(&server.url(&format!("/api/v1/dems/{dem_id}"))).json();
+    assert!(
+        done["crs"]["proj4"]
+            .as_str()
+            .is_some_and(|s| s.starts_with("+proj=utm +zone=18 ")),
+        "{done}"
+    );
+    assert_eq!(done["crs"], dem["crs"]);
     // The DTM's own extent (2 m cells from (321498, 4298018)).
     assert_eq!(
         done["bounds"],

@@ -245,6 +245,61 @@ fn to_wgs84(epsg: u32, points: &[(f64, f64)]) -> Vec<(f64, f64)> {
     lonlat
 }
 
+/// A PROJ.4 definition as a map from parameter to value ("" for a flag),
+/// `+datum=` spelt out as PROJ.4 defines it (`WGS84`, `NAD83`: their
+/// ellipsoid and a zero `+towgs84`) and `+towgs84=` padded to 7 numbers.
+fn proj4_params(def: &str) -> std::collections::BTreeMap<String, String> {
+    let mut m = std::collections::BTreeMap::new();
+    for p in def.split_whitespace() {
+        let p = p.strip_prefix('+').unwrap_or(p);
+        let (k, v) = p.split_once('=').unwrap_or((p, ""));
+        match (k, v) {
+            ("type", "crs") => {}
+            ("datum", "WGS84" | "NAD83") => {
+                let ellps = if v == "WGS84" { "WGS84" } else { "GRS80" };
+                m.insert("ellps".to_string(), ellps.to_string());
+                m.insert("towgs84".to_string(), "0,0,0".to_string());
+            }
+            _ => {
+                m.insert(k.to_string(), v.to_string());
+            }
+        }
+    }
+    if let Some(t) = m.get_mut("towgs84") {
+        let mut v: Vec<f64> = t.split(',').map(|x| x.parse().unwrap()).collect();
+        v.resize(7, 0.0);
+        *t = format!("{v:?}");
+    }
+    m
+}
+
+/// The service's `crs.proj4` against `gdalsrsinfo -o proj4 EPSG:<code>`:
+/// the same parameters. GDAL writes `+towgs84` only when PROJ's database
+/// (GDAL's own PROJ, possibly another version than the service's) has
+/// exactly one Helmert transformation to WGS84, the service also when it
+/// has several (the best ranked, which PROJ applies without its grids);
+/// so a `+towgs84` only the service writes is not a difference. Where
+/// GDAL has one (or a `+datum=` implying one) the service must have the
+/// same. Here: EPSG:26918, NAD83 / UTM 18N (the DTM's), is `+datum=NAD83`
+/// for GDAL 3.6 and `+ellps=GRS80 +towgs84=0,0,0,0,0,0,0` for the service's
+/// PROJ 9.6, the same to PROJ and proj4js.
+fn assert_proj4_like_gdal(proj4: &str, epsg: u32) {
+    assert!(
+        proj4.starts_with("+proj=") && !proj4.contains("+type=crs"),
+        "EPSG:{epsg}: {proj4:?}"
+    );
+    let gdal = run_tool(
+        "gdalsrsinfo",
+        &["-o", "proj4", &format!("EPSG:{epsg}")],
+        None,
+    );
+    let (mut ours, theirs) = (proj4_params(proj4), proj4_params(&gdal));
+    if !theirs.contains_key("towgs84") {
+        ours.remove("towgs84");
+    }
+    assert_eq!(ours, theirs, "EPSG:{epsg}: {proj4:?} vs GDAL's {gdal:?}");
+}
+
 /// A synthetic SRTM3 tile (1201×1201 big-endian Int16, extent only in its
 /// name) with a gentle relief and a void, written as `dir/N45E006.hgt`.
 fn synthetic_hgt(dir: &Path) -> PathBuf {
@@ -295,6 +350,7 @@ fn shared_dems_upload_with_gdal_metadata() {
         );
         assert_eq!(dem["crs"]["geographic"], json!(c.epsg == 4326), "{ctx}");
         assert!(dem["crs"]["name"].as_str().is_some_and(|s| !s.is_empty()));
+        assert_proj4_like_gdal(dem["crs"]["proj4"].as_str().unwrap_or(""), c.epsg);
 
         let res = [g.gt[1].abs(), g.gt[5].abs()];
         for i in 0..2 {

@@ -410,6 +410,15 @@ fn openapi_document_and_docs_page() {
     );
     assert_eq!(params["side_overlap"]["maximum"], 0.95);
     assert_eq!(params["side_overlap"]["default"], 0.7);
+    // A DEM's CRS carries its PROJ.4 definition for the web page.
+    let proj4 = &doc["components"]["schemas"]["Crs"]["properties"]["proj4"];
+    assert_eq!(proj4["type"], "string", "{proj4}");
+    assert!(
+        proj4["description"]
+            .as_str()
+            .is_some_and(|d| d.contains("proj4js")),
+        "{proj4}"
+    );
     let page = get(&server.url("/api/docs/"));
     assert_eq!(page.status, 200);
     assert!(

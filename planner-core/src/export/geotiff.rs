@@ -663,6 +663,7 @@ mod tests {
             epsg: 32633,
             name: "WGS 84 / UTM zone 33N".to_string(),
             geographic: false,
+            proj4: String::new(),
         }
     }
 
@@ -671,6 +672,7 @@ mod tests {
             epsg: 4326,
             name: "WGS 84".to_string(),
             geographic: true,
+            proj4: String::new(),
         }
     }
 

@@ -1831,6 +1831,7 @@ mod tests {
                 epsg: 4326,
                 name: "WGS 84".into(),
                 geographic: true,
+                proj4: String::new(),
             },
             format: DemFormat::GeoTiff,
         }

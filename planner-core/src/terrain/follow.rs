@@ -524,6 +524,8 @@ impl BlockGrid {
                 epsg: self.epsg,
                 name: self.name.clone(),
                 geographic: false,
+                // An internal grid: nothing reads its PROJ.4 string.
+                proj4: String::new(),
             },
             format: DemFormat::GeoTiff,
         }
@@ -642,6 +644,7 @@ mod tests {
                 epsg: 32631,
                 name: "WGS 84 / UTM zone 31N".into(),
                 geographic: false,
+                proj4: String::new(),
             },
             format: DemFormat::GeoTiff,
         }

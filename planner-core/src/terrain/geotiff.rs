@@ -2663,6 +2663,7 @@ mod tests {
             epsg: 32633,
             name: "WGS 84 / UTM zone 33N".into(),
             geographic: false,
+            proj4: String::new(),
         };
         let mut cur = std::io::Cursor::new(Vec::new());
         write_geotiff_f32(

@@ -263,6 +263,7 @@ pub(crate) mod test_support {
                 epsg: if geographic { 4326 } else { 32633 },
                 name: String::new(),
                 geographic,
+                proj4: String::new(),
             },
             format: DemFormat::GeoTiff,
         }

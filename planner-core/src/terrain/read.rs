@@ -194,7 +194,7 @@ pub(super) fn resolve_crs(
 
 /// [`Crs::from_epsg`], remembered: asking PROJ costs milliseconds, about
 /// as much as reading a DEM of a few megabytes.
-fn crs_from_epsg(code: u32) -> Result<Crs, TerrainError> {
+pub(super) fn crs_from_epsg(code: u32) -> Result<Crs, TerrainError> {
     static CACHE: OnceLock<Mutex<HashMap<u32, Crs>>> = OnceLock::new();
     let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
     if let Some(crs) = cache.lock().ok().and_then(|c| c.get(&code).cloned()) {

@@ -193,6 +193,7 @@ mod tests {
                 epsg,
                 name: String::new(),
                 geographic: epsg == 4326,
+                proj4: String::new(),
             },
             format: DemFormat::GeoTiff,
         }

@@ -366,16 +366,20 @@ fn response(row: &CostmapRow, live: Option<Live>) -> Result<CostmapResponse, Api
         this: base,
     };
     let (params, stats, warnings, width, height, crs, bounds, bounds_wgs84) = match result {
-        Some(r) => (
-            Some(r.params),
-            Some(r.stats),
-            r.warnings,
-            Some(r.width),
-            Some(r.height),
-            Some(r.crs),
-            r.bounds,
-            r.bounds_wgs84,
-        ),
+        Some(mut r) => {
+            // Stored before `crs.proj4` existed.
+            r.crs.fill_proj4();
+            (
+                Some(r.params),
+                Some(r.stats),
+                r.warnings,
+                Some(r.width),
+                Some(r.height),
+                Some(r.crs),
+                r.bounds,
+                r.bounds_wgs84,
+            )
+        }
         None => (None, None, Vec::new(), None, None, None, None, None),
     };
     Ok(CostmapResponse {
@@ -1025,6 +1029,7 @@ mod tests {
                 epsg,
                 name: format!("test CRS {epsg}"),
                 geographic: false,
+                proj4: String::new(),
             },
             format: planner_core::terrain::DemFormat::Asc,
         })

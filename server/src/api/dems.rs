@@ -204,8 +204,12 @@ pub fn terrain_error(e: TerrainError) -> ApiError {
 }
 
 fn stored_info(row: &DemMetaRow) -> Result<DemInfo, ApiError> {
-    serde_json::from_str(&row.info)
-        .map_err(|e| ApiError::Internal(format!("stored DEM info of {} unreadable: {e}", row.id)))
+    let mut info: DemInfo = serde_json::from_str(&row.info).map_err(|e| {
+        ApiError::Internal(format!("stored DEM info of {} unreadable: {e}", row.id))
+    })?;
+    // Stored before `crs.proj4` existed.
+    info.crs.fill_proj4();
+    Ok(info)
 }
 
 fn response(row: &DemMetaRow, info: DemInfo) -> DemResponse {
@@ -740,6 +744,31 @@ mod tests {
         assert!(parse_epsg("0").is_err());
         assert!(parse_epsg("EPSG:abc").is_err());
         assert!(parse_epsg("ÉPSG:1").is_err());
+    }
+
+    /// A DEM stored before `crs.proj4` existed is returned with it.
+    #[test]
+    fn stored_info_gains_proj4() {
+        let row = DemMetaRow {
+            id: "d1".into(),
+            name: None,
+            created_at: 0,
+            file_name: None,
+            crs_override: None,
+            info: r#"{"format":"geotiff","width":2,"height":2,
+                "crs":{"epsg":27700,"name":"OSGB36 / British National Grid","geographic":false},
+                "resolution_m":[1.0,1.0],"resolution":[1.0,1.0],
+                "bounds":[0.0,0.0,2.0,2.0],"bounds_wgs84":[-7.5,49.7,-7.5,49.7],
+                "min":1.0,"max":2.0,"nodata_value":null,"nodata_fraction":0.0}"#
+                .into(),
+            size_bytes: 1,
+        };
+        let info = stored_info(&row).unwrap();
+        assert!(
+            info.crs.proj4.starts_with("+proj=tmerc") && info.crs.proj4.contains("+towgs84="),
+            "{}",
+            info.crs.proj4
+        );
     }
 
     #[test]
