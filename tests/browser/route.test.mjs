@@ -21,12 +21,19 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   await uploadDtm(page);
   await page.click('#tab-route');
   assert.equal(await page.inputValue('#vehicle'), 'u-go');
+  // The preset's numbers (from GET /api/v1/vehicles) and what the map does on this tab.
+  assert.equal(await page.textContent('#vehicle-numbers'), '0.88 × 0.75 m (width × length); climbs steps up to 0.15 m and slopes up to 25°.');
+  assert.match(await page.textContent('#map-hint'), /pick the start and the goal/);
 
   // Watch the progress bar while the job runs (it may be quick on this DTM).
   await page.click('#build-costmap');
   await page.waitForFunction(() => /Costmap ready/.test(document.querySelector('#costmap-status').textContent), null, { timeout: 60_000 });
   assert.ok(await page.locator('#costmap-view').isVisible());
   assert.ok(await page.locator('#costmap-legend').evaluate((img) => img.complete && img.naturalWidth > 0), 'legend shown');
+  // The costlier-area hint gives this costmap's own cost range (its statistics).
+  const costmaps = await (await fetch(`${env.server.url}/api/v1/costmaps`)).json();
+  const built = await (await fetch(`${env.server.url}/api/v1/costmaps/${costmaps.items[0].id}`)).json();
+  assert.match(await page.textContent('#cost-hint'), new RegExp(`cells cost ${built.stats.cost_min.toFixed(1)} to ${built.stats.cost_max.toFixed(1)}\\)`));
 
   // After the costmap, the map waits for the start, then the goal.
   await clickLonLat(page, ...START);
@@ -114,6 +121,15 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   await page.click('#clear-costlier');
   assert.match(await page.textContent('#costlier-status'), /^No costlier area\./);
 
+  // "Plan route" now would start from the costmap as built: the page asks before dropping the replans' areas.
+  const routesBefore = (await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items.length;
+  const dialog = new Promise((resolve) => page.once('dialog', async (d) => { resolve(d.message()); await d.dismiss(); }));
+  await page.click('#plan-route');
+  assert.match(await dialog, /does not keep the 2 blocked or costlier areas of the replans/);
+  await page.waitForTimeout(300);
+  assert.equal((await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items.length, routesBefore, 'declined: nothing planned');
+  assert.match(await page.textContent('#block-status'), /1 area blocked by earlier replans/);
+
   // The rover mission loads in pymavlink.
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#route-downloads a[href$="mission.waypoints"]')]);
   const file = path.join(mkdtempSync(path.join(tmpdir(), 'terraplan-dl-')), download.suggestedFilename());
@@ -123,5 +139,47 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
 
   assert.deepEqual(outside, [], 'no request left the local server');
   assert.deepEqual(problems, []);
+  await context.close();
+});
+
+test('ends in one cell, ends forgotten with the DEM, and a route whose DEM was deleted', async () => {
+  // The first test left a DEM, its costmap and routes on the server.
+  const { page, context, problems } = await openPage(env.browser, env.server.url);
+  const dems = (await (await fetch(`${env.server.url}/api/v1/dems`)).json()).items;
+  const costmaps = (await (await fetch(`${env.server.url}/api/v1/costmaps`)).json()).items;
+  await page.selectOption('#dem-select', dems[0].id);
+  await page.click('#tab-route');
+  await page.selectOption('#costmap-select', costmaps[0].id);
+  await page.waitForSelector('#costmap-view:not([hidden])');
+
+  // Start and goal typed into the same cell: planned, and said to be nothing to drive.
+  await page.fill('#route-start', START.join(', '));
+  await page.fill('#route-goal', `${START[0] + 1e-6}, ${START[1]}`);
+  await page.click('#plan-route');
+  await page.waitForFunction(() => /same cell: there is nothing to drive/.test(document.querySelector('#route-busy').textContent), null, { timeout: 30_000 });
+
+  // Another terrain: the ends belonged to the one before.
+  await page.selectOption('#dem-select', '');
+  assert.equal(await page.inputValue('#route-start'), '');
+  assert.equal(await page.inputValue('#route-goal'), '');
+
+  // Delete the DEM behind the page's back, then reopen a route made on it from Saved work.
+  const routes = (await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items;
+  const longest = routes.reduce((a, b) => (b.length_2d_m > a.length_2d_m ? b : a));
+  assert.equal((await fetch(`${env.server.url}/api/v1/dems/${dems[0].id}`, { method: 'DELETE' })).status, 204);
+  await page.click('#tab-saved');
+  await page.click('#saved-refresh');
+  await page.waitForFunction(() => document.querySelector('#saved-status').textContent === '');
+  const title = longest.name ?? `Unnamed route #${longest.id.replace(/-/g, '').slice(-6)}`;
+  await page.click(`button[aria-label="Open ${title}"]`);
+  await page.waitForSelector('#route-result:not([hidden])');
+  assert.match(await page.textContent('#dem-upload-error'), /has been deleted: what was made from it is shown without its hillshade/);
+  // The costmap overlay is the base map now: no "no base map" note over it. The time falls back to the 2D length.
+  assert.equal(await page.locator('#map-empty').isVisible(), false);
+  const stats = await page.textContent('#route-stats');
+  assert.doesNotMatch(stats, /Time0 s/, stats);
+  assert.match(stats, /Time\d+ min \d+ s at/, stats);
+  await screenshot(page, 'route-dem-deleted');
+  assert.deepEqual(problems.filter((p) => !/404/.test(p)), []);
   await context.close();
 });

@@ -54,12 +54,15 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
     assert.ok(Math.hypot(p[0] - roi.coordinates[0][i][0], p[1] - roi.coordinates[0][i][1]) < 1e-9, `ROI corner ${i}: ${p}`);
   });
   assert.equal(areas.nfz.length, 1);
-  assert.equal(await page.textContent('#roi-status'), 'Area drawn: 4 corners.');
+  assert.match(await page.textContent('#roi-status'), /^Area: \d+\.\d\d ha, 4 corners\.$/);
   assert.equal(await page.locator('#nfz-list li').count(), 1);
   assert.equal(await page.inputValue('#survey-name'), 'saved field');
+  assert.equal(await page.locator('#survey-stale').isVisible(), false, 'a reopened plan is not stale');
+  assert.equal(await page.evaluate(() => document.querySelector('#panel').scrollTop), 0, 'the panel shows the reopened note from the top');
   assert.equal(await page.inputValue('#camera'), 'dji_mavic2_pro');
   assert.match(await page.textContent('#camera-numbers'), /focal length 10\.26 mm/);
   assert.equal(await page.isChecked('#height-mode-gsd'), true);
+  assert.match(await page.textContent('#flight-geometry'), /^altitude \d+\.\d m; each photo covers/);
   assert.equal(await page.isDisabled('#altitude'), true);
   assert.equal(await page.inputValue('#gsd'), '2');
   assert.equal(await page.inputValue('#front-overlap'), '75');
@@ -110,6 +113,16 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   assert.equal(await page.inputValue('#dem-select'), dem.id);
   await screenshot(page, 'saved-route-reopened');
 
+  // On the route tab the survey's (hidden) area cannot be dragged by accident.
+  const before = await page.evaluate(() => window.terraplan.areas().roi);
+  const corner = await page.evaluate(() => window.terraplan.pixelFor(-77.0527, 38.8090));
+  const away = await page.evaluate(() => window.terraplan.pixelFor(-77.0520, 38.8085));
+  await page.mouse.move(corner[0], corner[1]);
+  await page.mouse.down();
+  await page.mouse.move(away[0], away[1], { steps: 8 });
+  await page.mouse.up();
+  assert.deepEqual(await page.evaluate(() => window.terraplan.areas().roi), before, 'the hidden area is unchanged');
+
   // Delete the survey, then the costmap (its routes go with it).
   await page.click('#tab-saved');
   await page.click('button[aria-label="Delete saved field"]');
@@ -120,6 +133,12 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   await page.waitForFunction(() => document.querySelector('#saved-routes li')?.textContent === 'None yet.');
   assert.equal((await (await fetch(`${env.server.url}/api/v1/surveys/${survey.id}`)).status), 404);
   await screenshot(page, 'saved-after-delete');
+
+  // After a reload the DEM chosen last is the base map again.
+  await page.reload();
+  await page.waitForSelector('body[data-ready="true"]');
+  assert.equal(await page.inputValue('#dem-select'), dem.id);
+  assert.equal(await page.locator('#map-empty').isVisible(), false);
   assert.deepEqual(problems, []);
   await context.close();
 });

@@ -42,8 +42,11 @@ export interface Dem {
   created_at: string;
   width: number;
   height: number;
-  crs: { epsg: number | null; name: string; geographic: boolean };
+  /** `proj4`: the CRS as a PROJ string bound to WGS84 (absent from older servers). */
+  crs: { epsg: number | null; name: string; geographic: boolean; proj4?: string };
   resolution: [number, number];
+  /** The cell size in metres (at the centre, for a geographic DEM). */
+  resolution_m?: [number, number];
   bounds: [number, number, number, number];
   bounds_wgs84: [number, number, number, number];
   min: number;
@@ -99,6 +102,10 @@ export interface SurveyStats {
   cell_count: number;
   makespan_s?: number;
   uav_count?: number;
+  /** The slice angle used (the one "auto" chose), the lane spacing and the distance between photos. */
+  slice_angle_deg?: number;
+  line_spacing_m?: number;
+  trigger_distance_m?: number;
 }
 export interface Camera {
   sensor_width_mm: number;
@@ -164,6 +171,8 @@ export interface Costmap {
   bounds?: [number, number, number, number] | null;
   bounds_wgs84?: [number, number, number, number] | null;
   warnings: string[];
+  /** Once done: among others the range of the traversable cells' costs. */
+  stats?: { cost_min: number | null; cost_max: number | null } | null;
   urls: { self: string; events: string; preview_png: string; legend_svg: string; costmap_tif: string };
 }
 export interface JobEvent {
@@ -188,13 +197,14 @@ export interface Route {
   waypoints: { lon: number; lat: number; height_m: number | null }[];
   geometry: { type: 'LineString'; coordinates: number[][] };
   length_2d_m: number;
-  length_3d_m: number;
+  /** Null (like the slopes, grade, climb and descent) when the costmap's DEM is gone: no heights. */
+  length_3d_m: number | null;
   cost: number;
-  max_slope_deg: number;
-  mean_slope_deg: number;
-  max_grade_deg: number;
-  climb_m: number;
-  descent_m: number;
+  max_slope_deg: number | null;
+  mean_slope_deg: number | null;
+  max_grade_deg: number | null;
+  climb_m: number | null;
+  descent_m: number | null;
   search_ms: number;
   blocked: unknown[];
   /** Every cost change of the chain of replans so far (absent from older servers). */
@@ -260,10 +270,12 @@ export const api = {
  * Uploads a DEM file as the raw body. XMLHttpRequest rather than fetch
  * because only XHR reports upload progress.
  */
-export function uploadDem(file: File, name: string, onProgress: (fraction: number) => void): Promise<Dem> {
+/** Uploads a DEM; `crs` ("EPSG:32633") for a file that does not give its own. */
+export function uploadDem(file: File, name: string, crs: string | null, onProgress: (fraction: number) => void): Promise<Dem> {
   return new Promise((resolve, reject) => {
     const xhr = new XMLHttpRequest();
     const params = new URLSearchParams({ name, file_name: file.name });
+    if (crs) params.set('crs', crs);
     xhr.open('POST', `/api/v1/dems?${params}`);
     const type = /\.(tif|tiff)$/i.test(file.name) ? 'image/tiff' : /\.asc$/i.test(file.name) ? 'text/plain' : 'application/octet-stream';
     xhr.setRequestHeader('Content-Type', type);

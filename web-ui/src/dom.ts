@@ -7,8 +7,15 @@ export function byId<T extends HTMLElement = HTMLElement>(id: string): T {
   return el as T;
 }
 
+/** A number field's value; NaN when it is empty (not 0, which `Number('')` gives) or not a number. */
 export function numberValue(id: string): number {
-  return Number(byId<HTMLInputElement>(id).value);
+  const text = byId<HTMLInputElement>(id).value.trim();
+  return text === '' ? NaN : Number(text);
+}
+
+/** Puts a value into an input or select. */
+export function setValue(id: string, value: string | number): void {
+  byId<HTMLInputElement | HTMLSelectElement>(id).value = String(value);
 }
 
 /** Creates an element with text and attributes. */

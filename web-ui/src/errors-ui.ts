@@ -22,14 +22,14 @@ export class ErrorSlots {
     for (const el of this.root.querySelectorAll('[aria-invalid="true"]')) el.removeAttribute('aria-invalid');
   }
 
-  /** Shows one message in a field's slot (appending to what is there). */
-  show(field: string, text: string): void {
+  /** Shows one message in a field's slot (appending to what is there); `controlId` names the control at fault when the slot serves several. */
+  show(field: string, text: string, controlId?: string): void {
     const slot = this.slot(field) ?? this.slot(this.fallback);
     if (!slot) return;
     slot.textContent = slot.textContent ? `${slot.textContent} ${text}` : text;
     slot.hidden = false;
-    // Mark the control the slot describes, so screen readers announce it.
-    const control = this.root.querySelector<HTMLElement>(`[aria-describedby~="${slot.id}"]`);
+    // Mark the control at fault, so screen readers announce it.
+    const control = (controlId ? document.getElementById(controlId) : null) ?? this.root.querySelector<HTMLElement>(`[aria-describedby~="${slot.id}"]`);
     control?.setAttribute('aria-invalid', 'true');
   }
 
@@ -37,7 +37,7 @@ export class ErrorSlots {
   showError(err: unknown): void {
     if (err instanceof ApiError) {
       const messages = problemToMessages(err.problem, this.rules, this.fallback);
-      for (const m of messages) this.show(m.field, m.text);
+      for (const m of messages) this.show(m.field, m.text, m.control);
       // Bring the first message into view for keyboard and screen users.
       this.slot(messages[0]?.field ?? this.fallback)?.scrollIntoView({ block: 'center' });
     } else {

@@ -3,6 +3,7 @@
 // that one builds default icon styles pointing at Google's servers, and we
 // only need the polygon rings.
 
+import proj4 from 'proj4';
 import type { LonLat, Ring } from './api';
 
 /** A polygon as GeoJSON coordinates: the exterior ring, then holes; rings closed. */
@@ -13,6 +14,7 @@ export class ImportError extends Error {}
 /** Detects the format from the file name, then the content. */
 export function parsePolygons(text: string, fileName = ''): PolygonRings[] {
   const trimmed = text.trimStart();
+  if (trimmed === '') throw new ImportError('The file is empty.');
   const isKml = /\.kml$/i.test(fileName) || trimmed.startsWith('<');
   const polygons = isKml ? parseKml(text) : parseGeoJson(text);
   if (polygons.length === 0) throw new ImportError('The file holds no polygon.');
@@ -24,11 +26,26 @@ export function parseGeoJson(text: string): PolygonRings[] {
   try {
     doc = JSON.parse(text);
   } catch {
-    throw new ImportError('The file is not valid JSON.');
+    throw new ImportError('The file is neither GeoJSON nor KML (it is not valid JSON). Areas can be imported from GeoJSON (.geojson, .json) and KML (.kml) files.');
   }
+  checkGeoJsonCrs(doc);
   const out: PolygonRings[] = [];
   collectGeoJson(doc, out);
   return out;
+}
+
+/** Names the 2008 GeoJSON `crs` member may give for longitude/latitude on WGS84. */
+const WGS84_NAMES = /^(urn:ogc:def:crs:OGC:(1\.3:)?CRS84|urn:ogc:def:crs:EPSG:(\d*\.?\d*)?:4326|EPSG:4326|CRS84|WGS ?84)$/i;
+
+/** Refuses a GeoJSON file that says it is in another CRS (old GeoJSON allowed a `crs` member; projected files use it). */
+function checkGeoJsonCrs(doc: unknown): void {
+  const crs = (doc as { crs?: { properties?: { name?: unknown } } } | null)?.crs;
+  const name = crs?.properties?.name;
+  if (typeof name === 'string' && !WGS84_NAMES.test(name.trim())) {
+    throw new ImportError(
+      `The file's coordinates are in ${name}, not longitude/latitude (WGS84). Export it in EPSG:4326, e.g. ogr2ogr -t_srs EPSG:4326 out.geojson in.geojson.`,
+    );
+  }
 }
 
 /** The polygons of a parsed GeoJSON object (geometry, Feature or collection). */
@@ -77,7 +94,17 @@ function toLonLat(p: unknown): LonLat {
     throw new ImportError('A position is not [longitude, latitude].');
   }
   // Heights (a third number) are dropped: the planner ignores them.
-  return [Number(p[0]), Number(p[1])];
+  return checkRange(Number(p[0]), Number(p[1]));
+}
+
+/** A position must be longitude/latitude: metres of a projected file would put the area nowhere. */
+function checkRange(lon: number, lat: number): LonLat {
+  if (Math.abs(lon) > 180 || Math.abs(lat) > 90) {
+    throw new ImportError(
+      `A position (${lon}, ${lat}) is not a longitude/latitude: the file seems to be in projected coordinates (metres). Export it in WGS84 (EPSG:4326).`,
+    );
+  }
+  return [lon, lat];
 }
 
 /** Closes a ring (first position repeated at the end) if it is open. */
@@ -117,7 +144,49 @@ function ringFromCoordinates(boundary: Element): LonLat[] | null {
     .map((tuple) => {
       const [lon, lat] = tuple.split(',').map(Number);
       if (!Number.isFinite(lon) || !Number.isFinite(lat)) throw new ImportError(`A KML coordinate is not "lon,lat": ${tuple}`);
-      return [lon, lat] as LonLat;
+      return checkRange(lon, lat);
     });
   return closeRing(ring);
+}
+
+/**
+ * The area of lon/lat rings (exterior minus holes), m², measured as the
+ * planner does (SPEC §2): in the UTM zone of the exterior's centroid on
+ * WGS84, so the page's figure and the plan's agree.
+ */
+export function utmArea(rings: PolygonRings): number {
+  const outer = rings[0] ?? [];
+  if (outer.length < 3) return 0;
+  const [lon, lat] = centroid(outer);
+  const zone = Math.min(60, Math.floor((lon + 180) / 6) + 1);
+  const utm = proj4('EPSG:4326', `+proj=utm +zone=${zone}${lat < 0 ? ' +south' : ''} +datum=WGS84 +units=m +no_defs`);
+  const planar = (ring: LonLat[]) => Math.abs(shoelace(ring.map((p) => utm.forward([p[0], p[1]]) as LonLat)));
+  return planar(outer) - rings.slice(1).reduce((sum, hole) => sum + planar(hole), 0);
+}
+
+/** Signed area of a ring (closed or not) by the shoelace formula. */
+function shoelace(ring: LonLat[]): number {
+  let twice = 0;
+  for (let i = 0; i < ring.length; i++) {
+    const [x0, y0] = ring[i];
+    const [x1, y1] = ring[(i + 1) % ring.length];
+    twice += x0 * y1 - x1 * y0;
+  }
+  return twice / 2;
+}
+
+/** The area centroid of a ring in lon/lat (planar, which is all a zone choice needs). */
+function centroid(ring: LonLat[]): LonLat {
+  const a = shoelace(ring);
+  if (Math.abs(a) < 1e-18) return ring[0];
+  let cx = 0;
+  let cy = 0;
+  for (let i = 0; i < ring.length; i++) {
+    const [x0, y0] = ring[i];
+    const [x1, y1] = ring[(i + 1) % ring.length];
+    const f = x0 * y1 - x1 * y0;
+    cx += (x0 + x1) * f;
+    cy += (y0 + y1) * f;
+  }
+  return [cx / (6 * a), cy / (6 * a)];
 }

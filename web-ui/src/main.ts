@@ -110,8 +110,15 @@ map.map.once('rendercomplete', () => performance.mark('terraplan:map-rendered'))
 (window as unknown as { terraplan: unknown }).terraplan = {
   pixelFor: (lon: number, lat: number) => map.pixelFor(lon, lat),
   areas: () => map.getAreas(),
+  fit: (extent: [number, number, number, number]) => map.fitLonLat(extent),
 };
 
-void Promise.all([dems.refresh(), route.loadVehicles(), survey.loadCameras()]).then(() => {
+// The DEM chosen last comes back after a reload (the map is its hillshade).
+const LAST_DEM = 'terraplan.dem';
+selection.onChange((d) => (d ? localStorage.setItem(LAST_DEM, d.id) : localStorage.removeItem(LAST_DEM)));
+
+void Promise.all([dems.refresh(), route.loadVehicles(), survey.loadCameras()]).then(async () => {
+  const last = localStorage.getItem(LAST_DEM);
+  if (last && dems.has(last)) await dems.choose(last);
   document.body.dataset.ready = 'true';
 });

@@ -19,8 +19,10 @@ import { LineString, Point, Polygon, MultiPolygon } from 'ol/geom';
 import type Geometry from 'ol/geom/Geometry';
 import { Fill, Stroke, Style, Circle as CircleStyle, Text, RegularShape } from 'ol/style';
 import { fromLonLat, toLonLat, transformExtent } from 'ol/proj';
-import { defaults as defaultControls, ScaleLine, Attribution } from 'ol/control';
+import { defaults as defaultControls, ScaleLine, Attribution, MousePosition, Control } from 'ol/control';
+import { createEmpty, extend as extendExtent, isEmpty, type Extent } from 'ol/extent';
 import type { Coordinate } from 'ol/coordinate';
+import type { FeatureLike } from 'ol/Feature';
 import type { LonLat, Route, Survey } from './api';
 import type { PolygonRings } from './geo-import';
 import type { ImagePlacement } from './projection';
@@ -52,8 +54,15 @@ export interface MapEvents {
   modeChanged(mode: MapMode): void;
 }
 
+/** What the map does when browsing, by task (only survey areas are editable). */
+const BROWSE_HINTS: Record<'survey' | 'route' | 'all', string> = {
+  survey: 'Drag to pan, scroll to zoom. Drag a corner of an area to edit it; click an edge to add one.',
+  route: 'Drag to pan, scroll to zoom. Build or choose a costmap, then pick the start and the goal.',
+  all: 'Drag to pan, scroll to zoom.',
+};
+
 const MODE_HINTS: Record<MapMode, string> = {
-  browse: 'Drag to pan, scroll to zoom. Drag a corner of an area to edit it.',
+  browse: BROWSE_HINTS.survey,
   'draw-roi': 'Click the corners of the survey area; click the first corner or double-click to finish. Backspace removes the last corner, Escape cancels.',
   'draw-nfz': 'Click the corners of a no-fly zone; click the first corner or double-click to finish. Escape cancels.',
   'place-uav': 'Click where each UAV takes off. Escape when done.',
@@ -98,6 +107,60 @@ function lineStyles(colour: string, width = 3, dashed = false): Style[] {
   ];
 }
 
+/** Segments shorter than this on screen get no arrow (they would clutter turns). */
+const ARROW_MIN_SEGMENT_PX = 70;
+
+/**
+ * Arrows at the middle of the longer segments, pointing the way the vehicle
+ * goes: what a pilot checks first on a mission (where it starts, which way
+ * the lanes are flown).
+ */
+function directionArrows(line: LineString, colour: string, resolution: number): Style[] {
+  const out: Style[] = [];
+  const pts = line.getCoordinates();
+  for (let i = 1; i < pts.length; i++) {
+    const [x0, y0] = pts[i - 1];
+    const [x1, y1] = pts[i];
+    const dx = x1 - x0;
+    const dy = y1 - y0;
+    if (Math.hypot(dx, dy) / resolution < ARROW_MIN_SEGMENT_PX) continue;
+    out.push(
+      new Style({
+        geometry: new Point([(x0 + x1) / 2, (y0 + y1) / 2]),
+        // A triangle's first point is up; rotation is clockwise from north.
+        image: new RegularShape({
+          points: 3,
+          radius: 6,
+          rotation: Math.atan2(dx, dy),
+          rotateWithView: true,
+          fill: new Fill({ color: colour }),
+          stroke: new Stroke({ color: '#fff', width: 1.5 }),
+        }),
+      }),
+    );
+  }
+  return out;
+}
+
+/** A route line: haloed, with direction arrows; faded when another route is highlighted, thicker when it is the one. */
+function routeStyle(feature: FeatureLike, resolution: number, emphasis: 'normal' | 'highlighted' | 'faded'): Style[] {
+  const colour = feature.get('colour') as string;
+  const width = (feature.get('width') as number) + (emphasis === 'highlighted' ? 1.5 : 0);
+  const shown = emphasis === 'faded' ? fade(colour) : colour;
+  const styles = lineStyles(shown, width);
+  if (emphasis === 'faded') styles[0] = new Style({ stroke: new Stroke({ color: 'rgba(255, 255, 255, 0.35)', width: width + 2 }) });
+  const geom = feature.getGeometry();
+  if (emphasis !== 'faded' && geom instanceof LineString) styles.push(...directionArrows(geom, colour, resolution));
+  return styles;
+}
+
+/** A colour "#rrggbb" at 35 % opacity. */
+function fade(colour: string): string {
+  const m = /^#([\da-f]{2})([\da-f]{2})([\da-f]{2})$/i.exec(colour);
+  if (!m) return colour;
+  return `rgba(${parseInt(m[1], 16)}, ${parseInt(m[2], 16)}, ${parseInt(m[3], 16)}, 0.35)`;
+}
+
 const toMap = (p: LonLat | number[]) => fromLonLat([p[0], p[1]]);
 const ringsToMap = (rings: PolygonRings) => rings.map((r) => r.map(toMap));
 
@@ -132,12 +195,27 @@ export class MapView {
     this.surveyLayers = [
       new VectorLayer({ source: this.cells, style: cellStyle, zIndex: 3 }),
       new VectorLayer({ source: this.areas, style: (f) => areaStyles[f.get('kind') as AreaKind], zIndex: 4 }),
-      new VectorLayer({ source: this.flights, style: (f) => f.get('style') as Style | Style[], zIndex: 5 }),
+      new VectorLayer({ source: this.flights, style: (f, res) => (f.get('kind') === 'route' ? routeStyle(f, res, this.emphasis(f)) : (f.get('style') as Style | Style[])), zIndex: 5 }),
     ];
-    this.groundLayer = new VectorLayer({ source: this.ground, style: (f) => f.get('style') as Style | Style[], zIndex: 6 });
+    this.groundLayer = new VectorLayer({
+      source: this.ground,
+      style: (f, res) => (f.get('kind') === 'route' ? routeStyle(f, res, 'normal') : (f.get('style') as Style | Style[])),
+      zIndex: 6,
+    });
     this.map = new OlMap({
       target,
-      controls: defaultControls({ attribution: false }).extend([new ScaleLine(), new Attribution({ collapsible: true })]),
+      controls: defaultControls({ attribution: false }).extend([
+        new ScaleLine(),
+        new Attribution({ collapsible: true }),
+        // Where the pointer is, in the lon, lat order the page's fields take.
+        new MousePosition({
+          projection: 'EPSG:4326',
+          coordinateFormat: (c) => (c ? `${c[0].toFixed(6)}, ${c[1].toFixed(6)}` : ''),
+          className: 'mouse-position',
+          placeholder: '',
+        }),
+        this.fitControl(),
+      ]),
       layers: [this.hillshade, this.costmap, ...this.surveyLayers, this.groundLayer],
       view: new View({ center: fromLonLat([-77.0525, 38.8106]), zoom: 16, maxZoom: 22 }),
       keyboardEventTarget: target,
@@ -157,7 +235,15 @@ export class MapView {
       }
     });
     target.addEventListener('keydown', (e) => this.onKey(e));
+    // Escape ends a drawing or picking mode wherever the focus is (right after pressing "Draw area" it is on that button).
+    document.addEventListener('keydown', (e) => {
+      if (e.key === 'Escape' && this.mode !== 'browse') {
+        this.draw?.abortDrawing();
+        this.setMode('browse');
+      }
+    });
     this.setHint();
+    this.updateEmpty();
   }
 
   getMode(): MapMode {
@@ -173,7 +259,7 @@ export class MapView {
     }
     this.mode = mode;
     const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : mode === 'draw-costlier' ? 'costlier' : null;
-    this.modify.setActive(kind === null);
+    this.modify.setActive(kind === null && this.surveyLayers[0].getVisible());
     if (kind) {
       // stopClick keeps the finishing double-click from zooming the map.
       this.draw = new Draw({ type: 'Polygon', stopClick: true });
@@ -198,16 +284,14 @@ export class MapView {
       this.map.addInteraction(this.snap);
     }
     this.map.getTargetElement()?.classList.toggle('picking', mode !== 'browse');
+    // On a tablet the map sits above the panel: bring it into view for the clicks it now waits for.
+    if (mode !== 'browse') this.map.getTargetElement()?.scrollIntoView({ block: 'nearest' });
     this.setHint();
     this.events.modeChanged(mode);
   }
 
   private onKey(e: KeyboardEvent): void {
-    if (e.key === 'Escape' && this.mode !== 'browse') {
-      this.draw?.abortDrawing();
-      this.setMode('browse');
-      e.preventDefault();
-    } else if (e.key === 'Backspace' && this.draw) {
+    if (e.key === 'Backspace' && this.draw) {
       this.draw.removeLastPoint();
       e.preventDefault();
     } else if (e.key === 'Enter' && this.draw) {
@@ -216,13 +300,25 @@ export class MapView {
     }
   }
 
+  private task: 'survey' | 'route' | 'all' = 'survey';
+
   private setHint(): void {
-    this.hint.textContent = MODE_HINTS[this.mode];
+    this.hint.textContent = this.mode === 'browse' ? BROWSE_HINTS[this.task] : MODE_HINTS[this.mode];
+  }
+
+  /** Says so over the map while there is no base layer (no DEM, no online tiles). */
+  private updateEmpty(): void {
+    const empty = !this.hillshade.getVisible() && !this.costmap.getVisible() && !this.tiles?.getVisible();
+    this.map.getTargetElement()?.parentElement?.classList.toggle('empty', empty);
   }
 
   /** Shows the layers of one task (the other's would clutter the map), or all. */
   showTask(task: 'survey' | 'route' | 'all'): void {
+    this.task = task;
+    this.setHint();
     for (const l of this.surveyLayers) l.setVisible(task !== 'route');
+    // Hidden areas must not be editable: their corners would still catch drags on the route tab.
+    this.modify.setActive(task !== 'route' && this.draw === null);
     this.groundLayer.setVisible(task !== 'survey');
     this.costmap.setOpacity(task === 'survey' ? 0 : this.costmapOpacity);
   }
@@ -233,16 +329,21 @@ export class MapView {
   setHillshade(url: string | null, placement?: ImagePlacement): void {
     if (!url || !placement) {
       this.hillshade.setVisible(false);
+      this.hillshadeExtent = null;
+      this.updateEmpty();
       return;
     }
     this.hillshade.setSource(new ImageStatic({ url, imageExtent: placement.extent, projection: placement.projection }));
     this.hillshade.setVisible(true);
+    this.hillshadeExtent = transformExtent(placement.extent, placement.projection, 'EPSG:3857');
+    this.updateEmpty();
   }
 
   /** Turns the online tile layer on or off; it is created only when first wanted, so no request is made otherwise. */
   setOnlineTiles(urlTemplate: string | null): void {
     if (!urlTemplate) {
       this.tiles?.setVisible(false);
+      this.updateEmpty();
       return;
     }
     if (!this.tiles) {
@@ -251,16 +352,19 @@ export class MapView {
     }
     this.tiles.setSource(new XYZ({ url: urlTemplate, attributions: '© OpenStreetMap contributors', crossOrigin: 'anonymous' }));
     this.tiles.setVisible(true);
+    this.updateEmpty();
   }
 
   setCostmapOverlay(url: string | null, placement?: ImagePlacement): void {
     if (!url || !placement) {
       this.costmap.setVisible(false);
+      this.updateEmpty();
       return;
     }
     // No interpolation: class colours must stay crisp at any zoom.
     this.costmap.setSource(new ImageStatic({ url, imageExtent: placement.extent, projection: placement.projection, interpolate: false }));
     this.costmap.setVisible(true);
+    this.updateEmpty();
   }
 
   private costmapOpacity = 0.7;
@@ -268,6 +372,35 @@ export class MapView {
   setCostmapOpacity(opacity: number): void {
     this.costmapOpacity = opacity;
     this.costmap.setOpacity(opacity);
+  }
+
+  /** A map button that zooms to what is shown: the areas and routes, else the terrain model. */
+  private fitControl(): Control {
+    const button = document.createElement('button');
+    button.type = 'button';
+    button.textContent = '⤢';
+    button.title = 'Zoom to the areas and routes, or the terrain model';
+    button.setAttribute('aria-label', button.title);
+    button.addEventListener('click', () => this.fitAll());
+    const element = document.createElement('div');
+    element.className = 'fit-all ol-unselectable ol-control';
+    element.append(button);
+    return new Control({ element });
+  }
+
+  /** The extent of the hillshade shown, in the view's projection (null when none). */
+  private hillshadeExtent: Extent | null = null;
+
+  /** Zooms to the shown areas and routes, or the terrain model when there are none. */
+  fitAll(): void {
+    const extent = createEmpty();
+    const sources = [this.areas, ...(this.surveyLayers[0].getVisible() ? [this.cells, this.flights] : []), ...(this.groundLayer.getVisible() ? [this.ground] : [])];
+    for (const src of sources) {
+      const e = src.getFeatures().length ? src.getExtent() : null;
+      if (e) extendExtent(extent, e);
+    }
+    const target = !isEmpty(extent) ? extent : this.hillshadeExtent;
+    if (target) this.map.getView().fit(target, { padding: [30, 30, 30, 30], maxZoom: 19, duration: 250 });
   }
 
   /** Zooms to a lon/lat extent [west, south, east, north]. */
@@ -338,11 +471,29 @@ export class MapView {
       this.cells.addFeature(new Feature({ geometry: geom }));
     }
     survey.uavs.forEach((uav, i) => {
-      for (const sortie of uav.sorties) {
+      uav.sorties.forEach((sortie, k) => {
         const line = new LineString(sortie.route.coordinates.map(toMap));
-        this.flights.addFeature(new Feature({ geometry: line, kind: 'route', uav: uav.id, colour: colours(i), style: lineStyles(colours(i), 2.5) }));
-      }
+        this.flights.addFeature(new Feature({ geometry: line, kind: 'route', uav: uav.id, sortie: k, colour: colours(i), width: 2.5 }));
+      });
     });
+  }
+
+  private highlighted: { uav: string; sortie: number | null } | null = null;
+
+  /**
+   * Brings one UAV's route (or one of its sorties) forward: thicker, with
+   * the others faded. Null shows them all alike.
+   */
+  highlightRoute(uav: string | null, sortie: number | null = null): void {
+    this.highlighted = uav === null ? null : { uav, sortie };
+    this.flights.changed();
+  }
+
+  private emphasis(f: FeatureLike): 'normal' | 'highlighted' | 'faded' {
+    const h = this.highlighted;
+    if (!h) return 'normal';
+    const mine = f.get('uav') === h.uav && (h.sortie === null || f.get('sortie') === h.sortie);
+    return mine ? 'highlighted' : 'faded';
   }
 
   // ---- ground routes ----
@@ -373,7 +524,7 @@ export class MapView {
     }
     if (route) {
       const line = new LineString(route.geometry.coordinates.map(toMap));
-      this.ground.addFeature(new Feature({ geometry: line, kind: 'route', style: lineStyles('#00b4ff', 3.5) }));
+      this.ground.addFeature(new Feature({ geometry: line, kind: 'route', colour: '#00b4ff', width: 3.5 }));
     }
   }
 

@@ -6,17 +6,21 @@ import type { Problem } from './api';
 
 /** Where a request member's fault is shown: a field key and its plain name. */
 export interface FieldRule {
-  /** JSON pointer prefix, matched at a segment boundary ("/uavs" matches "/uavs/2/start"). */
+  /** JSON pointer prefix, matched at a segment boundary ("/uavs" matches "/uavs/2/start"); a `*` segment matches any one segment. */
   prefix: string;
   /** The key of the place on the page (an element id ends in `-error`). */
   field: string;
   /** What the member is called on the page. */
   label: string;
+  /** The id of the control to mark invalid, when not the first one the slot describes. */
+  control?: string;
 }
 
 export interface FieldMessage {
   field: string;
   text: string;
+  /** The id of the control to mark invalid (else the first one the field's slot describes). */
+  control?: string;
 }
 
 /** The survey request's members and where each is shown. Longer prefixes first wins. */
@@ -36,6 +40,7 @@ export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/slice_angle_deg', field: 'slice-angle', label: 'Slice angle' },
   { prefix: '/speed_m_s', field: 'speed', label: 'Speed' },
   { prefix: '/altitude_frame', field: 'altitude-frame', label: 'Altitude frame' },
+  { prefix: '/uavs/*/max_flight_time_s', field: 'battery', label: 'Battery' },
   { prefix: '/uavs', field: 'uavs', label: 'UAVs' },
   { prefix: '/assignment', field: 'uavs', label: 'Assignment' },
 ];
@@ -43,6 +48,8 @@ export const SURVEY_FIELDS: FieldRule[] = [
 export const COSTMAP_FIELDS: FieldRule[] = [
   { prefix: '/dem_id', field: 'dem', label: 'Terrain model' },
   { prefix: '/vehicle', field: 'vehicle', label: 'Vehicle' },
+  { prefix: '/vehicle/max_slope_deg', field: 'vehicle', label: 'Max slope', control: 'max-slope' },
+  { prefix: '/vehicle/max_step_m', field: 'vehicle', label: 'Max step', control: 'max-step' },
   { prefix: '/options/resolution_m', field: 'resolution', label: 'Cell size' },
   { prefix: '/options', field: 'vehicle', label: 'Costmap option' },
 ];
@@ -57,7 +64,9 @@ export const ROUTE_FIELDS: FieldRule[] = [
 ];
 
 function matches(pointer: string, prefix: string): boolean {
-  return pointer === prefix || pointer.startsWith(prefix + '/');
+  const want = prefix.split('/');
+  const have = pointer.split('/');
+  return have.length >= want.length && want.every((seg, i) => seg === '*' || seg === have[i]);
 }
 
 /** The rule for a pointer: the longest matching prefix, or undefined. */
@@ -82,10 +91,58 @@ export function plainMessage(pointer: string, message: string, rule?: FieldRule)
   if (/fewer than|at least (3|4) (distinct )?(points|positions|vertices)/i.test(message)) {
     return `${label}: the outline needs at least three distinct corners. ${capitalise(message)}.`;
   }
-  const uav = /^\/(?:uavs|cost_changes)\/(\d+)/.exec(pointer);
-  const which = uav ? ` ${Number(uav[1]) + 1}` : '';
-  return `${label}${which}: ${message.replace(/^\/[\w/]+:\s*/, '')}`;
+  let text = pageWords(message.replace(/^\/[\w/]+:\s*/, ''));
+  // The page takes overlaps in percent; the API's messages give fractions.
+  if (rule?.field === 'front-overlap' || rule?.field === 'side-overlap') {
+    text = text.replace(/^(-?[\d.]+) is outside the allowed range \[([\d.]+), ([\d.]+)\]/, (_, v: string, lo: string, hi: string) => `${pct(v)} % is outside the allowed range ${pct(lo)}–${pct(hi)} %`);
+  }
+  // The battery field is in minutes and the page shows no cell numbers.
+  if (rule?.field === 'battery') {
+    text = text.replace(/\bcell \d+\b/g, 'one of the cells').replace(/\b(\d+(?:\.\d+)?) s\b/g, (_, n: string) => minutesAndSeconds(Number(n)));
+  }
+  // A fault of one UAV or area says which (numbered from 1, as on the page); the battery's own messages name their UAV.
+  const item = /^\/(uavs|cost_changes)\/(\d+)/.exec(pointer);
+  if (item && rule?.field !== 'battery') {
+    const n = Number(item[2]) + 1;
+    return `${item[1] === 'uavs' ? `UAV ${n}` : `${label} ${n}`}: ${text}`;
+  }
+  // "Max step: max step must be …" would say the name twice.
+  if (text.toLowerCase().startsWith(`${label.toLowerCase()} `)) text = text.slice(label.length + 1);
+  return `${label}: ${text}`;
 }
+
+/** API member names as the page calls them (messages are written for API users). */
+const PAGE_WORDS: [RegExp, string][] = [
+  [/\bset allow_partial_dem: true\b/g, 'tick “Plan even where the DEM has gaps”'],
+  [/\ballow_partial_dem\b/g, '“Plan even where the DEM has gaps”'],
+  [/\bmax_flight_time_s\b/g, 'battery time'],
+  [/\bmax_step_m\b/g, 'max step'],
+  [/\bmax_slope_deg\b/g, 'max slope'],
+  [/\baltitude_m\b/g, 'altitude'],
+  [/\bgsd_cm_px\b/g, 'GSD'],
+  [/\bspeed_m_s\b/g, 'speed'],
+  [/\bslice_angle_deg\b/g, 'slice angle'],
+  [/\bresolution_m\b/g, 'cell size'],
+  [/\bfront_overlap\b/g, 'front overlap'],
+  [/\bside_overlap\b/g, 'side overlap'],
+];
+
+function pageWords(message: string): string {
+  let text = message;
+  for (const [pattern, words] of PAGE_WORDS) text = text.replace(pattern, words);
+  return text;
+}
+
+/** 45 → "45 s", 360 → "6 min", 367 → "6 min 7 s". */
+function minutesAndSeconds(seconds: number): string {
+  const total = Math.round(seconds);
+  const min = Math.floor(total / 60);
+  const sec = total % 60;
+  if (min === 0) return `${sec} s`;
+  return sec === 0 ? `${min} min` : `${min} min ${sec} s`;
+}
+
+const pct = (fraction: string) => String(Math.round(Number(fraction) * 1000) / 10);
 
 function capitalise(s: string): string {
   return s.charAt(0).toUpperCase() + s.slice(1);
@@ -102,7 +159,7 @@ export function problemToMessages(problem: Problem, rules: FieldRule[], fallback
     const m = /^(\/[\w/]*):\s*(.*)$/s.exec(problem.detail ?? '');
     if (m) {
       const rule = ruleFor(m[1], rules);
-      if (rule) return [{ field: rule.field, text: plainMessage(m[1], m[2], rule) }];
+      if (rule) return [withControl({ field: rule.field, text: plainMessage(m[1], m[2], rule) }, rule)];
     }
     return [{ field: fallback, text: statusMessage(problem) }];
   }
@@ -112,9 +169,13 @@ export function problemToMessages(problem: Problem, rules: FieldRule[], fallback
     const text = plainMessage(issue.pointer, issue.message, rule);
     const field = rule?.field ?? fallback;
     // One message per field and text: a ring fault is often reported per ring.
-    if (!out.some((o) => o.field === field && o.text === text)) out.push({ field, text });
+    if (!out.some((o) => o.field === field && o.text === text)) out.push(withControl({ field, text }, rule));
   }
   return out;
+}
+
+function withControl(m: FieldMessage, rule: FieldRule | undefined): FieldMessage {
+  return rule?.control ? { ...m, control: rule.control } : m;
 }
 
 /** A problem without field faults in plain words, by status. */

@@ -134,6 +134,29 @@ function el(name: string, attrs: Record<string, string | number>, text?: string)
   return e;
 }
 
+/**
+ * The SVG path of the terrain under a profile: one closed area per run of
+ * points with a known terrain height, each down to the axis at `bottom`
+ * (a gap in the DEM splits the terrain, rather than one area spanning it).
+ */
+export function terrainArea(points: ProfilePoint[], s: { x(d: number): number; y(h: number): number }, bottom: number): string {
+  let path = '';
+  let run: ProfilePoint[] = [];
+  const close = () => {
+    if (run.length >= 2) {
+      path += run.map((p, i) => `${i ? 'L' : 'M'}${s.x(p.distance_m).toFixed(1)},${s.y(p.terrain_m!).toFixed(1)}`).join('');
+      path += `L${s.x(run[run.length - 1].distance_m).toFixed(1)},${bottom}L${s.x(run[0].distance_m).toFixed(1)},${bottom}Z`;
+    }
+    run = [];
+  };
+  for (const p of points) {
+    if (p.terrain_m == null) close();
+    else run.push(p);
+  }
+  close();
+  return path;
+}
+
 /** Draws the chart into `container` (replacing what was there). */
 export function renderProfileChart(
   container: HTMLElement,
@@ -166,22 +189,9 @@ export function renderProfileChart(
   svg.append(el('text', { x: box.width - box.right, y: box.height - 2, 'text-anchor': 'end', class: 'axis' }, 'distance (m)'));
   svg.append(el('text', { x: 2, y: box.top + 8, class: 'axis' }, 'm'));
 
-  // Terrain as a filled area, where known (gaps split it).
-  let terrainPath = '';
-  let open = false;
-  for (const p of points) {
-    if (p.terrain_m == null) {
-      open = false;
-      continue;
-    }
-    terrainPath += `${open ? 'L' : 'M'}${s.x(p.distance_m).toFixed(1)},${s.y(p.terrain_m).toFixed(1)}`;
-    open = true;
-  }
-  if (terrainPath) {
-    const known = points.filter((p) => p.terrain_m != null);
-    const area = `${terrainPath}L${s.x(known[known.length - 1].distance_m).toFixed(1)},${bottom}L${s.x(known[0].distance_m).toFixed(1)},${bottom}Z`;
-    svg.append(el('path', { d: area, class: 'terrain' }));
-  }
+  // Terrain as a filled area, where known: each run between gaps is its own area down to the axis.
+  const terrainPath = terrainArea(points, s, bottom);
+  if (terrainPath) svg.append(el('path', { d: terrainPath, class: 'terrain' }));
   const flown = points.map((p, i) => `${i ? 'L' : 'M'}${s.x(p.distance_m).toFixed(1)},${s.y(p.altitude_m).toFixed(1)}`).join('');
   svg.append(el('path', { d: flown, class: 'flown', stroke: opts.colour }));
   container.append(svg);

@@ -1,8 +1,9 @@
 // Placing raster images (DEM hillshades, costmap previews) on the map. They
 // are drawn in the raster's own CRS, so OpenLayers needs that projection:
-// proj4 definitions are built here for the common projected families (UTM
-// on WGS84, NAD83, ETRS89); any other CRS falls back to the WGS84 bounds,
-// which is only approximate (the API gives no proj4/WKT definition).
+// the server gives its PROJ definition (`crs.proj4`, bound to WGS84 so the
+// datum shift is in it); for servers that did not, definitions are built
+// here for the common projected families (UTM on WGS84, NAD83, ETRS89), and
+// any other CRS falls back to the WGS84 bounds, which is only approximate.
 
 import proj4 from 'proj4';
 import { register } from 'ol/proj/proj4';
@@ -34,16 +35,23 @@ type Extent = [number, number, number, number];
  * Where an image goes, given its extent in its CRS and its WGS84 envelope
  * (the approximate fallback when the CRS is not one we can define).
  */
-export function placeImage(crs: { epsg: number | null } | null | undefined, extent: Extent, wgs84: Extent): ImagePlacement {
+export function placeImage(
+  crs: { epsg: number | null; proj4?: string | null } | null | undefined,
+  extent: Extent,
+  wgs84: Extent,
+): ImagePlacement {
   const epsg = crs?.epsg;
-  if (epsg != null) {
-    const code = `EPSG:${epsg}`;
-    if (getProjection(code)) return { projection: code, extent, exact: true };
-    const def = proj4Definition(epsg);
-    if (def) {
+  const def = crs?.proj4?.trim() || (epsg != null ? proj4Definition(epsg) : null);
+  const code = epsg != null ? `EPSG:${epsg}` : def ? `TERRAPLAN:${def}` : null;
+  if (code && getProjection(code)) return { projection: code, extent, exact: true };
+  if (code && def) {
+    try {
       proj4.defs(code, def);
       register(proj4);
       return { projection: code, extent, exact: true };
+    } catch {
+      // A definition proj4js cannot read: forgotten (so later registrations work), and the image placed approximately.
+      delete (proj4.defs as unknown as Record<string, unknown>)[code];
     }
   }
   return { projection: 'EPSG:4326', extent: wgs84, exact: false };

@@ -24,11 +24,16 @@ export interface StoredCostChange {
   cost: number;
 }
 
-/** The cost typed in the input, or why it cannot be used. */
-export function parseCost(text: string): { cost: number } | { error: string } {
+/** "the costmap’s cells cost 1.0 to 20.0", for the hint and the messages (null range: not said). */
+export function costRangeWords(range: [number, number] | null): string {
+  return range ? `the costmap’s cells cost ${range[0].toFixed(1)} to ${range[1].toFixed(1)}` : 'the costmap’s cells cost 1 and more';
+}
+
+/** The cost typed in the input, or why it cannot be used; `range` is the costmap's own (its stats). */
+export function parseCost(text: string, range: [number, number] | null = null): { cost: number } | { error: string } {
   const t = text.trim();
   const cost = t === '' ? NaN : Number(t);
-  if (!Number.isFinite(cost)) return { error: 'Cost: type a number greater than 0 (the costmap’s cells cost 1 to 20).' };
+  if (!Number.isFinite(cost)) return { error: `Cost: type a number greater than 0 (${costRangeWords(range)}).` };
   if (!(cost > 0)) return { error: `Cost: it must be greater than 0, not ${t} (block the area instead to make it impassable).` };
   if (cost > COST_MAX) return { error: `Cost: at most ${COST_MAX.toLocaleString('en')}.` };
   return { cost };

@@ -10,7 +10,7 @@ import type { PolygonRings } from './geo-import';
 import type { MapMode, MapView } from './map';
 import { COSTMAP_FIELDS, ROUTE_FIELDS } from './problems';
 import { costmapNeedsDem, placeCostmap } from './projection';
-import { areaRings, blockedStatus, costlierOfRoute, costlierStatus, parseCost, replanBody, type CostlierArea } from './route-changes';
+import { areaRings, blockedStatus, costlierOfRoute, costlierStatus, costRangeWords, parseCost, replanBody, type CostlierArea } from './route-changes';
 import type { DemSelection } from './state';
 
 export class RoutePanel {
@@ -45,6 +45,12 @@ export class RoutePanel {
     byId('pick-goal').addEventListener('click', () => this.map.setMode('pick-goal'));
     byId('pick-position').addEventListener('click', () => this.map.setMode('pick-position'));
     for (const id of ['route-start', 'route-goal', 'route-position']) byId(id).addEventListener('change', () => this.showPoints());
+    // Enter in a typed end plans, as in a form.
+    for (const id of ['route-start', 'route-goal', 'route-speed']) {
+      byId(id).addEventListener('keydown', (e) => {
+        if ((e as KeyboardEvent).key === 'Enter') void this.planRoute();
+      });
+    }
     byId('plan-route').addEventListener('click', () => void this.planRoute());
     byId('draw-block').addEventListener('click', () => this.map.setMode('draw-block'));
     byId('clear-block').addEventListener('click', () => {
@@ -76,11 +82,19 @@ export class RoutePanel {
     if (!v) return;
     byId<HTMLInputElement>('max-slope').placeholder = String(v.max_slope_deg);
     byId<HTMLInputElement>('max-step').placeholder = String(v.max_step_m);
+    byId('vehicle-numbers').textContent = vehicleSummary(v);
   }
 
   private async demChanged(dem: Dem | null): Promise<void> {
+    this.clearEnds();
     this.setCostmap(null);
     await this.listCostmaps(dem);
+  }
+
+  /** Forgets the start, goal and rover position: they belong to the terrain shown before. */
+  private clearEnds(): void {
+    for (const id of ['route-start', 'route-goal', 'route-position']) byId<HTMLInputElement>(id).value = '';
+    this.showPoints();
   }
 
   /** Fills the costmap chooser with the finished costmaps of this DEM. */
@@ -151,6 +165,7 @@ export class RoutePanel {
     try {
       const cm = await api.getCostmap(id);
       if (this.dem.current?.id !== cm.dem_id) {
+        this.clearEnds();
         this.switchingDem = true;
         try {
           await this.chooseDem(cm.dem_id, true);
@@ -173,6 +188,7 @@ export class RoutePanel {
     if (!cm) {
       this.map.setCostmapOverlay(null);
       byId<HTMLSelectElement>('costmap-select').value = '';
+      byId('costmap-status').textContent = '';
       return;
     }
     // The costmap's own bounds place it; only costmaps of older servers need their DEM.
@@ -185,6 +201,13 @@ export class RoutePanel {
     if (![...select.options].some((o) => o.value === cm.id)) select.append(h('option', { value: cm.id }, cm.name ?? cm.vehicle.name));
     select.value = cm.id;
     byId('costmap-status').textContent = `Costmap for ${cm.vehicle.name} (${cm.width}×${cm.height} cells).`;
+    byId('cost-hint').textContent = `Cells inside the area cost this instead (${costRangeWords(this.costRange())}); the route avoids it where a detour is cheaper.`;
+  }
+
+  /** The range of the shown costmap's traversable costs (null when it does not say). */
+  private costRange(): [number, number] | null {
+    const s = this.costmap?.stats;
+    return s && s.cost_min != null && s.cost_max != null ? [s.cost_min, s.cost_max] : null;
   }
 
   // ---- map events ----
@@ -205,7 +228,7 @@ export class RoutePanel {
 
   private drawCostlier(): void {
     this.routeErrors.clear();
-    const parsed = parseCost(byId<HTMLInputElement>('cost-value').value);
+    const parsed = parseCost(byId<HTMLInputElement>('cost-value').value, this.costRange());
     if ('error' in parsed) {
       this.routeErrors.show('cost', parsed.error);
       return;
@@ -246,12 +269,22 @@ export class RoutePanel {
     if (!start) this.routeErrors.show('start', 'Start: pick it on the map or type “lon, lat”.');
     if (!goal) this.routeErrors.show('goal', 'Goal: pick it on the map or type “lon, lat”.');
     if (!start || !goal) return;
+    // A new route starts from the costmap as built: the areas of the shown route's replans do not come with it.
+    const inherited = (this.route?.blocked.length ?? 0) + (this.route?.cost_changes?.length ?? 0);
+    if (inherited > 0 && !window.confirm(`Plan a new route on the costmap as built? It does not keep the ${inherited} blocked or costlier area${inherited === 1 ? '' : 's'} of the replans; “Replan around the areas” keeps them.`)) return;
+    // Both ends are set (typed, perhaps): the map stops waiting for a click that would move one.
+    const mode = this.map.getMode();
+    if (mode === 'pick-start' || mode === 'pick-goal') this.map.setMode('browse');
     const body: Record<string, unknown> = { start, goal };
     const speed = byId<HTMLInputElement>('route-speed').value;
     if (speed !== '') body.speed_m_s = Number(speed);
+    let planned: Route | null = null;
     await this.busy('Planning…', async () => {
-      this.setRoute(await api.createRoute(this.costmap!.id, body));
+      planned = await api.createRoute(this.costmap!.id, body);
+      this.setRoute(planned);
     });
+    // Both ends in one cell: a "route" of one point, which is worth saying.
+    if (planned && (planned as Route).waypoints.length < 2) byId('route-busy').textContent = 'Start and goal are in the same cell: there is nothing to drive.';
   }
 
   private async replan(): Promise<void> {
@@ -316,7 +349,8 @@ export class RoutePanel {
       ['Length (2D)', formatLength(route.length_2d_m)],
       ['Length (3D)', formatLength(route.length_3d_m)],
       ['Cost', formatNumber(route.cost, 1)],
-      ['Time', speed > 0 ? `${formatDuration(route.length_3d_m / speed)} at ${formatNumber(speed, 1)} m/s` : '–'],
+      // Along the terrain when its heights are known (no DEM: the plain length).
+      ['Time', speed > 0 ? `${formatDuration((route.length_3d_m ?? route.length_2d_m) / speed)} at ${formatNumber(speed, 1)} m/s` : '–'],
       ['Max slope', formatDegrees(route.max_slope_deg)],
       ['Mean slope', formatDegrees(route.mean_slope_deg)],
       ['Max grade', formatDegrees(route.max_grade_deg)],
@@ -356,4 +390,9 @@ export class RoutePanel {
       this.routeErrors.showError(err);
     }
   }
+}
+
+/** A vehicle preset's numbers in a sentence, under the chooser. */
+export function vehicleSummary(v: Vehicle): string {
+  return `${v.width_m} × ${v.length_m} m (width × length); climbs steps up to ${v.max_step_m} m and slopes up to ${v.max_slope_deg}°.`;
 }

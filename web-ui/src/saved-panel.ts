@@ -36,22 +36,22 @@ export class SavedPanel {
       const [surveys, costmaps, routes, dems] = await Promise.all([api.listSurveys(), api.listCostmaps(), api.listRoutes(), api.listDems()]);
       this.fill('saved-surveys', 'survey', surveys.items.map((s) => ({
         id: s.id,
-        title: s.name ?? `Survey ${s.id.slice(0, 8)}`,
+        title: s.name ?? `Unnamed survey ${idTail(s.id)}`,
         detail: `${formatDate(s.created_at)} · ${formatArea(s.area_m2)} · ${s.uav_count} UAV${s.uav_count === 1 ? '' : 's'} · ${formatDuration(s.makespan_s)}`,
       })));
       this.fill('saved-costmaps', 'costmap', costmaps.items.map((c) => ({
         id: c.id,
-        title: c.name ?? `Costmap ${c.id.slice(0, 8)}`,
+        title: c.name ?? `${c.vehicle.name} costmap ${idTail(c.id)}`,
         detail: `${formatDate(c.created_at)} · ${c.vehicle.name} · ${c.status}`,
       })));
       this.fill('saved-routes', 'route', routes.items.map((r) => ({
         id: r.id,
-        title: r.name ?? `Route ${r.id.slice(0, 8)}`,
+        title: r.name ?? `Unnamed route ${idTail(r.id)}`,
         detail: `${formatDate(r.created_at)} · ${formatLength(r.length_2d_m)}${r.parent_id ? ' · replanned' : ''}`,
       })));
       this.fill('saved-dems', 'dem', dems.items.map((d) => ({
         id: d.id,
-        title: d.name ?? d.file_name ?? d.id.slice(0, 8),
+        title: d.name ?? d.file_name ?? `DEM ${idTail(d.id)}`,
         detail: `${formatDate(d.created_at)} · ${d.width}×${d.height} · ${d.crs.name}`,
       })));
       status.textContent = '';
@@ -72,7 +72,7 @@ export class SavedPanel {
         const open = h('button', { type: 'button', 'aria-label': `Open ${e.title}` }, 'Open');
         open.addEventListener('click', () => void this.open(kind, e.id));
         const del = h('button', { type: 'button', class: 'danger', 'aria-label': `Delete ${e.title}` }, 'Delete');
-        del.addEventListener('click', () => void this.remove(kind, e));
+        del.addEventListener('click', () => void this.remove(kind, e, del));
         return h('li', {}, h('div', {}, h('strong', {}, e.title), h('br'), h('small', {}, e.detail)), h('div', { class: 'buttons' }, open, del));
       }),
     );
@@ -90,10 +90,18 @@ export class SavedPanel {
     }
   }
 
-  private async remove(kind: 'survey' | 'costmap' | 'route' | 'dem', e: Entry): Promise<void> {
-    const extra = kind === 'costmap' ? ' Its routes are deleted with it.' : '';
+  private async remove(kind: 'survey' | 'costmap' | 'route' | 'dem', e: Entry, button: HTMLButtonElement): Promise<void> {
+    // A second click while the first is being answered would delete twice (and report the second as not found).
+    if (button.disabled) return;
+    const extra =
+      kind === 'costmap'
+        ? ' Its routes are deleted with it.'
+        : kind === 'dem'
+          ? ' The costmaps, routes and surveys made from it are kept, without its hillshade; new routes on those costmaps have no heights.'
+          : '';
     if (!window.confirm(`Delete “${e.title}”?${extra}`)) return;
     this.errors.clear();
+    button.disabled = true;
     try {
       if (kind === 'survey') await api.deleteSurvey(e.id);
       else if (kind === 'costmap') await api.deleteCostmap(e.id);
@@ -103,6 +111,17 @@ export class SavedPanel {
       await this.refresh();
     } catch (err) {
       this.errors.showError(err);
+    } finally {
+      button.disabled = false;
     }
   }
+}
+
+/**
+ * A short tag telling unnamed items apart: the end of the id. (Ids are
+ * UUIDv7: their start is the creation time, the same for items made
+ * together; the end is random.)
+ */
+export function idTail(id: string): string {
+  return `#${id.replace(/-/g, '').slice(-6)}`;
 }

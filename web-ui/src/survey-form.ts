@@ -47,6 +47,8 @@ export interface SurveyFormValues {
   speedMS: number;
   altitudeFrame: 'relative' | 'amsl' | 'terrain';
   assignment: 'balanced' | 'competition' | 'min_reach';
+  /** Flight time on one battery, minutes, for every UAV (NaN: unlimited, or each UAV's own from a reopened survey). */
+  batteryMin: number;
   uavs: UavStart[];
   /** Members of a reopened survey's request the form has no control for (sent again as they were). */
   extra: Record<string, unknown>;
@@ -71,6 +73,31 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   if (slice !== 'auto' && slice !== '' && !Number.isFinite(Number(slice))) {
     errors.push({ field: 'slice-angle', text: 'Slice angle: give a number of degrees, or “auto”.' });
   }
+  // An empty number field is a fault here, never a silent 0 (an empty overlap would fly 0 % overlap).
+  // [error slot, label, value, the control's id]
+  const needed: [string, string, number, string][] = [
+    v.heightMode === 'gsd' ? ['altitude', 'Ground sample distance (cm/px)', v.gsdCmPx, 'gsd'] : ['altitude', 'Altitude (m)', v.altitudeM, 'altitude'],
+    ['front-overlap', 'Front overlap (%)', v.frontOverlapPct, 'front-overlap'],
+    ['side-overlap', 'Side overlap (%)', v.sideOverlapPct, 'side-overlap'],
+    ['speed', 'Speed (m/s)', v.speedMS, 'speed'],
+  ];
+  if (v.camera === 'custom') {
+    const c = v.customCamera;
+    needed.push(
+      ['camera', 'Sensor width (mm)', c.sensor_width_mm, 'cam-sw'],
+      ['camera', 'Sensor height (mm)', c.sensor_height_mm, 'cam-sh'],
+      ['camera', 'Focal length (mm)', c.focal_length_mm, 'cam-f'],
+      ['camera', 'Image width (px)', c.image_width_px, 'cam-iw'],
+      ['camera', 'Image height (px)', c.image_height_px, 'cam-ih'],
+    );
+  }
+  for (const [field, label, value, control] of needed) {
+    if (!Number.isFinite(value)) errors.push({ field, text: `${label}: give a number.`, control });
+  }
+  const battery = Number.isFinite(v.batteryMin) ? v.batteryMin : null;
+  if (battery !== null && (battery < BATTERY_MIN_RANGE[0] || battery > BATTERY_MIN_RANGE[1])) {
+    errors.push({ field: 'battery', text: `Battery: give a flight time from ${BATTERY_MIN_RANGE[0]} to ${BATTERY_MIN_RANGE[1]} minutes, or leave it empty for no limit.` });
+  }
   if (errors.length > 0) return { body: null, errors };
 
   const body: Record<string, unknown> = {
@@ -93,17 +120,79 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     body.dem_id = v.demId;
     if (v.allowPartialDem) body.allow_partial_dem = true;
   }
-  // No UAVs placed: the server puts one at the ROI's first vertex.
-  if (v.uavs.length > 0) {
-    body.uavs = v.uavs.map((u) => {
+  // No UAVs placed: the server puts one at the ROI's first vertex; with a
+  // battery limit that UAV is spelled out here, as the limit is per UAV.
+  const uavs: UavStart[] = v.uavs.length > 0 || battery === null ? v.uavs : [{ id: 'uav1', start: v.roi![0][0] }];
+  if (uavs.length > 0) {
+    body.uavs = uavs.map((u) => {
       const uav: Record<string, unknown> = { id: u.id, start: u.start };
       if (u.speed_m_s != null) uav.speed_m_s = u.speed_m_s;
-      if (u.max_flight_time_s != null) uav.max_flight_time_s = u.max_flight_time_s;
+      const seconds = battery !== null ? round(battery * 60, 1) : u.max_flight_time_s;
+      if (seconds != null) uav.max_flight_time_s = seconds;
       return uav;
     });
   }
   return { body, errors };
 }
+
+/** What a camera at a height gives on the ground (as the server computes it, coverage/camera.rs). */
+export interface FlightGeometry {
+  altitudeM: number;
+  gsdCmPx: number;
+  footprintSideM: number;
+  footprintFrontM: number;
+  lineSpacingM: number;
+  triggerDistanceM: number;
+  /** Seconds between photos at the survey speed. */
+  triggerIntervalS: number;
+}
+
+/**
+ * The flight geometry of a camera flown at an altitude, or at the altitude
+ * giving a GSD (`height` says which); overlaps in percent. Null when the
+ * numbers cannot give one (a field empty or out of range).
+ */
+export function flightGeometry(
+  camera: Camera,
+  height: { mode: 'altitude'; altitudeM: number } | { mode: 'gsd'; gsdCmPx: number },
+  sideOverlapPct: number,
+  frontOverlapPct: number,
+  speedMS: number,
+): FlightGeometry | null {
+  const portrait = camera.orientation === 'portrait';
+  const acrossMm = portrait ? camera.sensor_height_mm : camera.sensor_width_mm;
+  const acrossPx = portrait ? camera.image_height_px : camera.image_width_px;
+  const alongMm = portrait ? camera.sensor_width_mm : camera.sensor_height_mm;
+  const f = camera.focal_length_mm;
+  if (![acrossMm, acrossPx, alongMm, f].every((x) => Number.isFinite(x) && x > 0)) return null;
+  const altitudeM = height.mode === 'altitude' ? height.altitudeM : (height.gsdCmPx / 100) * acrossPx * f / acrossMm;
+  if (!Number.isFinite(altitudeM) || altitudeM <= 0) return null;
+  const footprintSideM = (altitudeM * acrossMm) / f;
+  const footprintFrontM = (altitudeM * alongMm) / f;
+  const triggerDistanceM = footprintFrontM * (1 - frontOverlapPct / 100);
+  return {
+    altitudeM,
+    gsdCmPx: (footprintSideM * 100) / acrossPx,
+    footprintSideM,
+    footprintFrontM,
+    lineSpacingM: footprintSideM * (1 - sideOverlapPct / 100),
+    triggerDistanceM,
+    triggerIntervalS: speedMS > 0 ? triggerDistanceM / speedMS : NaN,
+  };
+}
+
+/** The flight geometry in a line, shown under the height fields. */
+export function describeFlightGeometry(g: FlightGeometry, by: 'altitude' | 'gsd'): string {
+  const n = (x: number, d: number) => (Number.isFinite(x) ? x.toFixed(d) : '–');
+  const height = by === 'altitude' ? `GSD ${n(g.gsdCmPx, 2)} cm/px` : `altitude ${n(g.altitudeM, 1)} m`;
+  return (
+    `${height}; each photo covers ${n(g.footprintSideM, 1)} × ${n(g.footprintFrontM, 1)} m; ` +
+    `lanes ${n(g.lineSpacingM, 1)} m apart; a photo every ${n(g.triggerDistanceM, 1)} m (${n(g.triggerIntervalS, 1)} s).`
+  );
+}
+
+/** The battery field's range, minutes: the API takes 30 s to 24 h per UAV. */
+export const BATTERY_MIN_RANGE = [0.5, 1440] as const;
 
 /** The form's values before anything is changed: the API's defaults (index.html shows the same). */
 export const FORM_DEFAULTS = {
@@ -165,6 +254,12 @@ export function formFromRequest(
     uavs.push(uav);
   }
 
+  // One battery for every UAV goes back in the battery field; different ones stay with their UAVs.
+  const batteries = new Set(uavs.map((u) => u.max_flight_time_s));
+  const shared = uavs.length > 0 && batteries.size === 1 ? [...batteries][0] : undefined;
+  if (shared != null) for (const u of uavs) delete u.max_flight_time_s;
+  if (batteries.size > 1) notes.push('Its UAVs have different batteries: each keeps its own unless a battery is given here.');
+
   const extra: Record<string, unknown> = {};
   for (const [k, v] of Object.entries(r)) if (!FORM_MEMBERS.has(k) && v !== null && v !== undefined) extra[k] = v;
 
@@ -187,6 +282,7 @@ export function formFromRequest(
       speedMS: num(r.speed_m_s, d.speedMS),
       altitudeFrame: oneOf(r.altitude_frame, ['relative', 'amsl', 'terrain'] as const, d.altitudeFrame),
       assignment: oneOf(r.assignment, ['balanced', 'competition', 'min_reach'] as const, d.assignment),
+      batteryMin: shared != null ? round(shared / 60, 3) : NaN,
       uavs,
       extra,
     },

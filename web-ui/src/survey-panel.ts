@@ -3,10 +3,10 @@
 // profile, downloads).
 
 import { api, type CameraPreset, type Survey } from './api';
-import { byId, formatLonLat, h, numberValue, parseLonLat } from './dom';
+import { byId, formatLonLat, h, numberValue, parseLonLat, setValue } from './dom';
 import { ErrorSlots } from './errors-ui';
-import { formatArea, formatDuration, formatLength, formatNumber, formatPercent } from './format';
-import { ImportError, parsePolygons, type PolygonRings } from './geo-import';
+import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
+import { ImportError, parsePolygons, utmArea, type PolygonRings } from './geo-import';
 import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
 import { renderProfileChart, sortieProfile } from './profile-chart';
@@ -15,6 +15,8 @@ import {
   buildSurveyRequest,
   cameraSummary,
   describeExtra,
+  describeFlightGeometry,
+  flightGeometry,
   formFromRequest,
   nextUavId,
   uavColour,
@@ -55,17 +57,40 @@ export class SurveyPanel {
     byId('draw-roi').addEventListener('click', () => this.map.setMode('draw-roi'));
     byId('draw-nfz').addEventListener('click', () => this.map.setMode('draw-nfz'));
     byId('clear-roi').addEventListener('click', () => this.map.setRoi(null));
+    byId('clear-nfz').addEventListener('click', () => this.map.clearNoFlyZones());
     byId<HTMLInputElement>('import-roi').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'roi'));
     byId<HTMLInputElement>('import-nfz').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'nfz'));
 
+    // Any edit of the form: the flight geometry follows the numbers as they are typed, and the
+    // results of an earlier plan must not pass for the current settings.
+    for (const type of ['input', 'change']) {
+      byId('survey-form').addEventListener(type, () => {
+        this.showFlightGeometry();
+        this.markStale();
+      });
+    }
+    this.dem.onChange(() => this.markStale());
+
     byId('place-uavs').addEventListener('click', () => this.map.setMode(this.map.getMode() === 'place-uav' ? 'browse' : 'place-uav'));
     byId('clear-uavs').addEventListener('click', () => this.setUavs([]));
+    // Take-off points typed rather than clicked (keyboard use, known launch sites).
+    byId('add-uav').addEventListener('click', () => this.addTypedUav());
+    byId('uav-add').addEventListener('keydown', (e) => {
+      if ((e as KeyboardEvent).key === 'Enter') {
+        e.preventDefault(); // not the survey form's submit
+        this.addTypedUav();
+      }
+    });
     byId<HTMLFormElement>('survey-form').addEventListener('submit', (e) => {
       e.preventDefault();
       void this.plan();
     });
-    byId<HTMLSelectElement>('profile-uav').addEventListener('change', () => this.renderProfile(true));
-    byId<HTMLSelectElement>('profile-sortie').addEventListener('change', () => this.renderProfile());
+    // Choosing what to chart also brings that route forward on the map.
+    byId<HTMLSelectElement>('profile-uav').addEventListener('change', () => this.selectUav(byId<HTMLSelectElement>('profile-uav').value));
+    byId<HTMLSelectElement>('profile-sortie').addEventListener('change', () => {
+      this.renderProfile();
+      this.highlight();
+    });
   }
 
   /** Fills the camera chooser from the API's presets (the default first); their numbers show below it. */
@@ -92,38 +117,73 @@ export class SurveyPanel {
     if (preset) this.lastPreset = preset;
     else if (custom && this.lastPreset) this.setCustomCamera(this.lastPreset.camera);
     byId('camera-numbers').textContent = preset ? cameraSummary(preset.camera) : '';
+    this.showFlightGeometry();
+  }
+
+  /** GSD (or altitude), photo footprint, lane spacing and photo interval of the form's numbers, before planning. */
+  private showFlightGeometry(): void {
+    const v = this.formValues();
+    const camera = v.camera === 'custom' ? v.customCamera : this.cameras.find((c) => c.name === v.camera)?.camera;
+    const height = v.heightMode === 'gsd' ? { mode: 'gsd' as const, gsdCmPx: v.gsdCmPx } : { mode: 'altitude' as const, altitudeM: v.altitudeM };
+    const g = camera ? flightGeometry(camera, height, v.sideOverlapPct, v.frontOverlapPct, v.speedMS) : null;
+    byId('flight-geometry').textContent = g ? describeFlightGeometry(g, v.heightMode) : '';
   }
 
   private setCustomCamera(c: CustomCamera): void {
-    const set = (id: string, v: number | string) => (byId<HTMLInputElement | HTMLSelectElement>(id).value = String(v));
-    set('cam-sw', c.sensor_width_mm);
-    set('cam-sh', c.sensor_height_mm);
-    set('cam-f', c.focal_length_mm);
-    set('cam-iw', c.image_width_px);
-    set('cam-ih', c.image_height_px);
-    set('cam-orient', c.orientation);
+    setValue('cam-sw', c.sensor_width_mm);
+    setValue('cam-sh', c.sensor_height_mm);
+    setValue('cam-f', c.focal_length_mm);
+    setValue('cam-iw', c.image_width_px);
+    setValue('cam-ih', c.image_height_px);
+    setValue('cam-orient', c.orientation);
   }
 
   private setHeightMode(mode: 'altitude' | 'gsd'): void {
     byId<HTMLInputElement>(`height-mode-${mode}`).checked = true;
     byId<HTMLInputElement>('altitude').disabled = mode !== 'altitude';
     byId<HTMLInputElement>('gsd').disabled = mode !== 'gsd';
+    this.showFlightGeometry();
   }
 
   // ---- map events ----
 
+  /** Says over the shown plan that the form has changed since (until the next plan). */
+  private markStale(): void {
+    if (this.survey && !this.restoring) byId('survey-stale').hidden = false;
+  }
+
+  /** True while a saved survey's values are being put back into the form (not a change by the user). */
+  private restoring = false;
+
   areasChanged(roi: PolygonRings | null, nfz: PolygonRings[]): void {
     this.roi = roi;
     this.noFlyZones = nfz;
-    byId('roi-status').textContent = roi ? `Area drawn: ${roi[0].length - 1} corners${roi.length > 1 ? `, ${roi.length - 1} holes` : ''}.` : 'No area yet.';
+    this.markStale();
+    byId('roi-status').textContent = roi
+      ? `Area: ${formatArea(ringsArea(roi))}, ${roi[0].length - 1} corners${roi.length > 1 ? `, ${roi.length - 1} hole${roi.length > 2 ? 's' : ''}` : ''}.`
+      : 'No area yet.';
+    // A file of building footprints can bring many zones: one button takes them all away.
+    byId('clear-nfz').hidden = nfz.length < 2;
     const list = byId('nfz-list');
     list.replaceChildren(
       ...nfz.map((z, i) => {
         const remove = h('button', { type: 'button', 'aria-label': `Remove no-fly zone ${i + 1}` }, 'Remove');
         remove.addEventListener('click', () => this.map.removeNoFlyZone(i));
-        return h('li', {}, `No-fly zone ${i + 1} (${z[0].length - 1} corners) `, remove);
+        return h('li', {}, `No-fly zone ${i + 1} (${formatArea(ringsArea(z))}, ${z[0].length - 1} corners) `, remove);
       }),
     );
+  }
+
+  private addTypedUav(): void {
+    const input = byId<HTMLInputElement>('uav-add');
+    const at = parseLonLat(input.value);
+    if (!at) {
+      this.errors.show('uavs', 'Take-off point: give it as “lon, lat” in degrees, e.g. -77.0551, 38.8089.', 'uav-add');
+      return;
+    }
+    input.value = '';
+    input.removeAttribute('aria-invalid');
+    this.placeUav(at);
   }
 
   placeUav(at: [number, number]): void {
@@ -138,6 +198,7 @@ export class SurveyPanel {
 
   private setUavs(uavs: UavStart[]): void {
     this.uavs = uavs;
+    this.markStale();
     this.map.setUavStarts(uavs, uavColour);
     byId('uav-hint').hidden = uavs.length > 0;
     const list = byId('uav-list');
@@ -148,7 +209,7 @@ export class SurveyPanel {
         input.addEventListener('change', () => {
           const p = parseLonLat(input.value);
           if (p) this.setUavs(this.uavs.map((x, j) => (j === i ? { ...x, start: p } : x)));
-          else input.setAttribute('aria-invalid', 'true');
+          else this.errors.show('uavs', badStart(u.id), input.id);
         });
         const remove = h('button', { type: 'button', 'aria-label': `Remove ${u.id}` }, 'Remove');
         remove.addEventListener('click', () => this.setUavs(this.uavs.filter((_, j) => j !== i)));
@@ -206,6 +267,7 @@ export class SurveyPanel {
       speedMS: numberValue('speed'),
       altitudeFrame: val('altitude-frame') as SurveyFormValues['altitudeFrame'],
       assignment: val('assignment') as SurveyFormValues['assignment'],
+      batteryMin: numberValue('battery'),
       uavs: this.uavs,
       extra: this.extra,
     };
@@ -214,8 +276,11 @@ export class SurveyPanel {
   private async plan(): Promise<void> {
     this.errors.clear();
     const { body, errors } = buildSurveyRequest(this.formValues());
-    for (const e of errors) this.errors.show(e.field, e.text);
-    if (!body) return;
+    for (const e of errors) this.errors.show(e.field, e.text, e.control);
+    // A take-off point typed wrong is not planned from where it was before.
+    const badStarts = this.uavs.map((u, i) => ({ id: u.id, input: `uav-start-${i}` })).filter((b) => !parseLonLat(byId<HTMLInputElement>(b.input).value));
+    for (const b of badStarts) this.errors.show('uavs', badStart(b.id), b.input);
+    if (!body || badStarts.length > 0) return;
     const button = byId<HTMLButtonElement>('plan-survey');
     button.disabled = true;
     byId('survey-busy').textContent = 'Planning…';
@@ -240,6 +305,17 @@ export class SurveyPanel {
    */
   async open(survey: Survey): Promise<void> {
     this.errors.clear();
+    this.restoring = true;
+    try {
+      await this.restore(survey);
+    } finally {
+      this.restoring = false;
+    }
+    // From the top: the "reopened" note first (the panel may have been scrolled down a long list).
+    byId('panel').scrollTop = 0;
+  }
+
+  private async restore(survey: Survey): Promise<void> {
     const notes: string[] = [];
     const request = survey.request;
     if (request) {
@@ -250,8 +326,7 @@ export class SurveyPanel {
       });
       notes.push(...restored.notes);
       const v = restored.values;
-      const field = (id: string, value: string | number) => (byId<HTMLInputElement | HTMLSelectElement>(id).value = String(value));
-      field('survey-name', v.name);
+      setValue('survey-name', v.name);
       this.map.clearNoFlyZones();
       this.map.addNoFlyZones(v.noFlyZones);
       this.map.setRoi(v.roi);
@@ -266,14 +341,15 @@ export class SurveyPanel {
       this.cameraChanged();
 
       this.setHeightMode(v.heightMode);
-      field('altitude', v.altitudeM);
-      field('gsd', v.gsdCmPx);
-      field('front-overlap', v.frontOverlapPct);
-      field('side-overlap', v.sideOverlapPct);
-      field('slice-angle', v.sliceAngle);
-      field('speed', v.speedMS);
-      field('altitude-frame', v.altitudeFrame);
-      field('assignment', v.assignment);
+      setValue('altitude', v.altitudeM);
+      setValue('gsd', v.gsdCmPx);
+      setValue('front-overlap', v.frontOverlapPct);
+      setValue('side-overlap', v.sideOverlapPct);
+      setValue('slice-angle', v.sliceAngle);
+      setValue('speed', v.speedMS);
+      setValue('altitude-frame', v.altitudeFrame);
+      setValue('assignment', v.assignment);
+      setValue('battery', Number.isFinite(v.batteryMin) ? v.batteryMin : '');
       byId<HTMLInputElement>('allow-partial-dem').checked = v.allowPartialDem;
 
       let follow = false;
@@ -286,6 +362,7 @@ export class SurveyPanel {
 
       this.setUavs(v.uavs);
       this.extra = v.extra;
+      this.showFlightGeometry();
     } else {
       // Surveys saved by older servers do not keep their request: only the take-off points come back.
       this.setUavs(survey.uavs.map((u) => ({ id: u.id, start: u.start })));
@@ -307,6 +384,7 @@ export class SurveyPanel {
   /** Shows a planned survey (just planned, or reopened from the saved list). */
   show(survey: Survey): void {
     this.survey = survey;
+    byId('survey-stale').hidden = true;
     this.map.showSurvey(survey, uavColour);
     byId('survey-results').hidden = false;
     byId('results-heading').textContent = `Plan${survey.name ? `: ${survey.name}` : ''}`;
@@ -321,6 +399,10 @@ export class SurveyPanel {
       ['Makespan', formatDuration(s.makespan_s ?? s.flight_time_s)],
       ['Coverage', formatPercent(s.coverage_ratio)],
       ['Cells', formatNumber(s.cell_count)],
+      // What the planner chose or derived: the angle "auto" picked, the lane spacing and photo distance.
+      ['Slice angle', formatDegrees(s.slice_angle_deg)],
+      ['Lane spacing', formatNumber(s.line_spacing_m, 1, 'm')],
+      ['Photo spacing', formatNumber(s.trigger_distance_m, 1, 'm')],
     ];
     byId('survey-totals').replaceChildren(...totals.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
     byId('survey-warnings').replaceChildren(...survey.warnings.map((w) => h('li', {}, w)));
@@ -330,22 +412,27 @@ export class SurveyPanel {
       h(
         'tr',
         { 'data-uav': u.id },
-        h('th', { scope: 'row' }, swatch(i), u.id),
+        h('th', { scope: 'row' }, swatch(i), this.uavButton(u.id)),
         h('td', {}, formatLength(u.stats.length_3d_m ?? u.stats.length_m)),
         h('td', {}, formatDuration(u.stats.flight_time_s)),
         h('td', {}, formatNumber(u.stats.photos)),
         h('td', {}, formatNumber(u.stats.turns)),
+        h('td', { class: 'sorties-col' }, formatNumber(u.sorties.length)),
       ),
     );
+    // The sorties column only when a battery made some UAV fly more than one.
+    byId('uav-table').classList.toggle('with-sorties', survey.uavs.some((u) => u.sorties.length > 1));
     // Files per UAV and sortie (a UAV with a small battery flies several missions).
     const downloads = survey.uavs.flatMap((u, i) =>
       u.sorties.map((so) => {
         const tag = u.sorties.length > 1 ? ` (sortie ${so.number})` : '';
+        // With several sorties each says how long it flies, to check against the battery.
+        const shown = u.sorties.length > 1 ? ` (sortie ${so.number}, ${formatDuration(so.stats.flight_time_s)})` : '';
         return h(
           'li',
           {},
           swatch(i),
-          h('strong', {}, `${u.id}${tag}: `),
+          h('strong', {}, `${u.id}${shown}: `),
           link(so.files.waypoints, '.waypoints', `${u.id} mission waypoints${tag}`),
           link(so.files.plan, '.plan', `${u.id} QGroundControl plan${tag}`),
           link(so.files.route, 'GeoJSON', `${u.id} route GeoJSON${tag}`),
@@ -360,7 +447,43 @@ export class SurveyPanel {
 
     const select = byId<HTMLSelectElement>('profile-uav');
     select.replaceChildren(...survey.uavs.map((u) => h('option', { value: u.id }, u.id)));
+    this.highlighted = false;
+    this.highlight();
     this.renderProfile(true);
+  }
+
+  /** Whether the charted UAV's route is brought forward on the map (after the user chose one). */
+  private highlighted = false;
+
+  /** The UAV's name in the table: a button that charts its profile and brings its route forward (again: all alike). */
+  private uavButton(id: string): HTMLButtonElement {
+    const b = h('button', { type: 'button', class: 'link', 'aria-pressed': 'false', title: `Show ${id}'s route and profile` }, id);
+    b.addEventListener('click', () => {
+      if (this.highlighted && byId<HTMLSelectElement>('profile-uav').value === id) {
+        this.highlighted = false;
+        this.highlight();
+      } else {
+        this.selectUav(id);
+      }
+    });
+    return b;
+  }
+
+  private selectUav(id: string): void {
+    byId<HTMLSelectElement>('profile-uav').value = id;
+    this.highlighted = true;
+    this.renderProfile(true);
+    this.highlight();
+  }
+
+  /** Brings the charted UAV (its charted sortie when it flies several) forward, or shows all alike. */
+  private highlight(): void {
+    const id = this.highlighted ? byId<HTMLSelectElement>('profile-uav').value : null;
+    const multi = !byId('profile-sortie-field').hidden;
+    this.map.highlightRoute(id, id && multi ? Number(byId<HTMLSelectElement>('profile-sortie').value) : null);
+    for (const b of byId('uav-table').querySelectorAll<HTMLButtonElement>('tbody button.link')) {
+      b.setAttribute('aria-pressed', String(b.textContent === id));
+    }
   }
 
   /** Takes a deleted survey off the page if it is the one shown. */
@@ -396,8 +519,17 @@ export class SurveyPanel {
   }
 }
 
+function badStart(id: string): string {
+  return `${id} start: give it as “lon, lat” in degrees, e.g. -77.0551, 38.8089.`;
+}
+
 function link(href: string, text: string, label: string): HTMLAnchorElement {
   return h('a', { href, download: '', 'aria-label': label }, text);
+}
+
+/** Area of lon/lat rings (holes subtracted), m², as the planner measures it: in the UTM zone of the area's centroid. */
+function ringsArea(rings: PolygonRings): number {
+  return utmArea(rings);
 }
 
 function extentOf(rings: [number, number][][]): [number, number, number, number] {

@@ -2,7 +2,7 @@
 import { existsSync, readFileSync } from 'node:fs';
 import path from 'node:path';
 import { describe, expect, it } from 'vitest';
-import { closeRing, ImportError, parsePolygons } from '../src/geo-import';
+import { closeRing, ImportError, parsePolygons, utmArea } from '../src/geo-import';
 
 // The shared test data (../shared/data beside the repository); vitest runs in web-ui/.
 const FIELD = path.resolve(process.cwd(), '../../shared/data/polygons/fields2cover__test.json');
@@ -35,6 +35,23 @@ describe('GeoJSON import', () => {
     expect(() => parsePolygons('{not json', 'a.geojson')).toThrow(ImportError);
     expect(() => parsePolygons('{"type":"Point","coordinates":[0,0]}', 'a.geojson')).toThrow('no polygon');
     expect(() => parsePolygons('{"type":"Polygon","coordinates":[[["a",1]]]}', 'a.geojson')).toThrow('longitude');
+    expect(() => parsePolygons('  \n', 'a.geojson')).toThrow('The file is empty.');
+    expect(() => parsePolygons('AC R\nAN TMA\n', 'airspace.txt')).toThrow(/neither GeoJSON nor KML.*\.kml/);
+  });
+
+  it('refuses projected coordinates, with or without a crs member, and keeps WGS84 ones', () => {
+    const square = [[[321600, 4297700], [321700, 4297700], [321700, 4297800], [321600, 4297700]]];
+    expect(() => parsePolygons(JSON.stringify({ type: 'Polygon', coordinates: square }), 'utm.geojson')).toThrow(
+      'A position (321600, 4297700) is not a longitude/latitude: the file seems to be in projected coordinates (metres).',
+    );
+    const named = { type: 'FeatureCollection', crs: { type: 'name', properties: { name: 'urn:ogc:def:crs:EPSG::26918' } }, features: [] };
+    expect(() => parsePolygons(JSON.stringify(named), 'utm.geojson')).toThrow(/in urn:ogc:def:crs:EPSG::26918, not longitude\/latitude/);
+    for (const name of ['urn:ogc:def:crs:OGC:1.3:CRS84', 'EPSG:4326', 'urn:ogc:def:crs:EPSG::4326']) {
+      const wgs84 = { type: 'Feature', crs: { type: 'name', properties: { name } }, geometry: { type: 'Polygon', coordinates: [[[5, 52], [5.1, 52], [5.1, 52.1], [5, 52]]] } };
+      expect(parsePolygons(JSON.stringify(wgs84), 'ok.geojson')).toHaveLength(1);
+    }
+    const kml = '<kml xmlns="http://www.opengis.net/kml/2.2"><Polygon><outerBoundaryIs><LinearRing><coordinates>321600,4297700 321700,4297700 321700,4297800</coordinates></LinearRing></outerBoundaryIs></Polygon></kml>';
+    expect(() => parsePolygons(kml, 'utm.kml')).toThrow('not a longitude/latitude');
   });
 });
 
@@ -73,5 +90,23 @@ describe('closeRing', () => {
   it('repeats the first position only when needed', () => {
     expect(closeRing([[0, 0], [1, 0], [1, 1]])).toHaveLength(4);
     expect(closeRing([[0, 0], [1, 0], [1, 1], [0, 0]])).toHaveLength(4);
+  });
+});
+
+describe('utmArea', () => {
+  // Expected: pyproj (EPSG:32618 / 32733) + shapely on the same rings.
+  const roi: [number, number][] = [[-77.055, 38.809], [-77.0527, 38.809], [-77.0527, 38.8114], [-77.055, 38.8114], [-77.055, 38.809]];
+  const hole: [number, number][] = [[-77.0542, 38.81], [-77.0535, 38.81], [-77.0535, 38.8106], [-77.0542, 38.8106], [-77.0542, 38.81]];
+
+  it('measures in the UTM zone of the centroid, as the planner does, holes subtracted', () => {
+    expect(utmArea([roi])).toBeCloseTo(53224.036855, 3);
+    expect(utmArea([roi, hole])).toBeCloseTo(49174.387478, 3);
+    // Either winding; the southern hemisphere's zone.
+    expect(utmArea([[...roi].reverse()])).toBeCloseTo(53224.036855, 3);
+    expect(utmArea([[[15, -10], [15.01, -10], [15.01, -9.99], [15, -9.99], [15, -10]]])).toBeCloseTo(1211744.706282, 2);
+  });
+
+  it('is 0 for a degenerate ring', () => {
+    expect(utmArea([[[0, 0], [1, 1]]])).toBe(0);
   });
 });

@@ -1,6 +1,6 @@
 import { describe, expect, it } from 'vitest';
 import type { Uav } from '../src/api';
-import { DEFAULT_BOX, niceStep, profileFromRoute, profileScale, sortieProfile } from '../src/profile-chart';
+import { DEFAULT_BOX, niceStep, profileFromRoute, profileScale, sortieProfile, terrainArea } from '../src/profile-chart';
 
 describe('niceStep', () => {
   it('rounds to 1, 2 or 5 × 10^k', () => {
@@ -103,5 +103,20 @@ describe('sortieProfile', () => {
     expect(single).toMatchObject({ index: 0, count: 1 });
     expect(single.points[0].altitude_m).toBe(90);
     expect(sortieProfile({ ...uav, sorties: [] }, 0)).toEqual({ index: 0, count: 0, points: [], overTerrain: false });
+  });
+});
+
+describe('terrainArea', () => {
+  const identity = { x: (d: number) => d, y: (h: number) => h };
+  const pt = (distance_m: number, terrain_m: number | null) => ({ distance_m, altitude_m: 80, terrain_m });
+
+  it('closes each run between DEM gaps down to the axis on its own', () => {
+    const path = terrainArea([pt(0, 10), pt(10, 12), pt(20, null), pt(30, 11), pt(40, 13), pt(50, 14)], identity, 0);
+    expect(path).toBe('M0.0,10.0L10.0,12.0L10.0,0L0.0,0Z' + 'M30.0,11.0L40.0,13.0L50.0,14.0L50.0,0L30.0,0Z');
+  });
+
+  it('draws nothing for lone points or no terrain', () => {
+    expect(terrainArea([pt(0, 10), pt(10, null), pt(20, 12)], identity, 0)).toBe('');
+    expect(terrainArea([pt(0, null), pt(10, null)], identity, 0)).toBe('');
   });
 });

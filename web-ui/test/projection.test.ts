@@ -23,6 +23,24 @@ describe('proj4Definition', () => {
   });
 });
 
+describe('placeImage with the server’s PROJ definition', () => {
+  // What the server gives for British National Grid (bound to WGS84: the Helmert shift from OSGB36).
+  const bng = '+proj=tmerc +lat_0=49 +lon_0=-2 +k=0.9996012717 +x_0=400000 +y_0=-100000 +ellps=airy +towgs84=446.448,-125.157,542.06,0.15,0.247,0.842,-20.489 +units=m +no_defs';
+
+  it('places an image in any CRS the server defines, datum shift included', () => {
+    const placed = placeImage({ epsg: 27700, proj4: bng }, [434000, 289000, 435000, 290000], [-1.51, 52.49, -1.49, 52.51]);
+    expect(placed).toEqual({ projection: 'EPSG:27700', extent: [434000, 289000, 435000, 290000], exact: true });
+    // PROJ (gdaltransform -s_srs EPSG:4326 -t_srs EPSG:27700) puts lon −1.5, lat 52.5 at 434039.457, 289239.281.
+    const [x, y] = proj4('EPSG:4326', 'EPSG:27700', [-1.5, 52.5]);
+    expect(Math.hypot(x - 434039.457, y - 289239.281)).toBeLessThan(2);
+  });
+
+  it('prefers the server’s definition to the page’s own, and falls back when it cannot be read', () => {
+    expect(placeImage({ epsg: 2056, proj4: '+proj=somerc +lat_0=46.9524055555556 +lon_0=7.43958333333333 +k_0=1 +x_0=2600000 +y_0=1200000 +ellps=bessel +towgs84=674.374,15.056,405.346,0,0,0,0 +units=m +no_defs' }, [2600000, 1200000, 2601000, 1201000], [7.4, 46.9, 7.42, 46.91]).exact).toBe(true);
+    expect(placeImage({ epsg: null, proj4: '+proj=nonsense +x=1' }, [0, 0, 1, 1], [5, 52, 6, 53])).toEqual({ projection: 'EPSG:4326', extent: [5, 52, 6, 53], exact: false });
+  });
+});
+
 describe('costmapExtent', () => {
   it('is the DEM grid at factor 1 and drops short edge blocks when resampled', () => {
     expect(costmapExtent(dem, 283, 259)).toEqual([321498, 4297500, 322064, 4298018]);
@@ -42,7 +60,7 @@ describe('placeCostmap', () => {
   });
 
   it('falls back to the WGS84 bounds for a CRS the page cannot define', () => {
-    const cm = costmap({ crs: { epsg: 2056, name: 'CH1903+', geographic: false }, bounds: [2600000, 1200000, 2601000, 1201000], bounds_wgs84: [7.4, 46.9, 7.42, 46.91] });
+    const cm = costmap({ crs: { epsg: 2065, name: 'S-JTSK (Ferro) / Krovak', geographic: false }, bounds: [2600000, 1200000, 2601000, 1201000], bounds_wgs84: [7.4, 46.9, 7.42, 46.91] });
     expect(placeCostmap(cm, null)).toEqual({ projection: 'EPSG:4326', extent: [7.4, 46.9, 7.42, 46.91], exact: false });
     expect(placeImage(null, [0, 0, 1, 1], [5, 52, 6, 53]).exact).toBe(false);
   });

@@ -14,6 +14,9 @@ describe('parseCost', () => {
   it('refuses blanks, non-numbers, zero, negatives and more than the API takes', () => {
     for (const t of ['', 'abc', '0', '-3', '1e7', 'Infinity']) expect(parseCost(t)).toHaveProperty('error');
     expect((parseCost('0') as { error: string }).error).toMatch(/greater than 0/);
+    // The costmap's own range, when known (small-wheeled: 1.5 to 25).
+    expect(parseCost('x', [1.5, 25])).toEqual({ error: 'Cost: type a number greater than 0 (the costmap’s cells cost 1.5 to 25.0).' });
+    expect(parseCost('x')).toEqual({ error: 'Cost: type a number greater than 0 (the costmap’s cells cost 1 and more).' });
   });
 });
 

@@ -3,6 +3,8 @@ import {
   buildSurveyRequest,
   cameraSummary,
   describeExtra,
+  describeFlightGeometry,
+  flightGeometry,
   formFromRequest,
   nextUavId,
   uavColour,
@@ -32,6 +34,7 @@ function values(over: Partial<SurveyFormValues> = {}): SurveyFormValues {
     speedMS: 10,
     altitudeFrame: 'relative',
     assignment: 'balanced',
+    batteryMin: NaN,
     uavs: [],
     extra: {},
     ...over,
@@ -84,10 +87,106 @@ describe('buildSurveyRequest', () => {
     expect(body).not.toHaveProperty('camera_preset');
   });
 
+  it('refuses empty number fields instead of sending 0', () => {
+    const { body, errors } = buildSurveyRequest(values({ frontOverlapPct: NaN, speedMS: NaN, altitudeM: NaN }));
+    expect(body).toBeNull();
+    expect(errors).toEqual([
+      { field: 'altitude', text: 'Altitude (m): give a number.', control: 'altitude' },
+      { field: 'front-overlap', text: 'Front overlap (%): give a number.', control: 'front-overlap' },
+      { field: 'speed', text: 'Speed (m/s): give a number.', control: 'speed' },
+    ]);
+    // The altitude is not needed when the GSD sets the height; the custom camera's numbers are when it is used.
+    expect(buildSurveyRequest(values({ heightMode: 'gsd', altitudeM: NaN })).errors).toEqual([]);
+    expect(buildSurveyRequest(values({ heightMode: 'gsd', gsdCmPx: NaN })).errors).toEqual([
+      { field: 'altitude', text: 'Ground sample distance (cm/px): give a number.', control: 'gsd' },
+    ]);
+    expect(buildSurveyRequest(values({ camera: 'custom', customCamera: { ...p4, focal_length_mm: NaN } })).errors).toEqual([
+      { field: 'camera', text: 'Focal length (mm): give a number.', control: 'cam-f' },
+    ]);
+  });
+
   it('refuses to send without an ROI, with a bad slice angle, or AMSL without a DEM', () => {
     const { body, errors } = buildSurveyRequest(values({ roi: null, sliceAngle: 'north', altitudeFrame: 'amsl' }));
     expect(body).toBeNull();
     expect(errors.map((e) => e.field)).toEqual(['roi', 'altitude-frame', 'slice-angle']);
+  });
+});
+
+describe('battery', () => {
+  it('gives every UAV the battery, over any it kept from a reopened survey', () => {
+    const { body, errors } = buildSurveyRequest(
+      values({ batteryMin: 12.5, uavs: [{ id: 'a', start: [5, 52], max_flight_time_s: 900, speed_m_s: 6 }, { id: 'b', start: [5.006, 52] }] }),
+    );
+    expect(errors).toEqual([]);
+    expect(body!.uavs).toEqual([
+      { id: 'a', start: [5, 52], speed_m_s: 6, max_flight_time_s: 750 },
+      { id: 'b', start: [5.006, 52], max_flight_time_s: 750 },
+    ]);
+  });
+
+  it('spells out the default UAV (at the area’s first corner) to carry a battery', () => {
+    expect(buildSurveyRequest(values({ batteryMin: 1 })).body!.uavs).toEqual([{ id: 'uav1', start: [5, 52], max_flight_time_s: 60 }]);
+    expect(buildSurveyRequest(values()).body).not.toHaveProperty('uavs');
+  });
+
+  it('keeps each UAV’s own battery when the field is empty', () => {
+    const { body } = buildSurveyRequest(values({ uavs: [{ id: 'a', start: [5, 52], max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }] }));
+    expect(body!.uavs).toEqual([{ id: 'a', start: [5, 52], max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }]);
+  });
+
+  it('refuses a battery outside 30 s … 24 h, naming the field', () => {
+    for (const batteryMin of [0.4, 1441, -3]) {
+      const { body, errors } = buildSurveyRequest(values({ batteryMin }));
+      expect(body).toBeNull();
+      expect(errors).toEqual([{ field: 'battery', text: expect.stringMatching(/^Battery: .*0\.5 to 1440 minutes/) }]);
+    }
+  });
+
+  it('puts a battery shared by every UAV of a reopened survey back in the field', () => {
+    const request = { roi: { type: 'Polygon', coordinates: square }, uavs: [{ id: 'a', start: [5, 52], max_flight_time_s: 600 }, { id: 'b', start: [5.006, 52], max_flight_time_s: 600 }] };
+    const { values: v, notes } = formFromRequest(request, null, { camera: 'x', customCamera: p4 });
+    expect(notes).toEqual([]);
+    expect(v.batteryMin).toBe(10);
+    expect(v.uavs).toEqual([{ id: 'a', start: [5, 52] }, { id: 'b', start: [5.006, 52] }]);
+    expect(buildSurveyRequest(v).body!.uavs).toEqual(request.uavs);
+  });
+
+  it('leaves different batteries with their UAVs, and says so', () => {
+    const uavs = [{ id: 'a', start: [5, 52], max_flight_time_s: 600 }, { id: 'b', start: [5.006, 52] }];
+    const { values: v, notes } = formFromRequest({ roi: { type: 'Polygon', coordinates: square }, uavs }, null, { camera: 'x', customCamera: p4 });
+    expect(Number.isNaN(v.batteryMin)).toBe(true);
+    expect(notes).toEqual([expect.stringMatching(/different batteries/)]);
+    expect(buildSurveyRequest(v).body!.uavs).toEqual(uavs);
+  });
+});
+
+describe('flightGeometry', () => {
+  // The Phantom 4 Pro at 60 m: 13.2 mm × 60 m / 8.8 mm = 90 m across, 60 m along; 90 m / 5472 px = 1.645 cm/px.
+  it('gives the server’s GSD, footprint, line spacing and trigger distance', () => {
+    const g = flightGeometry(p4, { mode: 'altitude', altitudeM: 60 }, 70, 80, 10)!;
+    expect(g.footprintSideM).toBeCloseTo(90, 9);
+    expect(g.footprintFrontM).toBeCloseTo(60, 9);
+    expect(g.gsdCmPx).toBeCloseTo(90 * 100 / 5472, 9);
+    expect(g.lineSpacingM).toBeCloseTo(27, 9);
+    expect(g.triggerDistanceM).toBeCloseTo(12, 9);
+    expect(g.triggerIntervalS).toBeCloseTo(1.2, 9);
+    expect(describeFlightGeometry(g, 'altitude')).toBe('GSD 1.64 cm/px; each photo covers 90.0 × 60.0 m; lanes 27.0 m apart; a photo every 12.0 m (1.2 s).');
+  });
+
+  it('finds the altitude for a GSD, and swaps the sides in portrait', () => {
+    const g = flightGeometry(p4, { mode: 'gsd', gsdCmPx: 90 * 100 / 5472 }, 70, 80, 10)!;
+    expect(g.altitudeM).toBeCloseTo(60, 9);
+    expect(describeFlightGeometry(g, 'gsd')).toMatch(/^altitude 60\.0 m;/);
+    const portrait = flightGeometry({ ...p4, orientation: 'portrait' }, { mode: 'altitude', altitudeM: 60 }, 70, 80, 10)!;
+    expect(portrait.footprintSideM).toBeCloseTo(60, 9);
+    expect(portrait.footprintFrontM).toBeCloseTo(90, 9);
+    expect(portrait.gsdCmPx).toBeCloseTo(60 * 100 / 3648, 9);
+  });
+
+  it('gives nothing for empty or impossible numbers', () => {
+    expect(flightGeometry({ ...p4, focal_length_mm: 0 }, { mode: 'altitude', altitudeM: 60 }, 70, 80, 10)).toBeNull();
+    expect(flightGeometry(p4, { mode: 'altitude', altitudeM: NaN }, 70, 80, 10)).toBeNull();
+    expect(flightGeometry(p4, { mode: 'gsd', gsdCmPx: -1 }, 70, 80, 10)).toBeNull();
   });
 });
 
