@@ -20,6 +20,8 @@ test('a self-intersecting ROI gets a plain-words error next to the area controls
   // A bow tie: the edge from the first to the second corner crosses the third edge.
   await drawPolygon(page, '#draw-roi', [[-77.0545, 38.8090], [-77.0515, 38.8115], [-77.0515, 38.8090], [-77.0545, 38.8115]]);
   await page.waitForFunction(() => /4 corners/.test(document.querySelector('#roi-status').textContent));
+  // No area figure for it (a bow tie's halves would cancel to 0 m²).
+  assert.equal(await page.textContent('#roi-status'), 'Area: outline crosses itself, 4 corners.');
   await page.click('#plan-survey');
 
   const error = page.locator('#survey-roi-error');

@@ -190,3 +190,49 @@ function centroid(ring: LonLat[]): LonLat {
   }
   return [cx / (6 * a), cy / (6 * a)];
 }
+
+/** Rings longer than this are not checked for crossings by the page (the server still checks them). */
+const CROSSING_CHECK_MAX = 2000;
+
+/**
+ * Whether a ring's edges cross or touch other than at the corners they
+ * share: such an outline has no meaningful area (a bow tie's halves cancel
+ * in the shoelace sum), so the page says it crosses itself instead of
+ * showing a figure. Planar in lon/lat, which is enough to tell crossing;
+ * false for rings too long to check (the server's validation decides).
+ */
+export function ringCrossesItself(ring: LonLat[]): boolean {
+  const pts = ring.length > 1 && ring[0][0] === ring[ring.length - 1][0] && ring[0][1] === ring[ring.length - 1][1] ? ring.slice(0, -1) : ring;
+  const n = pts.length;
+  if (n < 4 || n > CROSSING_CHECK_MAX) return false;
+  for (let i = 0; i < n; i++) {
+    const a0 = pts[i];
+    const a1 = pts[(i + 1) % n];
+    // Edges i and j are adjacent when j = i ± 1 (mod n): they share a corner by construction.
+    for (let j = i + 2; j < n; j++) {
+      if (i === 0 && j === n - 1) continue;
+      if (segmentsMeet(a0, a1, pts[j], pts[(j + 1) % n])) return true;
+    }
+  }
+  return false;
+}
+
+/** Whether closed segments p0p1 and q0q1 share a point. */
+function segmentsMeet(p0: LonLat, p1: LonLat, q0: LonLat, q1: LonLat): boolean {
+  const d1 = orient(q0, q1, p0);
+  const d2 = orient(q0, q1, p1);
+  const d3 = orient(p0, p1, q0);
+  const d4 = orient(p0, p1, q1);
+  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return true;
+  return (d1 === 0 && onSegment(q0, q1, p0)) || (d2 === 0 && onSegment(q0, q1, p1)) || (d3 === 0 && onSegment(p0, p1, q0)) || (d4 === 0 && onSegment(p0, p1, q1));
+}
+
+/** Twice the signed area of triangle abc: > 0 when c is left of ab. */
+function orient(a: LonLat, b: LonLat, c: LonLat): number {
+  return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+/** Whether c, collinear with ab, lies within its bounding box. */
+function onSegment(a: LonLat, b: LonLat, c: LonLat): boolean {
+  return Math.min(a[0], b[0]) <= c[0] && c[0] <= Math.max(a[0], b[0]) && Math.min(a[1], b[1]) <= c[1] && c[1] <= Math.max(a[1], b[1]);
+}

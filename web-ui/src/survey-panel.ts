@@ -6,7 +6,7 @@ import { api, type CameraPreset, type Survey } from './api';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
-import { ImportError, parsePolygons, utmArea, type PolygonRings } from './geo-import';
+import { ImportError, parsePolygons, ringCrossesItself, utmArea, type PolygonRings } from './geo-import';
 import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
 import { renderProfileChart, sortieProfile } from './profile-chart';
@@ -160,7 +160,7 @@ export class SurveyPanel {
     this.noFlyZones = nfz;
     this.markStale();
     byId('roi-status').textContent = roi
-      ? `Area: ${formatArea(ringsArea(roi))}, ${roi[0].length - 1} corners${roi.length > 1 ? `, ${roi.length - 1} hole${roi.length > 2 ? 's' : ''}` : ''}.`
+      ? `Area: ${areaText(roi)}, ${roi[0].length - 1} corners${roi.length > 1 ? `, ${roi.length - 1} hole${roi.length > 2 ? 's' : ''}` : ''}.`
       : 'No area yet.';
     // A file of building footprints can bring many zones: one button takes them all away.
     byId('clear-nfz').hidden = nfz.length < 2;
@@ -169,7 +169,7 @@ export class SurveyPanel {
       ...nfz.map((z, i) => {
         const remove = h('button', { type: 'button', 'aria-label': `Remove no-fly zone ${i + 1}` }, 'Remove');
         remove.addEventListener('click', () => this.map.removeNoFlyZone(i));
-        return h('li', {}, `No-fly zone ${i + 1} (${formatArea(ringsArea(z))}, ${z[0].length - 1} corners) `, remove);
+        return h('li', {}, `No-fly zone ${i + 1} (${areaText(z)}, ${z[0].length - 1} corners) `, remove);
       }),
     );
   }
@@ -528,8 +528,9 @@ function link(href: string, text: string, label: string): HTMLAnchorElement {
 }
 
 /** Area of lon/lat rings (holes subtracted), m², as the planner measures it: in the UTM zone of the area's centroid. */
-function ringsArea(rings: PolygonRings): number {
-  return utmArea(rings);
+/** A polygon's area as the page shows it, or why it has none. */
+function areaText(rings: PolygonRings): string {
+  return rings.some(ringCrossesItself) ? 'outline crosses itself' : formatArea(utmArea(rings));
 }
 
 function extentOf(rings: [number, number][][]): [number, number, number, number] {

@@ -2,7 +2,7 @@
 import { existsSync, readFileSync } from 'node:fs';
 import path from 'node:path';
 import { describe, expect, it } from 'vitest';
-import { closeRing, ImportError, parsePolygons, utmArea } from '../src/geo-import';
+import { closeRing, ImportError, parsePolygons, ringCrossesItself, utmArea } from '../src/geo-import';
 
 // The shared test data (../shared/data beside the repository); vitest runs in web-ui/.
 const FIELD = path.resolve(process.cwd(), '../../shared/data/polygons/fields2cover__test.json');
@@ -108,5 +108,25 @@ describe('utmArea', () => {
 
   it('is 0 for a degenerate ring', () => {
     expect(utmArea([[[0, 0], [1, 1]]])).toBe(0);
+  });
+});
+
+describe('ringCrossesItself', () => {
+  const square: [number, number][] = [[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]];
+
+  it('is false for simple rings, closed or open, either winding, and for triangles', () => {
+    expect(ringCrossesItself(square)).toBe(false);
+    expect(ringCrossesItself(square.slice(0, -1))).toBe(false);
+    expect(ringCrossesItself([...square].reverse())).toBe(false);
+    expect(ringCrossesItself([[0, 0], [1, 0], [0, 1], [0, 0]])).toBe(false);
+    // A concave ring whose corner comes close to, but not onto, another edge.
+    expect(ringCrossesItself([[0, 0], [2, 0], [2, 2], [1, 0.001], [0, 2], [0, 0]])).toBe(false);
+  });
+
+  it('finds a bow tie, a loop, and a corner touching another edge', () => {
+    expect(ringCrossesItself([[0, 0], [1, 1], [1, 0], [0, 1], [0, 0]])).toBe(true);
+    // The last edge runs back across the first.
+    expect(ringCrossesItself([[0, 0], [3, 0], [3, 2], [1, -1], [0, 0]])).toBe(true);
+    expect(ringCrossesItself([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2], [0, 0]])).toBe(true);
   });
 });
