@@ -17,6 +17,7 @@ import Modify from 'ol/interaction/Modify';
 import Snap from 'ol/interaction/Snap';
 import { LineString, Point, Polygon, MultiPolygon } from 'ol/geom';
 import type Geometry from 'ol/geom/Geometry';
+import { asArray } from 'ol/color';
 import { Fill, Stroke, Style, Circle as CircleStyle, Text, RegularShape } from 'ol/style';
 import { fromLonLat, toLonLat, transformExtent } from 'ol/proj';
 import { defaults as defaultControls, ScaleLine, Attribution, MousePosition, Control } from 'ol/control';
@@ -154,11 +155,10 @@ function routeStyle(feature: FeatureLike, resolution: number, emphasis: 'normal'
   return styles;
 }
 
-/** A colour "#rrggbb" at 35 % opacity. */
+/** A colour at 35 % opacity (OpenLayers' own parser reads it). */
 function fade(colour: string): string {
-  const m = /^#([\da-f]{2})([\da-f]{2})([\da-f]{2})$/i.exec(colour);
-  if (!m) return colour;
-  return `rgba(${parseInt(m[1], 16)}, ${parseInt(m[2], 16)}, ${parseInt(m[3], 16)}, 0.35)`;
+  const [r, g, b] = asArray(colour);
+  return `rgba(${r}, ${g}, ${b}, 0.35)`;
 }
 
 const toMap = (p: LonLat | number[]) => fromLonLat([p[0], p[1]]);
@@ -259,7 +259,6 @@ export class MapView {
     }
     this.mode = mode;
     const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : mode === 'draw-costlier' ? 'costlier' : null;
-    this.modify.setActive(kind === null && this.surveyLayers[0].getVisible());
     if (kind) {
       // stopClick keeps the finishing double-click from zooming the map.
       this.draw = new Draw({ type: 'Polygon', stopClick: true });
@@ -283,6 +282,7 @@ export class MapView {
       this.map.addInteraction(this.draw);
       this.map.addInteraction(this.snap);
     }
+    this.updateModify();
     this.map.getTargetElement()?.classList.toggle('picking', mode !== 'browse');
     // On a tablet the map sits above the panel: bring it into view for the clicks it now waits for.
     if (mode !== 'browse') this.map.getTargetElement()?.scrollIntoView({ block: 'nearest' });
@@ -302,6 +302,14 @@ export class MapView {
 
   private task: 'survey' | 'route' | 'all' = 'survey';
 
+  /**
+   * Survey areas are editable only while no area is being drawn and they
+   * are shown: hidden ones' corners would still catch drags on the route tab.
+   */
+  private updateModify(): void {
+    this.modify.setActive(this.draw === null && this.surveyLayers[0].getVisible());
+  }
+
   private setHint(): void {
     this.hint.textContent = this.mode === 'browse' ? BROWSE_HINTS[this.task] : MODE_HINTS[this.mode];
   }
@@ -317,8 +325,7 @@ export class MapView {
     this.task = task;
     this.setHint();
     for (const l of this.surveyLayers) l.setVisible(task !== 'route');
-    // Hidden areas must not be editable: their corners would still catch drags on the route tab.
-    this.modify.setActive(task !== 'route' && this.draw === null);
+    this.updateModify();
     this.groundLayer.setVisible(task !== 'survey');
     this.costmap.setOpacity(task === 'survey' ? 0 : this.costmapOpacity);
   }
