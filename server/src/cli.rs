@@ -41,7 +41,7 @@ enum Command {
     /// metadata as JSON: size, resolution, CRS, bounds, height range.
     DemInfo(DemInfoArgs),
     /// Build the traversability costmap of a DEM for a ground vehicle and
-    /// write costmap.tif (band 1 cost, band 2 class), preview.png,
+    /// write costmap.tif (page 1 cost, page 2 class), preview.png,
     /// legend.svg, stats.json and layers/<name>.tif.
     Costmap(CostmapArgs),
     /// Plan the cheapest safe route for a ground robot across a costmap

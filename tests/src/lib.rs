@@ -466,6 +466,12 @@ pub fn gdalinfo(path: &Path) -> serde_json::Value {
     .expect("gdalinfo JSON")
 }
 
+/// GDAL's name for page 2 of a costmap GeoTIFF (`GTIFF_DIR:2:path`), its
+/// Byte class band; page 1, the Float32 cost, is the file itself.
+pub fn class_page(costmap_tif: &Path) -> PathBuf {
+    PathBuf::from(format!("GTIFF_DIR:2:{}", costmap_tif.display()))
+}
+
 /// Every value of band `band`, row-major from the top row (NaN for nan),
 /// as `gdal_translate -of XYZ` reads them.
 pub fn band_values(path: &Path, band: usize) -> Vec<f64> {

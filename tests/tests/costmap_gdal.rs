@@ -2,10 +2,12 @@
 //! `../shared/data/dems`: tests/validators/check_costmap_gdal.py compares
 //! terraplan's slope layer with `gdaldem slope` (Horn; `-s 111120` for
 //! geographic DEMs) — RMS, mean difference and agreement of the slope-only
-//! obstacle mask — and reads costmap.tif back with GDAL (bands, types,
-//! geotransform, CRS, NaN nodata, `gdallocationinfo` against ReadAsArray,
-//! cost NaN exactly where the class is not traversable). Run with
-//! `--nocapture` to see the figures per DEM.
+//! obstacle mask — and reads costmap.tif back with GDAL (its two pages,
+//! the Float32 cost and the Byte class; each band's description, data
+//! type, unit type and nodata through osgeo.gdal and `gdalinfo -json`, also
+//! the slope layer's; geotransform, CRS, `gdallocationinfo` against
+//! ReadAsArray, cost NaN exactly where the class is not traversable). Run
+//! with `--nocapture` to see the figures per DEM.
 
 use std::path::Path;
 use std::process::Command;
@@ -96,6 +98,16 @@ fn assert_covers_interior(figures: &Value) {
     );
     assert_eq!(figures["locations_checked"], 10, "{figures}");
     assert_eq!(figures["nan_class_mismatches"], 0, "{figures}");
+    // Every band was checked for its type and unit ("-": none).
+    assert_eq!(
+        figures["bands_checked"],
+        serde_json::json!([
+            "costmap.tif:1:Float32:cost",
+            "costmap.tif page 2:1:Byte:-",
+            "layers/slope.tif:1:Float32:deg"
+        ]),
+        "{figures}"
+    );
 }
 
 /// Lidar DTM, 283 × 259 cells of 2 m, NAD83 / UTM 18N (projected).

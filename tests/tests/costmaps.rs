@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    JOB_DEADLINE, Reply, Server, assert_invalid_at, assert_problem, band_values, close,
+    JOB_DEADLINE, Reply, Server, assert_invalid_at, assert_problem, band_values, class_page, close,
     costmap_job, delete, dtm, gdalinfo, get, get_with_headers, get_with_timeout, pixel_values,
     png_size, post, post_json, slow_costmap_options, sse_events, terraplan, text, upload_dem,
     wait_costmap_finished,
@@ -72,16 +72,33 @@ fn check_geotiff(dir: &Path, server: &Server, job: &Value) {
     assert_eq!(info["geoTransform"], dem["geoTransform"]);
     assert_eq!(epsg_of(&info), Some(26918));
     assert_eq!(epsg_of(&info), epsg_of(&dem));
+    // Page 1, the file itself: the cost, Float32 with NaN nodata, in unit
+    // "cost"; page 2 (GTIFF_DIR:2) the class codes, Byte with nodata 0
+    // (unknown) and no unit, on the same grid.
     let bands = info["bands"].as_array().unwrap();
-    assert_eq!(bands.len(), 2, "{info}");
-    for b in bands {
-        assert_eq!(b["type"], "Float32", "{b}");
-    }
+    assert_eq!(bands.len(), 1, "{info}");
+    assert_eq!(bands[0]["type"], "Float32", "{info}");
     assert_eq!(bands[0]["description"], "cost");
-    assert_eq!(bands[1]["description"], "class");
+    assert_eq!(bands[0]["unit"], "cost");
+    assert_eq!(bands[0]["noDataValue"], "NaN");
+    let subdatasets = &info["metadata"]["SUBDATASETS"];
+    assert_eq!(subdatasets.as_object().map(|o| o.len()), Some(4), "{info}");
+    let page2 = class_page(&tif);
+    assert_eq!(subdatasets["SUBDATASET_2_NAME"], page2.to_str().unwrap());
+    let class_info = gdalinfo(&page2);
+    assert_eq!(class_info["size"], dem["size"]);
+    assert_eq!(class_info["geoTransform"], dem["geoTransform"]);
+    assert_eq!(epsg_of(&class_info), Some(26918));
+    let class_bands = class_info["bands"].as_array().unwrap();
+    assert_eq!(class_bands.len(), 1, "{class_info}");
+    assert_eq!(class_bands[0]["type"], "Byte", "{class_info}");
+    assert_eq!(class_bands[0]["description"], "class");
+    assert_eq!(class_bands[0]["noDataValue"], 0.0);
+    assert!(class_bands[0].get("unit").is_none(), "{class_info}");
+    assert_eq!(class_bands[0]["metadata"][""]["CLASS_3"], "step");
 
     let cost = band_values(&tif, 1);
-    let class = band_values(&tif, 2);
+    let class = band_values(&page2, 1);
     let cells = (job["width"].as_u64().unwrap() * job["height"].as_u64().unwrap()) as usize;
     assert_eq!(cost.len(), cells);
     assert_eq!(class.len(), cells);
@@ -133,12 +150,13 @@ fn check_geotiff(dir: &Path, server: &Server, job: &Value) {
     let w = job["width"].as_u64().unwrap() as usize;
     let pixels: Vec<(usize, usize)> = (0..cells).step_by(997).map(|i| (i % w, i / w)).collect();
     assert!(pixels.len() > 50);
-    for (band, values) in [(1, &cost), (2, &class)] {
-        for ((c, r), got) in pixels.iter().zip(pixel_values(&tif, band, &pixels)) {
+    for (page, values) in [(&tif, &cost), (&page2, &class)] {
+        for ((c, r), got) in pixels.iter().zip(pixel_values(page, 1, &pixels)) {
             let want = values[r * w + c];
             assert!(
                 (want.is_nan() && got.is_nan()) || close(got, want, 1e-4),
-                "band {band} pixel {c},{r}: {got} vs {want}"
+                "{} pixel {c},{r}: {got} vs {want}",
+                page.display()
             );
         }
     }
@@ -156,6 +174,13 @@ fn check_geotiff(dir: &Path, server: &Server, job: &Value) {
         assert_eq!(info["bands"].as_array().unwrap().len(), 1, "{name}");
         assert_eq!(info["bands"][0]["type"], "Float32", "{name}");
         assert_eq!(info["bands"][0]["description"], name);
+        let unit = match name {
+            "slope" => "deg",
+            "zcomp" => "1",
+            _ => "m",
+        };
+        assert_eq!(info["bands"][0]["unit"], unit, "{name}");
+        assert_eq!(info["bands"][0]["noDataValue"], "NaN", "{name}");
         assert_eq!(info["geoTransform"], dem["geoTransform"], "{name}");
         assert_eq!(epsg_of(&info), Some(26918), "{name}");
         band_values(&path, 1)
@@ -565,7 +590,8 @@ fn landcover_raster_costs_and_lethal_classes() {
             &format!("/api/v1/costmaps/{id}/layers/landcover.tif"),
         ),
     );
-    let (class, lc) = (band_values(&tif, 2), band_values(&layer, 1));
+    let (class, lc) = (band_values(&class_page(&tif), 1), band_values(&layer, 1));
+    assert_eq!(gdalinfo(&layer)["bands"][0]["unit"], "cost");
     let width = 283;
     let (mut grass, mut water) = (0, 0);
     for (i, (&k, &v)) in class.iter().zip(&lc).enumerate() {
@@ -890,8 +916,11 @@ fn costmap_cli() {
         .sum();
     assert!(close(sum, 1.0, 1e-9));
     let info = gdalinfo(&out.join("costmap.tif"));
-    assert_eq!(info["bands"].as_array().unwrap().len(), 2);
+    assert_eq!(info["bands"].as_array().unwrap().len(), 1);
     assert_eq!(epsg_of(&info), Some(26918));
+    let class_info = gdalinfo(&class_page(&out.join("costmap.tif")));
+    assert_eq!(class_info["bands"][0]["type"], "Byte");
+    assert_eq!(epsg_of(&class_info), Some(26918));
     assert_eq!(
         png_size(&std::fs::read(out.join("preview.png")).unwrap()),
         (283, 259)

@@ -17,9 +17,9 @@ use geo::Intersects;
 use geo_types::{Coord, Line, LineString, Polygon};
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_invalid_at, assert_problem, band_values, close, delete, dtm, gdalinfo,
-    get, pixel_values, post, post_json, run_tool, slow_costmap_options, text, upload_dem,
-    validator, wait_costmap_finished,
+    Reply, Server, assert_invalid_at, assert_problem, band_values, class_page, close, delete, dtm,
+    gdalinfo, get, pixel_values, post, post_json, run_tool, slow_costmap_options, text,
+    upload_dem, validator, wait_costmap_finished,
 };
 
 /// Metres per degree of latitude, near enough for one-cell tolerances.
@@ -68,7 +68,8 @@ impl Costmap {
             .map(|v| v.as_f64().unwrap())
             .collect();
         let cost = band_values(&path, 1);
-        let class = band_values(&path, 2);
+        // The class codes are page 2 of the file (Byte, nodata 0 = unknown).
+        let class = band_values(&class_page(&path), 1);
         assert_eq!(cost.len(), width * height);
         let (region, sizes) = regions(&cost, width, height);
         Costmap {

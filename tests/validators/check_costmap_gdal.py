@@ -12,12 +12,16 @@ Runs with Debian's python3-gdal (/usr/bin/python3).
    finite, a 2-cell border left out): RMS and mean difference (terraplan
    minus gdaldem), and the agreement in % of the slope-only obstacle mask
    (slope >= max_slope). Fails when RMS > max-rms or agreement < min-agree.
-2. OUTDIR/costmap.tif read with GDAL: 2 bands, both Float32; geotransform
-   equal to the DEM's within 1e-9 relative; same CRS (osr IsSame); band 1
-   nodata NaN; band 1 NaN exactly where band 2 (class) != 1 (traversable);
-   and `gdallocationinfo -valonly` at ~10 random pixels (half of them
-   chosen among finite costs) gives the values ReadAsArray reads (NaN where
-   NaN).
+2. OUTDIR/costmap.tif read with GDAL (osgeo.gdal, and gdalinfo -json
+   agreeing): two pages (subdatasets GTIFF_DIR:1 and GTIFF_DIR:2); page 1
+   one Float32 band "cost", unit type "cost", nodata NaN; page 2 one Byte
+   band "class", no unit type, nodata 0, the class names as CLASS_<code>
+   metadata; layers/slope.tif one Float32 band "slope" in "deg", nodata NaN;
+   each with a geotransform equal to the DEM's within 1e-9 relative and the
+   same CRS (osr IsSame); the cost NaN exactly where the class != 1
+   (traversable), classes in 0..5; and `gdallocationinfo -valonly` of both
+   pages at ~10 random pixels (half of them chosen among finite costs) gives
+   the values ReadAsArray reads (NaN where NaN).
 
 Prints one JSON line with the figures; exit 1 with the reasons on stderr
 when a check fails.
@@ -37,6 +41,8 @@ from osgeo import gdal, osr
 gdal.UseExceptions()
 
 BORDER = 2
+# The class codes 0..5 by name, as the class band's metadata lists them.
+CLASS_NAMES = ["unknown", "traversable", "slope", "step", "enclosed", "other"]
 
 
 def read_band(ds, index):
@@ -181,51 +187,93 @@ def main():
 
     # --- 2. costmap.tif -------------------------------------------------
     cm_path = os.path.join(args.outdir, "costmap.tif")
+    class_path = f"GTIFF_DIR:2:{cm_path}"
+    slope_path = os.path.join(args.outdir, "layers", "slope.tif")
     cm_ds = gdal.Open(cm_path)
-    if cm_ds.RasterCount != 2:
-        problems.append(f"costmap.tif has {cm_ds.RasterCount} bands, not 2")
-    for i in range(1, cm_ds.RasterCount + 1):
-        t = gdal.GetDataTypeName(cm_ds.GetRasterBand(i).DataType)
-        if t != "Float32":
-            problems.append(f"costmap.tif band {i} is {t}, not Float32")
-    if (cm_ds.RasterXSize, cm_ds.RasterYSize) != (dem_ds.RasterXSize, dem_ds.RasterYSize):
-        problems.append(
-            f"costmap.tif is {cm_ds.RasterXSize}x{cm_ds.RasterYSize}, the DEM "
-            f"{dem_ds.RasterXSize}x{dem_ds.RasterYSize}")
-    cm_gt = cm_ds.GetGeoTransform()
-    if not same_geotransform(cm_gt, dem_gt):
-        problems.append(f"costmap.tif geotransform {cm_gt} != DEM's {dem_gt}")
-    cm_srs = srs_of(cm_ds)
-    if dem_srs is None or cm_srs is None:
-        problems.append("costmap.tif or the DEM has no CRS")
-    elif not cm_srs.IsSame(dem_srs):
-        # A compound DEM CRS: the costmap may carry the horizontal part only.
-        horiz = dem_srs.Clone()
-        if not (dem_srs.IsCompound() and horiz.StripVertical() == 0
-                and cm_srs.IsSame(horiz)):
-            problems.append(
-                f"costmap.tif CRS {cm_srs.GetName()} is not the DEM's {dem_srs.GetName()}")
-    nd1 = cm_ds.GetRasterBand(1).GetNoDataValue()
-    if nd1 is None or not math.isnan(nd1):
-        problems.append(f"costmap.tif band 1 nodata is {nd1}, not NaN")
+    subdatasets = cm_ds.GetMetadata("SUBDATASETS")
+    names = sorted(v for k, v in subdatasets.items() if k.endswith("_NAME"))
+    if names != [f"GTIFF_DIR:1:{cm_path}", class_path]:
+        problems.append(f"costmap.tif pages (subdatasets) are {names}, not cost and class")
+    class_ds = gdal.Open(class_path)
+    slope_ds = gdal.Open(slope_path)
+    # What each raster must hold, as osgeo.gdal reads it: band count, then
+    # per band description, data type, unit type ("" = none) and nodata.
+    expected = [
+        ("costmap.tif", cm_ds, cm_path, [("cost", "Float32", "cost", "nan")]),
+        ("costmap.tif page 2", class_ds, class_path, [("class", "Byte", "", 0.0)]),
+        ("layers/slope.tif", slope_ds, slope_path, [("slope", "Float32", "deg", "nan")]),
+    ]
+    band_checks = []
+    for name, ds, path, bands_wanted in expected:
+        if ds.RasterCount != len(bands_wanted):
+            problems.append(f"{name} has {ds.RasterCount} bands, not {len(bands_wanted)}")
+            continue
+        info = json.loads(subprocess.run(
+            ["gdalinfo", "-json", path], capture_output=True, text=True, check=True).stdout)
+        for i, (desc, dtype, unit, nodata) in enumerate(bands_wanted, start=1):
+            band = ds.GetRasterBand(i)
+            got_nodata = band.GetNoDataValue()
+            got = (band.GetDescription(), gdal.GetDataTypeName(band.DataType),
+                   band.GetUnitType(), got_nodata)
+            nodata_ok = (got_nodata is not None and
+                         (math.isnan(got_nodata) if nodata == "nan" else got_nodata == nodata))
+            if got[:3] != (desc, dtype, unit) or not nodata_ok:
+                problems.append(
+                    f"{name} band {i}: description, type, unit, nodata {got}, "
+                    f"expected {(desc, dtype, unit, nodata)}")
+            # gdalinfo -json reports the same (its "unit" only when set).
+            j = info["bands"][i - 1]
+            j_got = (j.get("description"), j.get("type"), j.get("unit", ""),
+                     j.get("noDataValue"))
+            j_nodata = "NaN" if nodata == "nan" else nodata
+            if j_got != (desc, dtype, unit, j_nodata):
+                problems.append(
+                    f"{name} band {i}: gdalinfo -json says {j_got}, "
+                    f"expected {(desc, dtype, unit, j_nodata)}")
+            band_checks.append(f"{name}:{i}:{dtype}:{unit or '-'}")
+    result["bands_checked"] = band_checks
+    class_names = class_ds.GetRasterBand(1).GetMetadata()
+    want_names = {f"CLASS_{i}": n for i, n in enumerate(CLASS_NAMES)}
+    if class_names != want_names:
+        problems.append(f"class band metadata {class_names}, expected {want_names}")
 
-    bands = [cm_ds.GetRasterBand(i).ReadAsArray().astype(np.float64)
-             for i in range(1, cm_ds.RasterCount + 1)]
+    for name, ds in [("costmap.tif", cm_ds), ("costmap.tif page 2", class_ds),
+                     ("layers/slope.tif", slope_ds)]:
+        if (ds.RasterXSize, ds.RasterYSize) != (dem_ds.RasterXSize, dem_ds.RasterYSize):
+            problems.append(
+                f"{name} is {ds.RasterXSize}x{ds.RasterYSize}, the DEM "
+                f"{dem_ds.RasterXSize}x{dem_ds.RasterYSize}")
+        gt = ds.GetGeoTransform()
+        if not same_geotransform(gt, dem_gt):
+            problems.append(f"{name} geotransform {gt} != DEM's {dem_gt}")
+        srs = srs_of(ds)
+        if dem_srs is None or srs is None:
+            problems.append(f"{name} or the DEM has no CRS")
+        elif not srs.IsSame(dem_srs):
+            # A compound DEM CRS: the costmap may carry the horizontal part only.
+            horiz = dem_srs.Clone()
+            if not (dem_srs.IsCompound() and horiz.StripVertical() == 0
+                    and srs.IsSame(horiz)):
+                problems.append(
+                    f"{name} CRS {srs.GetName()} is not the DEM's {dem_srs.GetName()}")
+
+    # The raw values (no nodata masking): the class page's 0 is "unknown".
+    cost = cm_ds.GetRasterBand(1).ReadAsArray().astype(np.float64)
+    cls = class_ds.GetRasterBand(1).ReadAsArray()
     result["locations_checked"] = 0
-    if len(bands) >= 2:
-        cost, cls = bands[0], bands[1]
+    if cost.shape == cls.shape:
         mismatch = np.isnan(cost) != (cls != 1)
         result["nan_class_mismatches"] = int(mismatch.sum())
         if mismatch.any():
             r, c = np.argwhere(mismatch)[0]
             problems.append(
-                f"band 1 NaN must be exactly where band 2 != 1: {int(mismatch.sum())} "
+                f"cost NaN must be exactly where the class != 1: {int(mismatch.sum())} "
                 f"cells differ, first at pixel {c},{r} (cost {cost[r, c]}, class {cls[r, c]})")
-        finite_cls = cls[np.isfinite(cls)]
-        bad_cls = ~np.isin(finite_cls, [0, 1, 2, 3, 4, 5])
+        bad_cls = cls > 5
         if bad_cls.any():
-            problems.append(f"band 2 has classes outside 0..5: {np.unique(finite_cls[bad_cls])[:10]}")
+            problems.append(f"classes outside 0..5: {np.unique(cls[bad_cls])[:10]}")
         result["traversable_pct"] = round(100.0 * float(np.mean(cls == 1)), 3)
+        result["unknown_pct"] = round(100.0 * float(np.mean(cls == 0)), 3)
 
         rng = random.Random(args.seed)
         h, w = cost.shape
@@ -238,25 +286,28 @@ def main():
             else:
                 picks.append((rng.randrange(w), rng.randrange(h)))
         for (px, py) in picks:
-            run = subprocess.run(
-                ["gdallocationinfo", "-valonly", cm_path, str(px), str(py)],
-                capture_output=True, text=True)
-            if run.returncode != 0:
-                problems.append(f"gdallocationinfo {px} {py} failed: {run.stderr.strip()}")
-                continue
-            lines = run.stdout.split()
-            if len(lines) != len(bands):
-                problems.append(
-                    f"gdallocationinfo {px} {py} printed {run.stdout!r}, expected {len(bands)} values")
-                continue
-            for i, (txt, arr) in enumerate(zip(lines, bands), start=1):
-                listed = float(txt)
-                if not same_value(listed, float(arr[py, px])):
+            ok = True
+            for path, arr in [(cm_path, cost), (class_path, cls.astype(np.float64))]:
+                run = subprocess.run(
+                    ["gdallocationinfo", "-valonly", path, str(px), str(py)],
+                    capture_output=True, text=True)
+                if run.returncode != 0:
+                    problems.append(f"gdallocationinfo {path} {px} {py} failed: "
+                                    f"{run.stderr.strip()}")
+                    ok = False
+                    continue
+                lines = run.stdout.split()
+                if len(lines) != 1 or not same_value(float(lines[0]), float(arr[py, px])):
                     problems.append(
-                        f"pixel {px},{py} band {i}: gdallocationinfo {txt}, "
+                        f"pixel {px},{py} of {path}: gdallocationinfo {run.stdout!r}, "
                         f"ReadAsArray {arr[py, px]}")
-            result["locations_checked"] += 1
+                    ok = False
+            result["locations_checked"] += int(ok)
+    else:
+        problems.append(f"cost {cost.shape} and class {cls.shape} differ in size")
     cm_ds = None
+    class_ds = None
+    slope_ds = None
     dem_ds = None
 
     result["ok"] = not problems

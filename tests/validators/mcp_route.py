@@ -2,9 +2,10 @@
 terraplan's route planner against.
 
     mcp_route.py random DIR --seed N --count K --size WxH
-        writes K random 2-band costmap GeoTIFFs (band 1 cost, band 2 class,
-        2 m cells in EPSG:32618, planar, the layout `terraplan costmap`
-        writes) to DIR, half of them with obstacles, and DIR/cases.json:
+        writes K random costmap GeoTIFFs (page 1 the Float32 cost with NaN
+        nodata, page 2 the Byte class with nodata 0, 2 m cells in
+        EPSG:32618: the layout `terraplan costmap` writes, by tifffile) to
+        DIR, half of them with obstacles, and DIR/cases.json:
         for each, the file, start and goal cells and their UTM centres, and
         MCP_Geometric's cost between them.
     mcp_route.py cost COSTMAP.tif ROW,COL ROW,COL
@@ -57,6 +58,18 @@ def read_bands(path):
     return data, planar, scale, tie
 
 
+def read_class(path):
+    """The class codes: page 2 of a costmap, or band 2 of its first page (as
+    terraplan wrote costmaps before the class page) when page 2 is missing
+    or only an overview or mask of page 1."""
+    with tifffile.TiffFile(path) as tif:
+        if len(tif.pages) > 1 and not (tif.pages[1].is_reduced or tif.pages[1].is_mask):
+            return tif.pages[1].asarray()
+        page = tif.pages[0]
+        data = page.asarray()
+        return data[1] if page.planarconfig == 2 else data[..., 1]
+
+
 def read_costmap(path):
     """Band 1 (cost, float64 with inf for NaN), the cell size (x, y) and
     the top-left corner."""
@@ -80,21 +93,22 @@ def mcp_cost(cost, cell, start, goal):
 
 
 def write_costmap(path, cost):
-    h, w = cost.shape
-    cls = np.where(np.isfinite(cost), 1, 3).astype(np.float32)
+    cls = np.where(np.isfinite(cost), 1, 3).astype(np.uint8)
     geokeys = (1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 32618)
-    tifffile.imwrite(
-        path,
-        np.stack([cost.astype(np.float32), cls]),
-        planarconfig="separate",
-        photometric="minisblack",
-        extratags=[
-            (33550, "d", 3, (CELL_M, CELL_M, 0.0), True),
-            (33922, "d", 6, (0.0, 0.0, 0.0, ORIGIN[0], ORIGIN[1], 0.0), True),
-            (34735, "H", len(geokeys), geokeys, True),
-            (42113, "s", 4, "nan", True),
-        ],
-    )
+    georef = [
+        (33550, "d", 3, (CELL_M, CELL_M, 0.0), True),
+        (33922, "d", 6, (0.0, 0.0, 0.0, ORIGIN[0], ORIGIN[1], 0.0), True),
+        (34735, "H", len(geokeys), geokeys, True),
+    ]
+    with tifffile.TiffWriter(path) as tif:
+        # GDAL_NODATA counts its terminating NUL.
+        for data, nodata in [(cost.astype(np.float32), "nan"), (cls, "0")]:
+            tif.write(
+                data,
+                photometric="minisblack",
+                metadata=None,
+                extratags=georef + [(42113, "s", len(nodata) + 1, nodata, True)],
+            )
 
 
 def centre_utm(row, col):
@@ -150,8 +164,7 @@ def pick(path):
     h, w = cost.shape
     a = int(np.argmin(rows.astype(np.int64) ** 2 + cols.astype(np.int64) ** 2))
     b = int(np.argmin((h - 1 - rows.astype(np.int64)) ** 2 + (w - 1 - cols.astype(np.int64)) ** 2))
-    data, planar, _, _ = read_bands(path)
-    cls = data[1] if planar else data[..., 1]
+    cls = read_class(path)
     step = np.argwhere(cls == 3)
     island = np.argwhere(finite & (labels != biggest))
     first = lambda cells: [int(v) for v in cells[0]] if len(cells) else None

@@ -118,9 +118,22 @@ impl Layer {
     pub fn from_name(name: &str) -> Option<Layer> {
         Layer::ALL.into_iter().find(|l| l.name() == name)
     }
+
+    /// The unit of the layer's values, as written in its GeoTIFF for
+    /// GDAL's `GetUnitType()`: `deg`, `m`, `cost` (a cost on the cost
+    /// band's scale), or `1` for the dimensionless fractions in [0, 1]
+    /// (the CF conventions' unit for a pure number).
+    pub fn unit(self) -> &'static str {
+        match self {
+            Layer::Slope => "deg",
+            Layer::Zcomp | Layer::Inflation => "1",
+            Layer::Step | Layer::Roughness | Layer::NegativeStep => "m",
+            Layer::Landcover => "cost",
+        }
+    }
 }
 
-/// Cell classes of band 2.
+/// Cell classes of the costmap's class band (page 2 of its GeoTIFF).
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -152,6 +165,18 @@ impl Class {
 
     pub fn from_code(code: u8) -> Option<Class> {
         Class::ALL.get(usize::from(code)).copied()
+    }
+
+    /// The name it has in statistics and in the class band's metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Class::Unknown => "unknown",
+            Class::Traversable => "traversable",
+            Class::Slope => "slope",
+            Class::Step => "step",
+            Class::Enclosed => "enclosed",
+            Class::Other => "other",
+        }
     }
 
     /// An obstacle the vehicle must not enter (not unknown).

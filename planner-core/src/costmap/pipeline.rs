@@ -19,12 +19,16 @@ use super::{
     Class, Costmap, CostmapError, CostmapOptions, InflationMode, Layer, MAX_RADIUS_CELLS, Progress,
     ResolvedParams, Stage, StepMode, Vehicle,
 };
-use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
+use crate::export::geotiff::{Band, BandData, Page, write_geotiff};
 use crate::geo::Issue;
 use crate::terrain::Dem;
 
 /// Cells per parallel task of the whole-grid passes.
 const CHUNK: usize = 1 << 14;
+
+/// The nodata value of the GeoTIFF's class band: unknown cells (no
+/// height, or not judged), which `preview.png` leaves transparent too.
+pub const CLASS_NODATA: u8 = Class::Unknown as u8;
 
 /// Slope costs span [1, SLOPE_COST_MAX] (thesis §3.6.3: Zcomp remapped
 /// from [cos(max_slope), 1] to [10, 1]).
@@ -641,31 +645,45 @@ fn coarse_warnings(
 }
 
 impl Costmap {
-    /// The costmap as a Float32 GeoTIFF in the DEM's CRS: band 1 the cost
-    /// (NaN = nodata on obstacles and unknown cells), band 2 the class.
+    /// The costmap as a GeoTIFF in the DEM's CRS, in two pages (images; a
+    /// TIFF image has one sample type and GDAL one nodata value per image):
+    /// page 1, what GDAL opens as the file, the cost (Float32, unit `cost`,
+    /// NaN = nodata on obstacles and unknown cells); page 2 (GDAL's
+    /// `GTIFF_DIR:2:costmap.tif`) the class codes (Byte, no unit, nodata 0 =
+    /// unknown, the codes' names in the band's metadata as `CLASS_<code>`).
     pub fn write_geotiff<W: Write + Seek>(&self, out: W) -> std::io::Result<()> {
-        write_geotiff_f32(
+        let names: Vec<(String, &str)> = Class::ALL
+            .iter()
+            .map(|c| (format!("CLASS_{}", *c as u8), c.name()))
+            .collect();
+        let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+        write_geotiff(
             out,
             self.width,
             self.height,
             &self.transform,
             &self.crs,
             &[
-                Band {
-                    description: "cost",
-                    data: BandData::F32(&self.cost),
+                Page {
+                    bands: &[Band::new("cost", "cost", BandData::F32(&self.cost))],
+                    nodata: Some(f64::NAN),
                 },
-                Band {
-                    description: "class",
-                    data: BandData::U8(&self.class),
+                Page {
+                    bands: &[Band {
+                        description: "class",
+                        unit: "",
+                        metadata: &names,
+                        data: BandData::U8(&self.class),
+                    }],
+                    nodata: Some(f64::from(CLASS_NODATA)),
                 },
             ],
-            Some(f64::NAN),
         )
     }
 
-    /// One kept layer as a single-band Float32 GeoTIFF; `Ok(false)` (and
-    /// nothing written) when that layer was not kept.
+    /// One kept layer as a single-band Float32 GeoTIFF (NaN nodata, the
+    /// layer's name and unit on the band); `Ok(false)` (and nothing
+    /// written) when that layer was not kept.
     pub fn write_layer_geotiff<W: Write + Seek>(
         &self,
         layer: Layer,
@@ -674,17 +692,16 @@ impl Costmap {
         let Some((_, data)) = self.layers.iter().find(|(l, _)| *l == layer) else {
             return Ok(false);
         };
-        write_geotiff_f32(
+        write_geotiff(
             out,
             self.width,
             self.height,
             &self.transform,
             &self.crs,
-            &[Band {
-                description: layer.name(),
-                data: BandData::F32(data),
+            &[Page {
+                bands: &[Band::new(layer.name(), layer.unit(), BandData::F32(data))],
+                nodata: Some(f64::NAN),
             }],
-            Some(f64::NAN),
         )?;
         Ok(true)
     }
@@ -1194,8 +1211,18 @@ mod tests {
         ));
     }
 
+    /// Tag `tag` of page `page` (0-based) of a TIFF, as text.
+    fn ascii_tag(bytes: &[u8], page: usize, tag: u16) -> Option<String> {
+        let mut d = tiff::decoder::Decoder::new(std::io::Cursor::new(bytes)).unwrap();
+        d.seek_to_image(page).unwrap();
+        d.find_tag(tiff::tags::Tag::Unknown(tag))
+            .unwrap()
+            .map(|v| v.into_string().unwrap())
+    }
+
     #[test]
-    fn writes_a_two_band_geotiff_our_reader_reads_back() {
+    fn writes_cost_and_class_pages_our_reader_reads_back() {
+        use crate::terrain::{geotiff_pages, read_geotiff_page_band};
         let d = surface(12, 10, 1.0, |x, _| if x > 5.5 { 3.0 } else { 1.0 });
         let m = build(
             &d,
@@ -1207,13 +1234,60 @@ mod tests {
         );
         let mut buf = std::io::Cursor::new(Vec::new());
         m.write_geotiff(&mut buf).unwrap();
-        assert!(buf.get_ref().len() > 2 * 12 * 10 * 4);
+        let tif = buf.into_inner();
+        // Float32 cost + Byte class, and the head.
+        assert!(tif.len() > 12 * 10 * 5);
+        assert_eq!(geotiff_pages(&tif, 10).unwrap().len(), 2);
+        let limits = Default::default();
+        let cost = read_geotiff_page_band(&tif, 1, 1, None, &limits).unwrap();
+        let class = read_geotiff_page_band(&tif, 2, 1, None, &limits).unwrap();
+        for page in [&cost, &class] {
+            assert_eq!((page.width, page.height), (12, 10));
+            assert_eq!(page.transform, d.transform);
+            assert_eq!(page.crs.epsg, 32633);
+        }
+        assert!(cost.nodata.is_some_and(f64::is_nan));
+        assert_eq!(class.nodata, Some(0.0));
+        let mut seen = [0usize; 6];
+        for i in 0..m.cost.len() {
+            let (c, k) = (m.cost[i], m.class[i]);
+            assert!(c.is_nan() == cost.values[i].is_nan(), "cost {i}");
+            if !c.is_nan() {
+                assert_eq!(cost.values[i], f64::from(c), "cost {i}");
+            }
+            // Unknown is the class page's nodata: read as NaN.
+            if k == Class::Unknown as u8 {
+                assert!(class.values[i].is_nan(), "class {i}");
+            } else {
+                assert_eq!(class.values[i], f64::from(k), "class {i}");
+            }
+            seen[usize::from(k)] += 1;
+        }
+        // The border ring is unknown, the wall a step, the rest traversable.
+        assert!(seen[0] > 0 && seen[1] > 0 && seen[3] > 0, "{seen:?}");
+        let cost_meta = ascii_tag(&tif, 0, 42112).unwrap();
+        assert!(
+            cost_meta.contains(r#"role="unittype">cost</Item>"#),
+            "{cost_meta}"
+        );
+        let class_meta = ascii_tag(&tif, 1, 42112).unwrap();
+        assert!(!class_meta.contains("unittype"), "{class_meta}");
+        for c in Class::ALL {
+            let item = format!(
+                r#"<Item name="CLASS_{}" sample="0">{}</Item>"#,
+                c as u8,
+                c.name()
+            );
+            assert!(class_meta.contains(&item), "{class_meta}");
+        }
+        assert_eq!(ascii_tag(&tif, 0, 42113).as_deref(), Some("nan"));
+        assert_eq!(ascii_tag(&tif, 1, 42113).as_deref(), Some("0"));
+
         // terraplan's DEM reader takes single-band files: read a layer.
         let mut layer = std::io::Cursor::new(Vec::new());
         assert!(m.write_layer_geotiff(Layer::Step, &mut layer).unwrap());
-        let back =
-            crate::terrain::read_dem(layer.get_ref(), Some("s.tif"), None, &Default::default())
-                .unwrap();
+        let layer = layer.into_inner();
+        let back = crate::terrain::read_dem(&layer, Some("s.tif"), None, &limits).unwrap();
         assert_eq!((back.width, back.height), (12, 10));
         assert_eq!(back.transform, d.transform);
         assert_eq!(back.crs.epsg, 32633);
@@ -1221,6 +1295,14 @@ mod tests {
         for (a, b) in back.values.iter().zip(step) {
             assert!(a.is_nan() == b.is_nan() && (a.is_nan() || (*a - f64::from(*b)).abs() < 1e-6));
         }
+        assert_eq!(
+            ascii_tag(&layer, 0, 42112).as_deref(),
+            Some(
+                "<GDALMetadata>\n  <Item name=\"DESCRIPTION\" sample=\"0\" \
+                 role=\"description\">step</Item>\n  <Item name=\"UNITTYPE\" sample=\"0\" \
+                 role=\"unittype\">m</Item>\n</GDALMetadata>"
+            )
+        );
         assert!(
             !m.write_layer_geotiff(Layer::Slope, std::io::Cursor::new(Vec::new()))
                 .unwrap()

@@ -1,5 +1,5 @@
 //! Export stage: missions and their file formats (SPEC §3.6), and
-//! georeferenced Float32 rasters (costmaps, SPEC §4.2).
+//! georeferenced Float32 and Byte rasters (costmaps, SPEC §4.2).
 
 pub mod geojson;
 pub mod geotiff;
@@ -9,7 +9,7 @@ pub mod mission;
 pub mod qgc_plan;
 pub mod waypoints;
 
-pub use geotiff::{Band, BandData, write_geotiff_f32};
+pub use geotiff::{Band, BandData, Page, SampleType, write_geotiff};
 pub use kml::write_kml;
 pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};
 pub use qgc_plan::write_plan;

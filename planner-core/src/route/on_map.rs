@@ -17,7 +17,9 @@ use crate::costmap::Class;
 use crate::costmap::grid::work_grid;
 use crate::geo::UtmProjection;
 use crate::terrain::dilate::cell_size_m;
-use crate::terrain::{Crs, Dem, DemLimits, GeoTransform, read_geotiff_band};
+use crate::terrain::{
+    Crs, Dem, DemLimits, GeoTransform, TerrainError, geotiff_pages, read_geotiff_page_band,
+};
 
 /// A point given by the caller: `[lon, lat]` (WGS84 degrees) or
 /// `{"utm": [easting, northing]}` in the route's UTM zone (the zone of
@@ -238,32 +240,52 @@ impl RouteMap {
     }
 
     /// A map from the bytes of a costmap GeoTIFF as terraplan writes it
-    /// (band 1 cost, band 2 class) and, for heights, the DEM it was built
-    /// from: the DEM is brought to the costmap's grid by the costmap's own
-    /// block averaging (`resample_factor` read off the two cell sizes) and
-    /// must then cover exactly the same cells.
+    /// (page 1 the Float32 cost, page 2 the Byte class codes, nodata 0 =
+    /// unknown; or, as written before, one page of two Float32 bands, cost
+    /// and class) and, for heights, the DEM it was built from: the DEM is
+    /// brought to the costmap's grid by the costmap's own block averaging
+    /// (`resample_factor` read off the two cell sizes) and must then cover
+    /// exactly the same cells.
     pub fn from_costmap_geotiff(
         costmap_tif: &[u8],
         dem: Option<&Dem>,
         limits: &DemLimits,
     ) -> Result<RouteMap, MapRouteError> {
-        let read = |band| {
-            read_geotiff_band(costmap_tif, band, None, limits)
-                .map_err(|e| MapRouteError::CostmapFile(e.to_string()))
-        };
+        let file = |e: TerrainError| MapRouteError::CostmapFile(e.to_string());
+        let read = |page, band| read_geotiff_page_band(costmap_tif, page, band, None, limits);
+        // Page 2 holds the classes unless it is an overview or mask of
+        // page 1 (a costmap of the old layout given overviews by gdaladdo).
+        let pages = geotiff_pages(costmap_tif, 2).map_err(file)?;
+        let class_page = pages.get(1).is_some_and(|p| p.full_resolution);
         // One band in f64 at a time, each narrowed at once: the largest
         // maps hold 8 bytes a cell less at the peak.
-        let mut cost = read(1)?;
+        let mut cost = read(1, 1).map_err(file)?;
         let costs = cost.values.iter().map(|&v| v as f32).collect();
         cost.values = Vec::new();
-        let classes = read(2)?
+        let class = if class_page { read(2, 1) } else { read(1, 2) }.map_err(file)?;
+        if (class.width, class.height, class.transform) != (cost.width, cost.height, cost.transform)
+        {
+            return Err(MapRouteError::CostmapFile(format!(
+                "the class page ({}×{} cells, geotransform {:?}) is not on the cost page's grid \
+                 ({}×{} cells, geotransform {:?})",
+                class.width,
+                class.height,
+                class.transform.coefficients(),
+                cost.width,
+                cost.height,
+                cost.transform.coefficients()
+            )));
+        }
+        let classes = class
             .values
             .iter()
             .map(|&v| {
-                if (0.0..=255.0).contains(&v) {
+                // Nodata (NaN: the Byte page's 0) and anything not a class
+                // code is unknown.
+                if (0.0..=255.0).contains(&v) && v.fract() == 0.0 {
                     v as u8
                 } else {
-                    0
+                    Class::Unknown as u8
                 }
             })
             .collect();
@@ -1091,6 +1113,7 @@ mod tests {
     #[test]
     fn costmap_geotiff_round_trip_with_the_dem() {
         use crate::costmap::{CostmapOptions, Stage, VehiclePreset, build_costmap};
+        use crate::export::geotiff::{Band, BandData, Page, write_geotiff};
         use crate::terrain::test_support::{dem, north_up};
         let (w, h) = (120, 100);
         // A gentle plane (2 %) with a 3 m wall across columns 60..64,
@@ -1158,5 +1181,56 @@ mod tests {
             RouteMap::from_costmap_geotiff(b"not a tiff", None, &DemLimits::default()),
             Err(MapRouteError::CostmapFile(_))
         ));
+
+        // The class codes come back exactly from the Byte page, its nodata
+        // (0) as unknown, and from the Float32 band 2 of costmaps written
+        // before the class page.
+        assert_eq!(bare.classes.as_deref(), Some(&cm.class[..]));
+        assert!(cm.class.contains(&(Class::Unknown as u8)));
+        let classes_f32: Vec<f32> = cm.class.iter().map(|&k| f32::from(k)).collect();
+        let bands = [
+            Band::new("cost", "", BandData::F32(&cm.cost)),
+            Band::new("class", "", BandData::F32(&classes_f32)),
+        ];
+        let page = Page {
+            bands: &bands,
+            nodata: Some(f64::NAN),
+        };
+        let mut old = std::io::Cursor::new(Vec::new());
+        write_geotiff(
+            &mut old,
+            cm.width,
+            cm.height,
+            &cm.transform,
+            &cm.crs,
+            &[page],
+        )
+        .unwrap();
+        let map =
+            RouteMap::from_costmap_geotiff(old.get_ref(), None, &DemLimits::default()).unwrap();
+        assert_eq!(map.classes.as_deref(), Some(&cm.class[..]));
+
+        // A class page on another grid is refused, naming both: page 2's
+        // ModelTiepoint (the second copy, IFDs being written in page order)
+        // moved by 1 m east.
+        let mut moved = tif.clone();
+        let t = cm.transform;
+        let tiepoint: Vec<u8> = [0.0, 0.0, 0.0, t.origin_x, t.origin_y, 0.0]
+            .iter()
+            .flat_map(|v: &f64| v.to_le_bytes())
+            .collect();
+        let at: Vec<usize> = moved
+            .windows(tiepoint.len())
+            .enumerate()
+            .filter(|(_, w)| *w == &tiepoint[..])
+            .map(|(i, _)| i)
+            .collect();
+        assert_eq!(at.len(), 2);
+        moved[at[1] + 24..at[1] + 32].copy_from_slice(&(t.origin_x + 1.0).to_le_bytes());
+        let e = RouteMap::from_costmap_geotiff(&moved, None, &DemLimits::default()).unwrap_err();
+        assert!(
+            matches!(&e, MapRouteError::CostmapFile(m) if m.contains("class page")),
+            "{e}"
+        );
     }
 }

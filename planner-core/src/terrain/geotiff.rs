@@ -32,6 +32,7 @@ use super::read::{c_atof, check_limits, resolve_crs};
 use super::{Dem, DemFormat, DemLimits, GeoTransform, TerrainError};
 
 // Baseline and extension tags.
+const NEW_SUBFILE_TYPE: u16 = 254;
 const IMAGE_WIDTH: u16 = 256;
 const IMAGE_LENGTH: u16 = 257;
 const BITS_PER_SAMPLE: u16 = 258;
@@ -86,6 +87,7 @@ fn unsupported(msg: impl Into<String>) -> TerrainError {
 
 fn tag_name(tag: u16) -> String {
     let name = match tag {
+        NEW_SUBFILE_TYPE => "NewSubfileType",
         IMAGE_WIDTH => "ImageWidth",
         IMAGE_LENGTH => "ImageLength",
         BITS_PER_SAMPLE => "BitsPerSample",
@@ -139,6 +141,7 @@ fn type_size(typ: u16) -> Option<u64> {
 }
 
 /// A bounds-checked view of a TIFF file's bytes.
+#[derive(Clone, Copy)]
 struct TiffBytes<'a> {
     b: &'a [u8],
     le: bool,
@@ -192,15 +195,16 @@ impl<'a> TiffBytes<'a> {
         }
     }
 
-    /// The entries of the first IFD.
-    fn first_ifd(&self) -> Result<Vec<Entry>, TerrainError> {
-        let truncated = || invalid("the TIFF header is truncated");
-        let ifd = if self.big {
-            self.u64(8)
-        } else {
-            self.u32(4).map(u64::from)
-        }
-        .ok_or_else(truncated)?;
+    /// The offset of the first IFD.
+    fn first_ifd_offset(&self) -> Result<u64, TerrainError> {
+        self.offset(if self.big { 8 } else { 4 })
+            .ok_or_else(|| invalid("the TIFF header is truncated"))
+    }
+
+    /// The number of entries of the IFD at `ifd`, where they start, and
+    /// the sizes of an entry and of its inline value; the table (and the
+    /// next-IFD pointer after it) checked to lie within the file.
+    fn ifd_table(&self, ifd: u64) -> Result<(u64, u64, u64, u64), TerrainError> {
         let (n, first, entry_len, inline_len) = if self.big {
             let n = self.u64(ifd).ok_or_else(|| self.ifd_outside(ifd))?;
             (n, ifd.checked_add(8), 20u64, 8u64)
@@ -210,16 +214,55 @@ impl<'a> TiffBytes<'a> {
         };
         let first = first.ok_or_else(|| self.ifd_outside(ifd))?;
         if n == 0 {
-            return Err(invalid("the TIFF's first image directory is empty"));
+            return Err(invalid(format!(
+                "the TIFF's image directory at offset {ifd} is empty"
+            )));
         }
         let table_end = n.checked_mul(entry_len).and_then(|l| l.checked_add(first));
         if table_end.is_none_or(|end| end > self.b.len() as u64) {
             return Err(invalid(format!(
-                "the TIFF's first image directory ({n} entries at offset {ifd}) runs past the \
+                "the TIFF's image directory ({n} entries at offset {ifd}) runs past the \
                  end of the file ({} bytes): the file is truncated or corrupt",
                 self.b.len()
             )));
         }
+        Ok((n, first, entry_len, inline_len))
+    }
+
+    /// The offsets of the first `limit` IFDs (or all, if fewer), following
+    /// the next-IFD pointers; a loop or a pointer outside the file is an
+    /// error.
+    fn ifd_offsets(&self, limit: usize) -> Result<Vec<u64>, TerrainError> {
+        let mut ifd = self.first_ifd_offset()?;
+        let mut seen = std::collections::HashSet::new();
+        let mut out = Vec::new();
+        while out.len() < limit {
+            if !seen.insert(ifd) {
+                return Err(invalid(format!(
+                    "the TIFF's image directories loop back to offset {ifd}: the file is corrupt"
+                )));
+            }
+            out.push(ifd);
+            let (n, first, entry_len, _) = self.ifd_table(ifd)?;
+            // Within the file's length (checked by `ifd_table`), so no overflow.
+            let next = self.offset(first + n * entry_len).ok_or_else(|| {
+                invalid(format!(
+                    "the TIFF's image directory at offset {ifd} ends without the pointer to \
+                     the next one: the file is truncated or corrupt"
+                ))
+            })?;
+            if next == 0 {
+                break;
+            }
+            ifd = next;
+        }
+        Ok(out)
+    }
+
+    /// The entries of the IFD at `ifd`.
+    fn ifd_entries(&self, ifd: u64) -> Result<Vec<Entry>, TerrainError> {
+        let truncated = || invalid("the TIFF header is truncated");
+        let (n, first, entry_len, inline_len) = self.ifd_table(ifd)?;
         let mut entries = Vec::new();
         for i in 0..n {
             let e = first + i * entry_len; // within the file, checked above
@@ -258,7 +301,7 @@ impl<'a> TiffBytes<'a> {
 
     fn ifd_outside(&self, ifd: u64) -> TerrainError {
         invalid(format!(
-            "the TIFF's first image directory offset ({ifd}) is outside the file ({} bytes)",
+            "the TIFF's image directory offset ({ifd}) is outside the file ({} bytes)",
             self.b.len()
         ))
     }
@@ -597,13 +640,8 @@ struct Header {
     big: bool,
 }
 
-/// The header of a GeoTIFF, for reading band `band` (1-based) of it, or
-/// with `None` for reading it as a DEM (which must have a single band).
-fn parse_header(
-    bytes: &[u8],
-    limits: &DemLimits,
-    band: Option<usize>,
-) -> Result<Header, TerrainError> {
+/// A bounds-checked view of `bytes`, with the BigTIFF header checked.
+fn tiff_bytes(bytes: &[u8]) -> Result<TiffBytes<'_>, TerrainError> {
     let le = bytes.first() == Some(&b'I');
     let big = matches!(bytes.get(2..4), Some(b"+\0" | b"\0+"));
     let file = TiffBytes { b: bytes, le, big };
@@ -612,7 +650,64 @@ fn parse_header(
             "the BigTIFF header is corrupt (offset size is not 8)",
         ));
     }
-    let entries = file.first_ifd()?;
+    Ok(file)
+}
+
+/// A page of a TIFF (an IFD of its main chain; page n is GDAL's
+/// `GTIFF_DIR:n`), as far as choosing which to read needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TiffPage {
+    pub width: u64,
+    pub height: u64,
+    /// SamplesPerPixel.
+    pub bands: u64,
+    /// Not an overview (a reduced-resolution copy of another page) nor a
+    /// transparency mask (`NewSubfileType` bits 0 and 2 clear): an image of
+    /// its own, which GDAL lists as a subdataset.
+    pub full_resolution: bool,
+}
+
+/// The first `limit` pages of a TIFF (or all, if fewer).
+pub(super) fn pages(bytes: &[u8], limit: usize) -> Result<Vec<TiffPage>, TerrainError> {
+    let file = tiff_bytes(bytes)?;
+    let mut out = Vec::new();
+    for at in file.ifd_offsets(limit)? {
+        let ifd = Ifd {
+            file,
+            entries: file.ifd_entries(at)?,
+        };
+        out.push(TiffPage {
+            width: ifd.uint(IMAGE_WIDTH, None)?,
+            height: ifd.uint(IMAGE_LENGTH, None)?,
+            bands: ifd.uint(SAMPLES_PER_PIXEL, Some(1))?,
+            full_resolution: ifd.uint(NEW_SUBFILE_TYPE, Some(0))? & 0b101 == 0,
+        });
+    }
+    Ok(out)
+}
+
+/// The header of page `page` (0-based) of a GeoTIFF, for reading band
+/// `band` (1-based) of it, or with `None` for reading it as a DEM (which
+/// must have a single band).
+fn parse_header(
+    bytes: &[u8],
+    limits: &DemLimits,
+    page: usize,
+    band: Option<usize>,
+) -> Result<Header, TerrainError> {
+    let file = tiff_bytes(bytes)?;
+    let (le, big) = (file.le, file.big);
+    let offsets = file.ifd_offsets(page.saturating_add(1))?;
+    let Some(&at) = offsets.get(page) else {
+        let n = offsets.len();
+        return Err(invalid(format!(
+            "page {} does not exist: the TIFF has {n} page{} (image directories), numbered \
+             from 1",
+            page + 1,
+            if n == 1 { "" } else { "s" }
+        )));
+    };
+    let entries = file.ifd_entries(at)?;
     let ifd = Ifd { file, entries };
 
     // Size first: nothing below allocates more than the file's size.
@@ -1113,34 +1208,40 @@ fn tiff_error(e: TiffError) -> TerrainError {
     }
 }
 
-/// Read a single-band GeoTIFF as a DEM.
+/// Read a single-band GeoTIFF as a DEM (its first page).
 pub(super) fn read(
     bytes: &[u8],
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
-    read_raster(bytes, None, crs, limits)
+    read_raster(bytes, 0, None, crs, limits)
 }
 
-/// Read band `band` (1-based) of a GeoTIFF with any number of bands.
+/// Read band `band` (1-based) of page `page` (1-based) of a GeoTIFF with
+/// any number of pages and bands.
 pub(super) fn read_band(
     bytes: &[u8],
+    page: usize,
     band: usize,
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
-    read_raster(bytes, Some(band), crs, limits)
+    if page == 0 {
+        return Err(invalid("page 0 does not exist: pages are numbered from 1"));
+    }
+    read_raster(bytes, page - 1, Some(band), crs, limits)
 }
 
-/// The one reading path: band `band` (1-based), or with `None` the only
-/// band of a single-band file.
+/// The one reading path: on page `page` (0-based), band `band`
+/// (1-based), or with `None` the only band of a single-band page.
 fn read_raster(
     bytes: &[u8],
+    page: usize,
     band: Option<usize>,
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
-    let h = parse_header(bytes, limits, band)?;
+    let h = parse_header(bytes, limits, page, band)?;
     let crs = resolve_crs(h.crs_code.clone(), crs)?;
     let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
     let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
@@ -1151,7 +1252,7 @@ fn read_raster(
     let mut values = crate::buffer::filled(n, 0.0f64);
 
     let decoded = catch_unwind(AssertUnwindSafe(|| {
-        decode(bytes, &h, matcher, width, &mut values)
+        decode(bytes, &h, page, matcher, width, &mut values)
     }));
     match decoded {
         Ok(r) => r?,
@@ -1181,6 +1282,7 @@ fn read_raster(
 fn decode(
     bytes: &[u8],
     h: &Header,
+    page: usize,
     nd: NoDataMatch,
     width: usize,
     out: &mut [f64],
@@ -1205,6 +1307,12 @@ fn decode(
         _ => bytes,
     };
     let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_error)?;
+    // Before the limits below, which are sized for the image data: the
+    // decoder reads the page's tags (GDAL_METADATA, ...) when it seeks, as
+    // it read the first page's in `new`.
+    if page > 0 {
+        dec.seek_to_image(page).map_err(tiff_error)?;
+    }
     let mut limits = Limits::default();
     // The largest decoded chunk: a whole strip or tile (cut at the bottom).
     let chunk_bytes = h
@@ -1216,9 +1324,15 @@ fn decode(
     limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
     limits.intermediate_buffer_size = bytes.len().max(1);
     dec = dec.with_limits(limits);
+    let inconsistent = || {
+        invalid(format!(
+            "the TIFF's image directory {} is inconsistent",
+            page + 1
+        ))
+    };
     let (dw, dh) = dec.dimensions().map_err(tiff_error)?;
     if (u64::from(dw), u64::from(dh)) != (padded_width, h.height) {
-        return Err(invalid("the TIFF's first image directory is inconsistent"));
+        return Err(inconsistent());
     }
     if h.bands > 1 {
         // The decoder parses the IFD itself: it must see the same bands.
@@ -1227,7 +1341,7 @@ fn decode(
             _ => 0,
         };
         if samples != h.bands {
-            return Err(invalid("the TIFF's first image directory is inconsistent"));
+            return Err(inconsistent());
         }
     }
 
@@ -2640,9 +2754,10 @@ mod tests {
 
     #[test]
     fn costmap_written_by_our_writer_round_trips() {
-        use crate::export::geotiff::{Band, BandData, write_geotiff_f32};
-        use crate::terrain::Crs;
-        // 300×250: two strips of about 256 KiB per band.
+        use crate::export::geotiff::{Band, BandData, Page, write_geotiff};
+        use crate::terrain::{Crs, geotiff_pages, read_geotiff_page_band};
+        // 300×250: two strips of about 256 KiB per Float32 band, one for
+        // the Byte page.
         let (w, h) = (300usize, 250usize);
         let cost: Vec<f32> = (0..w * h)
             .map(|i| match i % 97 {
@@ -2650,7 +2765,8 @@ mod tests {
                 k => 1.0 + k as f32 * 0.37 + (i / w) as f32 * 1e-3,
             })
             .collect();
-        let class: Vec<u8> = (0..w * h).map(|i| (i % 5) as u8).collect();
+        let slope: Vec<f32> = (0..w * h).map(|i| (i % 45) as f32).collect();
+        let class: Vec<u8> = (0..w * h).map(|i| (i % 6) as u8).collect();
         let transform = GeoTransform {
             origin_x: 500000.0,
             pixel_width: 2.0,
@@ -2666,47 +2782,104 @@ mod tests {
             proj4: String::new(),
         };
         let mut cur = std::io::Cursor::new(Vec::new());
-        write_geotiff_f32(
+        write_geotiff(
             &mut cur,
             w,
             h,
             &transform,
             &crs,
             &[
-                Band {
-                    description: "cost",
-                    data: BandData::F32(&cost),
+                Page {
+                    bands: &[
+                        Band::new("cost", "cost", BandData::F32(&cost)),
+                        Band::new("slope", "deg", BandData::F32(&slope)),
+                    ],
+                    nodata: Some(f64::NAN),
                 },
-                Band {
-                    description: "class",
-                    data: BandData::U8(&class),
+                Page {
+                    bands: &[Band::new("class", "", BandData::U8(&class))],
+                    nodata: Some(0.0),
                 },
             ],
-            Some(f64::NAN),
         )
         .unwrap();
         let bytes = cur.into_inner();
+        let page = |bands| crate::terrain::TiffPage {
+            width: w as u64,
+            height: h as u64,
+            bands,
+            full_resolution: true,
+        };
+        assert_eq!(geotiff_pages(&bytes, 100).unwrap(), vec![page(2), page(1)]);
+        assert_eq!(geotiff_pages(&bytes, 1).unwrap(), vec![page(2)]);
+        let page_band = |p, b| read_geotiff_page_band(&bytes, p, b, None, &DemLimits::default());
         let c = band(&bytes, 1).unwrap();
-        let k = band(&bytes, 2).unwrap();
-        for dem in [&c, &k] {
+        assert_eq!(page_band(1, 1).unwrap().values.len(), w * h);
+        let s = page_band(1, 2).unwrap();
+        let k = page_band(2, 1).unwrap();
+        for dem in [&c, &s, &k] {
             assert_eq!((dem.width, dem.height), (w, h));
             assert_eq!(dem.transform, transform);
             assert_eq!(dem.crs.epsg, 32633);
-            assert!(dem.nodata.is_some_and(f64::is_nan));
         }
+        assert!(c.nodata.is_some_and(f64::is_nan));
+        assert_eq!(k.nodata, Some(0.0));
         for i in 0..w * h {
             let want = f64::from(cost[i]);
             assert!(
                 c.values[i] == want || (want.is_nan() && c.values[i].is_nan()),
                 "cost {i}"
             );
-            assert_eq!(k.values[i], f64::from(class[i]), "class {i}");
+            assert_eq!(s.values[i], f64::from(slope[i]), "slope {i}");
+            if class[i] == 0 {
+                assert!(k.values[i].is_nan(), "class {i} is nodata");
+            } else {
+                assert_eq!(k.values[i], f64::from(class[i]), "class {i}");
+            }
         }
+        let msg = |r: Result<Dem, TerrainError>| r.unwrap_err().to_string();
+        assert!(msg(band(&bytes, 3)).contains("has 2 bands"));
+        assert!(msg(page_band(2, 2)).contains("band 2 does not exist"));
+        let e = msg(page_band(3, 1));
         assert!(
-            band(&bytes, 3)
-                .unwrap_err()
-                .to_string()
-                .contains("has 2 bands")
+            e.contains("page 3 does not exist") && e.contains("2 pages"),
+            "{e}"
         );
+        assert!(msg(page_band(0, 1)).contains("page 0"));
+        // A DEM is the first page's single band.
+        assert!(msg(super::read(&bytes, None, &DemLimits::default())).contains("single band"));
+
+        // A chain that loops back (page 2's next-IFD pointer to page 1) or
+        // leaves the file is refused, not followed forever.
+        let u16_at = |b: &[u8], at: usize| usize::from(u16::from_le_bytes([b[at], b[at + 1]]));
+        let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+        // A classic IFD: 2-byte count, 12-byte entries, 4-byte pointer.
+        let next_of = |b: &[u8], ifd: usize| ifd + 2 + 12 * u16_at(b, ifd);
+        let first = u32_at(&bytes, 4);
+        let second = u32_at(&bytes, next_of(&bytes, first as usize));
+        let at = next_of(&bytes, second as usize);
+        assert_eq!(u32_at(&bytes, at), 0);
+        // Page 2 as an overview (NewSubfileType 1, in place of its
+        // Compression entry, whose default is the same "none").
+        let mut overview = bytes.clone();
+        let entries = second as usize + 2;
+        let compression = (0..u16_at(&bytes, second as usize))
+            .map(|i| entries + 12 * i)
+            .find(|&e| u16_at(&bytes, e) == usize::from(COMPRESSION))
+            .unwrap();
+        overview[compression..compression + 2].copy_from_slice(&NEW_SUBFILE_TYPE.to_le_bytes());
+        let pages = geotiff_pages(&overview, 100).unwrap();
+        assert!(pages[0].full_resolution && !pages[1].full_resolution);
+
+        for (pointer, what) in [(first, "loop"), (u32::MAX, "outside the file")] {
+            let mut bad = bytes.clone();
+            bad[at..at + 4].copy_from_slice(&pointer.to_le_bytes());
+            let e = geotiff_pages(&bad, 100).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+            // The first page still reads; the second ends, either way.
+            let limits = DemLimits::default();
+            assert!(read_geotiff_page_band(&bad, 1, 1, None, &limits).is_ok());
+            let _ = read_geotiff_page_band(&bad, 2, 1, None, &limits);
+        }
     }
 }

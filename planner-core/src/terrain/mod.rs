@@ -20,9 +20,10 @@ mod sample;
 pub use crs::Crs;
 pub use dilate::dilate;
 pub use follow::{HeightRule, Point3, TerrainModel, length_3d};
+pub use geotiff::TiffPage;
 pub use hillshade::hillshade_png;
 pub use info::raster_bounds;
-pub use read::{read_dem, read_geotiff_band};
+pub use read::{geotiff_pages, read_dem, read_geotiff_band, read_geotiff_page_band};
 pub use sample::TerrainSampler;
 
 use serde::{Deserialize, Serialize};

@@ -4,6 +4,7 @@
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
+use super::geotiff::TiffPage;
 use super::{Crs, Dem, DemLimits, TerrainError, asc, geotiff, hgt};
 
 /// Read a DEM from the bytes of a file. The format is detected from the
@@ -50,19 +51,59 @@ pub fn read_geotiff_band(
     crs: Option<u32>,
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
-    if !geotiff::is_tiff(bytes) {
-        return Err(TerrainError::Invalid(format!(
-            "not a TIFF file: the file starts with {}",
-            if bytes.is_empty() {
-                "nothing (it is empty)".to_string()
-            } else {
-                describe_start(bytes)
-            }
-        )));
-    }
-    let dem = geotiff::read_band(bytes, band, crs, limits)?;
+    read_geotiff_page_band(bytes, 1, band, crs, limits)
+}
+
+/// Read band `band` of page `page` (both numbered from 1) of a GeoTIFF, as
+/// [`read_geotiff_band`] reads the first page's. A page is an image of
+/// the file (an IFD of its main chain), GDAL's subdataset
+/// `GTIFF_DIR:page:file`; each has its own size, sample type, nodata and
+/// georeferencing, e.g. a costmap's Byte class page after its Float32 cost
+/// page.
+///
+/// # Errors
+///
+/// As [`read_geotiff_band`], and for a page number of 0 or above the
+/// file's page count (the message names both).
+pub fn read_geotiff_page_band(
+    bytes: &[u8],
+    page: usize,
+    band: usize,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    check_tiff(bytes)?;
+    let dem = geotiff::read_band(bytes, page, band, crs, limits)?;
     check_degrees(&dem)?;
     Ok(dem)
+}
+
+/// The first `limit` pages (images: IFDs of the main chain, GDAL's
+/// `GTIFF_DIR:n`) of a GeoTIFF, with their sizes, band counts and whether
+/// each is an image of its own or an overview or mask of another; nothing
+/// else is read.
+///
+/// # Errors
+///
+/// Bytes that are not a TIFF, or whose chain of images is truncated,
+/// points outside the file or loops, or a page without its size.
+pub fn geotiff_pages(bytes: &[u8], limit: usize) -> Result<Vec<TiffPage>, TerrainError> {
+    check_tiff(bytes)?;
+    geotiff::pages(bytes, limit)
+}
+
+fn check_tiff(bytes: &[u8]) -> Result<(), TerrainError> {
+    if geotiff::is_tiff(bytes) {
+        return Ok(());
+    }
+    Err(TerrainError::Invalid(format!(
+        "not a TIFF file: the file starts with {}",
+        if bytes.is_empty() {
+            "nothing (it is empty)".to_string()
+        } else {
+            describe_start(bytes)
+        }
+    )))
 }
 
 /// A geographic CRS whose coordinates are not degrees (e.g. a UTM raster

@@ -1,9 +1,9 @@
 //! The costmaps resource: ask for a traversability costmap of an uploaded
 //! DEM for a ground vehicle (built in the background, see
 //! [`crate::costmap_jobs`]), follow its progress (polling or Server-Sent
-//! Events), list, fetch, delete, and download its files: the 2-band
-//! Float32 GeoTIFF (cost, class), a PNG preview with its SVG legend, and
-//! the per-layer GeoTIFFs asked for.
+//! Events), list, fetch, delete, and download its files: the GeoTIFF
+//! (Float32 cost page, Byte class page), a PNG preview with its SVG legend,
+//! and the per-layer GeoTIFFs asked for.
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
@@ -75,14 +75,16 @@ pub struct CostmapUrls {
     this: String,
     /// Its progress as Server-Sent Events.
     events: String,
-    /// The costmap: a GeoTIFF in the DEM's CRS, band 1 cost (Float32, NaN
-    /// where not traversable), band 2 class code.
+    /// The costmap: a GeoTIFF in the DEM's CRS, page 1 the cost (Float32,
+    /// unit `cost`, NaN where not traversable), page 2 (GDAL's
+    /// `GTIFF_DIR:2:`) the class code (Byte, nodata 0 = unknown).
     costmap_tif: String,
     /// A colour preview (PNG).
     preview_png: String,
     /// The preview's legend (SVG).
     legend_svg: String,
-    /// One Float32 GeoTIFF per kept layer, by layer name.
+    /// One Float32 GeoTIFF per kept layer, by layer name (its unit on the
+    /// band: `deg`, `m`, `cost` or `1`).
     layers: BTreeMap<String, String>,
 }
 
@@ -823,10 +825,11 @@ async fn download(
     Ok(res)
 }
 
-/// The costmap as a GeoTIFF in the DEM's CRS (on the working grid): band 1
-/// the cost (Float32, NaN on obstacles and unknown cells), band 2 the
-/// class code (0 unknown, 1 traversable, 2 slope, 3 step, 4 enclosed,
-/// 5 other).
+/// The costmap as a GeoTIFF in the DEM's CRS (on the working grid), in two
+/// pages: page 1 (what GDAL opens) the cost (Float32, unit type `cost`, NaN
+/// nodata on obstacles and unknown cells), page 2 (`GTIFF_DIR:2:file`) the
+/// class code (Byte, nodata 0; 0 unknown, 1 traversable, 2 slope, 3 step,
+/// 4 enclosed, 5 other).
 #[utoipa::path(
     get,
     path = "/api/v1/costmaps/{id}/costmap.tif",
@@ -894,8 +897,9 @@ pub async fn legend(
     download(&state, &row, LEGEND_SVG, None, &headers).await
 }
 
-/// One kept layer as a Float32 GeoTIFF on the costmap's grid, e.g.
-/// `slope.tif` (layers are asked for with `options.layers`).
+/// One kept layer as a Float32 GeoTIFF on the costmap's grid (NaN nodata,
+/// its unit as the band's unit type), e.g. `slope.tif` in degrees (layers
+/// are asked for with `options.layers`).
 #[utoipa::path(
     get,
     path = "/api/v1/costmaps/{id}/layers/{file}",

@@ -17,7 +17,7 @@ use super::{Failure, read_dem_file, read_json};
 
 #[derive(clap::Args)]
 pub(super) struct RouteArgs {
-    /// The costmap GeoTIFF (band 1 cost, band 2 class), as written by
+    /// The costmap GeoTIFF (page 1 cost, page 2 class), as written by
     /// `terraplan costmap` or served as `costmap.tif`.
     #[arg(value_name = "COSTMAP.tif")]
     costmap: PathBuf,
