@@ -37,7 +37,8 @@ if [ "${1:-}" = "--with-validators" ]; then
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_gdal[@]}" >/dev/null
   fi
-  stamp=".venv/.requirements-$(sha1sum tests/validators/requirements.txt | cut -c1-12)"
+  stamp=".venv/.requirements-$(cat tests/validators/requirements.txt tests/validators/requirements-nodeps.txt \
+    | sha1sum | cut -c1-12)"
   if [ ! -f "$stamp" ]; then
     echo "setup: creating .venv with the test validators" >&2
     python3 -m venv .venv
@@ -47,6 +48,8 @@ if [ "${1:-}" = "--with-validators" ]; then
 fi
 
 if [ "${1:-}" = "--with-validators" ] && [ ! -x /usr/bin/chromium ]; then
+    .venv/bin/pip install --quiet --disable-pip-version-check --no-deps \
+      -r tests/validators/requirements-nodeps.txt
   # The browser tests drive Debian's Chromium through playwright-core
   # (Playwright's own browser download is not used).
   echo "setup: installing chromium with apt-get" >&2

@@ -454,3 +454,80 @@ fn graceful_shutdown_finishes_in_flight_requests() {
         200
     );
 }
+
+/// Rally points through the API: each UAV's `mission.plan`,
+/// `mission.waypoints`, `fence.waypoints` and `rally.waypoints`, downloaded,
+/// agree item by item and load in pymavlink, MAVSDK and MAVProxy
+/// (check_missions.py); a rally point in a no-fly zone is a 422 at its
+/// pointer, and a survey without rally points has no rally file.
+#[test]
+fn rally_points_downloaded_load_in_mavsdk_and_mavproxy() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    let mut req = example_request();
+    req["rally_points"] = json!([[6.0605, 51.5105]]);
+    req["uavs"] = json!([{"id": "uav1", "start": [6.0620, 51.5110]},
+                         {"id": "uav2", "start": [6.0625, 51.5112]}]);
+    let r = post_json(&server.url("/api/v1/surveys"), &req);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let created = r.json();
+    let out = dir.path().join("files");
+    std::fs::create_dir(&out).unwrap();
+    for uav in created["uavs"].as_array().unwrap() {
+        let id = uav["id"].as_str().unwrap();
+        let sorties = uav["sorties"].as_array().unwrap();
+        assert_eq!(sorties.len(), 1);
+        let files = &sorties[0]["files"];
+        for (key, name) in [
+            ("plan", format!("{id}.plan")),
+            ("waypoints", format!("{id}.waypoints")),
+            ("fence", format!("{id}.fence.waypoints")),
+            ("rally", format!("{id}.rally.waypoints")),
+        ] {
+            let url = files[key]
+                .as_str()
+                .unwrap_or_else(|| panic!("no {key} link in {files}"));
+            let f = get(&server.url(url));
+            assert_eq!(f.status, 200, "{url}: {}", f.text());
+            std::fs::write(out.join(name), &f.body).unwrap();
+        }
+    }
+    let v = validator("check_missions.py", &[&out]);
+    assert!(
+        v.status.success(),
+        "check_missions.py: {}{}",
+        terraplan_e2e::text(&v.stdout),
+        terraplan_e2e::text(&v.stderr)
+    );
+    let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
+    for id in ["uav1", "uav2"] {
+        let s = &summary["stems"][id];
+        assert_eq!(s["rally_items"], 1, "{summary}");
+        assert_eq!(s["mavsdk"]["rally"], 1, "{summary}");
+        assert!(s["items"].as_u64().unwrap() > 3, "{summary}");
+    }
+
+    // In the middle of the example's mast NFZ: refused at its pointer.
+    let mut bad = req.clone();
+    bad["rally_points"] = json!([[6.0605, 51.5105], [6.0635, 51.512125]]);
+    let r = post_json(&server.url("/api/v1/surveys"), &bad);
+    assert_invalid_at(
+        &r,
+        "rally point in an NFZ",
+        "/rally_points/1",
+        "inside a no-fly zone",
+    );
+
+    // Without rally points: no link, and the file is a 404 that says why.
+    let r = post_json(&server.url("/api/v1/surveys"), &example_request());
+    assert_eq!(r.status, 201, "{}", r.text());
+    let plain = r.json();
+    let files = &plain["uavs"][0]["sorties"][0]["files"];
+    assert!(files.get("rally").is_none(), "{files}");
+    let url = files["fence"]
+        .as_str()
+        .unwrap()
+        .replace("fence.waypoints", "rally.waypoints");
+    let r = get(&server.url(&url));
+    assert_problem(&r, 404, "no rally points");
+}

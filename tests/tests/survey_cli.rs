@@ -1,5 +1,7 @@
 //! `terraplan survey` end to end on real field boundaries, checked by
-//! pymavlink, shapely and pyproj (tests/validators/check_survey.py).
+//! pymavlink, shapely and pyproj (tests/validators/check_survey.py), and
+//! every `.plan` with its `.waypoints`, fence and rally files read by
+//! pymavlink, MAVSDK and MAVProxy (tests/validators/check_missions.py).
 
 use std::path::{Path, PathBuf};
 
@@ -44,7 +46,22 @@ fn plan_and_validate(roi: &Path, nfz: &[&Path], params: &Value, dir: &Path) -> (
         text(&v.stderr)
     );
     let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
+    check_missions(&out);
     (plan, summary)
+}
+
+/// check_missions.py on an output directory: each `.plan` and its
+/// `.waypoints` agree item by item, and MAVSDK and MAVProxy load them with
+/// the fence and rally files; returns its summary.
+fn check_missions(out: &Path) -> Value {
+    let v = validator("check_missions.py", &[out]);
+    assert!(
+        v.status.success(),
+        "check_missions.py: {}{}",
+        text(&v.stdout),
+        text(&v.stderr)
+    );
+    serde_json::from_slice(&v.stdout).unwrap()
 }
 
 #[test]
@@ -144,6 +161,87 @@ fn netherlands_field_default_params() {
     let (plan, summary) = plan_and_validate(&roi, &[], &json!({}), dir.path());
     assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
     // Default camera at 60 m: GSD = 60·13.2·100/(5472·8.8) ≈ 1.645 cm/px.
+/// Rally points next to the fences: in every `.plan`, in a rally file per
+/// UAV (sorties included), inside the inclusion fence, at the flight
+/// altitude above home; MAVSDK and MAVProxy load them (check_missions.py).
+#[test]
+fn rally_points_in_every_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let ex = workspace().join("examples");
+    // West of the field's start, and inside the field's south-west part.
+    let rally = json!([[6.0605, 51.5105], [6.0635, 51.5118]]);
+    let params = json!({"altitude_m": 70, "rally_points": rally,
+                        "uavs": [{"id": "a", "start": [6.0620, 51.5110], "max_flight_time_s": 100},
+                                 {"id": "b", "start": [6.0625, 51.5112]}]});
+    let (plan, _) = plan_and_validate(
+        &ex.join("field.geojson"),
+        &[&ex.join("field-nfz.geojson")],
+        &params,
+        dir.path(),
+    );
+    let out = dir.path().join("out");
+    assert!(
+        plan["uavs"][0]["sorties"].as_array().unwrap().len() >= 2,
+        "the battery splits a's mission"
+    );
+    let summary = check_missions(&out);
+    let stems = summary["stems"].as_object().unwrap();
+    assert_eq!(
+        stems.len(),
+        plan["uavs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|u| u["sorties"].as_array().unwrap().len())
+            .sum::<usize>()
+    );
+    for (stem, s) in stems {
+        assert_eq!(s["rally_items"], 2, "{stem}");
+        assert_eq!(s["mavsdk"]["rally"], 2, "{stem}");
+    }
+    // The rally file: MAV_CMD_NAV_RALLY_POINT at 70 m above home, per UAV.
+    for uav in ["a", "b"] {
+        let loaded = validator(
+            "load_waypoints.py",
+            &[&out.join(format!("{uav}.rally.waypoints"))],
+        );
+        assert!(loaded.status.success(), "{}", text(&loaded.stderr));
+        let loaded: Value = serde_json::from_slice(&loaded.stdout).unwrap();
+        assert_eq!(loaded["count"], 2);
+        for (item, p) in loaded["items"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(rally.as_array().unwrap())
+        {
+            assert_eq!(
+                (item["command"].as_u64(), item["frame"].as_u64()),
+                (Some(5100), Some(3))
+            );
+            assert!((item["lon"].as_f64().unwrap() - p[0].as_f64().unwrap()).abs() < 1e-8);
+            assert!((item["lat"].as_f64().unwrap() - p[1].as_f64().unwrap()).abs() < 1e-8);
+            assert!((item["alt"].as_f64().unwrap() - 70.0).abs() < 1e-6);
+        }
+    }
+    // The inclusion fence holds both rally points.
+    use geo::Contains;
+    let ring: Vec<(f64, f64)> =
+        serde_json::from_value::<Vec<[f64; 2]>>(plan["fences"][0]["vertices"].clone())
+            .unwrap()
+            .into_iter()
+            .map(|v| (v[0], v[1]))
+            .collect();
+    assert_eq!(plan["fences"][0]["inclusion"], true);
+    let fence = geo_types::Polygon::new(ring.into(), vec![]);
+    for p in rally.as_array().unwrap() {
+        let pt = geo_types::Point::new(p[0].as_f64().unwrap(), p[1].as_f64().unwrap());
+        assert!(
+            fence.contains(&pt),
+            "rally point {p} outside the inclusion fence"
+        );
+    }
+}
+
     let gsd = plan["stats"]["gsd_cm_px"].as_f64().unwrap();
     assert!((gsd - 1.6447).abs() < 1e-3, "{gsd}");
     // Starts at the ROI's first vertex by default.
@@ -315,6 +413,20 @@ fn survey_over_a_dem_file() {
     let (hx, hy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
     let roi = write(
         dir.path(),
+        (
+            "rally point in NFZ",
+            rect(5.0, 52.0, 5.005, 52.003),
+            Some(rect(5.001, 52.001, 5.002, 52.002)),
+            json!({"rally_points": [[4.999, 52.0], [5.0015, 52.0015]]}),
+            "/rally_points/1: rally point 2 (5.0015, 52.0015) is inside a no-fly zone",
+        ),
+        (
+            "rally point with lon and lat swapped",
+            rect(5.0, 52.0, 5.005, 52.003),
+            None,
+            json!({"rally_points": [[52.0, 5.0]]}),
+            "/rally_points/0: rally point 1 (52, 5) is",
+        ),
         "roi.json",
         &rect(cx - hx, cy - hy, cx + hx, cy + hy),
     );
@@ -322,7 +434,8 @@ fn survey_over_a_dem_file() {
         dir.path(),
         "params.json",
         &json!({"altitude_m": 35, "agl_tolerance_m": 4, "altitude_frame": "terrain",
-                "uavs": [{"id": "t1", "start": [cx - hx, cy - hy]}]}),
+                "uavs": [{"id": "t1", "start": [cx - hx, cy - hy]}],
+                "rally_points": [[cx + hx, cy + hy]]}),
     );
     let out = dir.path().join("out");
     let o = terraplan(&[
@@ -368,3 +481,20 @@ fn survey_over_a_dem_file() {
     let err = text(&o.stderr);
     assert!(err.contains("DEM ") && err.contains("no heights"), "{err}");
 }
+    check_missions(&out);
+    // The rally point is flown at least 35 m above the DEM under it, and
+    // no lower than the mission's highest point (heights above home).
+    let plan: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    let ground = plan["rally_points"][0]["ground_amsl_m"].as_f64().unwrap();
+    let terrain = &plan["uavs"][0]["sorties"][0]["terrain"];
+    let home = terrain["home_amsl_m"].as_f64().unwrap();
+    let highest = terrain["max_altitude_m"].as_f64().unwrap() - home;
+    let rally = validator("load_waypoints.py", &[&out.join("t1.rally.waypoints")]);
+    assert!(rally.status.success(), "{}", text(&rally.stderr));
+    let rally: Value = serde_json::from_slice(&rally.stdout).unwrap();
+    let alt = rally["items"][0]["alt"].as_f64().unwrap();
+    assert!(
+        (alt - (ground + 35.0 - home).max(highest)).abs() < 1e-5,
+        "rally altitude {alt}, ground {ground}, home {home}, highest {highest}"
+    );

@@ -74,6 +74,8 @@ export interface UavFiles {
   plan: string;
   route: string;
   fence: string;
+  /** Rally points (MAVLink rally file), when the survey has some. */
+  rally?: string;
   kml: string;
 }
 export interface Sortie {

@@ -30,6 +30,7 @@ const map = new MapView(byId('map'), byId('map-hint'), {
   costlierDrawn: (areas) => route.costlierDrawn(areas),
   picked: (mode, at) => {
     if (mode === 'place-uav') survey.placeUav(at);
+    else if (mode === 'place-rally') survey.placeRally(at);
     else route.picked(mode, at);
   },
   modeChanged: (mode) => survey?.modeChanged(mode),

@@ -34,6 +34,7 @@ export type MapMode =
   | 'draw-roi'
   | 'draw-nfz'
   | 'place-uav'
+  | 'place-rally'
   | 'pick-start'
   | 'pick-goal'
   | 'pick-position'
@@ -67,6 +68,7 @@ const MODE_HINTS: Record<MapMode, string> = {
   'draw-roi': 'Click the corners of the survey area; click the first corner or double-click to finish. Backspace removes the last corner, Escape cancels.',
   'draw-nfz': 'Click the corners of a no-fly zone; click the first corner or double-click to finish. Escape cancels.',
   'place-uav': 'Click where each UAV takes off. Escape when done.',
+  'place-rally': 'Click each rally point, where a UAV may return instead of home. Escape when done.',
   'pick-start': 'Click the ground route’s start.',
   'pick-goal': 'Click the ground route’s goal.',
   'pick-position': 'Click where the rover is now (the replan starts there).',
@@ -229,7 +231,7 @@ export class MapView {
     this.map.addInteraction(this.modify);
 
     this.map.on('click', (e) => {
-      if (this.mode === 'place-uav' || this.mode === 'pick-start' || this.mode === 'pick-goal' || this.mode === 'pick-position') {
+      if (this.mode === 'place-uav' || this.mode === 'place-rally' || this.mode === 'pick-start' || this.mode === 'pick-goal' || this.mode === 'pick-position') {
         const [lon, lat] = toLonLat(e.coordinate);
         this.events.picked(this.mode, [lon, lat]);
       }
@@ -462,6 +464,14 @@ export class MapView {
     for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'start')) this.flights.removeFeature(f);
     starts.forEach((u, i) => {
       this.flights.addFeature(new Feature({ geometry: new Point(toMap(u.start)), kind: 'start', style: markerStyle(colours(i), u.id) }));
+    });
+  }
+
+  /** Shows the rally points as dark green squares, R1, R2, … */
+  setRallyPoints(points: LonLat[]): void {
+    for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'rally')) this.flights.removeFeature(f);
+    points.forEach((p, i) => {
+      this.flights.addFeature(new Feature({ geometry: new Point(toMap(p)), kind: 'rally', style: markerStyle('#1b5e20', `R${i + 1}`, 'square') }));
     });
   }
 

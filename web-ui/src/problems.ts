@@ -43,6 +43,7 @@ export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/uavs/*/max_flight_time_s', field: 'battery', label: 'Battery' },
   { prefix: '/uavs', field: 'uavs', label: 'UAVs' },
   { prefix: '/assignment', field: 'uavs', label: 'Assignment' },
+  { prefix: '/rally_points', field: 'rally', label: 'Rally points' },
 ];
 
 export const COSTMAP_FIELDS: FieldRule[] = [

@@ -50,6 +50,8 @@ export interface SurveyFormValues {
   /** Flight time on one battery, minutes, for every UAV (NaN: unlimited, or each UAV's own from a reopened survey). */
   batteryMin: number;
   uavs: UavStart[];
+  /** Where a UAV may return instead of home (the API's `rally_points`). */
+  rallyPoints: LonLat[];
   /** Members of a reopened survey's request the form has no control for (sent again as they were). */
   extra: Record<string, unknown>;
 }
@@ -132,6 +134,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
       return uav;
     });
   }
+  if (v.rallyPoints.length > 0) body.rally_points = v.rallyPoints.map((p) => [p[0], p[1]]);
   return { body, errors };
 }
 
@@ -210,7 +213,7 @@ export const FORM_DEFAULTS = {
 /** Request members the form has controls for (the rest are kept as `extra`). */
 const FORM_MEMBERS = new Set([
   'name', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
-  'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'altitude_frame', 'assignment', 'uavs',
+  'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
 ]);
 
 export interface RestoredForm {
@@ -260,6 +263,10 @@ export function formFromRequest(
   if (shared != null) for (const u of uavs) delete u.max_flight_time_s;
   if (batteries.size > 1) notes.push('Its UAVs have different batteries: each keeps its own unless a battery is given here.');
 
+  const rallyPoints: LonLat[] = (Array.isArray(r.rally_points) ? r.rally_points : [])
+    .filter((p): p is [number, number] => Array.isArray(p) && p.length === 2 && p.every((x) => typeof x === 'number'))
+    .map((p) => [p[0], p[1]]);
+
   const extra: Record<string, unknown> = {};
   for (const [k, v] of Object.entries(r)) if (!FORM_MEMBERS.has(k) && v !== null && v !== undefined) extra[k] = v;
 
@@ -284,6 +291,7 @@ export function formFromRequest(
       assignment: oneOf(r.assignment, ['balanced', 'competition', 'min_reach'] as const, d.assignment),
       batteryMin: shared != null ? round(shared / 60, 3) : NaN,
       uavs,
+      rallyPoints,
       extra,
     },
     notes,

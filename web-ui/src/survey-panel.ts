@@ -2,7 +2,7 @@
 // take-off points, and the planned survey (totals, per-UAV table, altitude
 // profile, downloads).
 
-import { api, type CameraPreset, type Survey } from './api';
+import { api, type CameraPreset, type LonLat, type Survey } from './api';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
@@ -31,6 +31,7 @@ export class SurveyPanel {
   private roi: PolygonRings | null = null;
   private noFlyZones: PolygonRings[] = [];
   private uavs: UavStart[] = [];
+  private rally: LonLat[] = [];
   private survey: Survey | null = null;
   private cameras: CameraPreset[] = [];
   /** The preset chosen last: "custom" starts from its numbers. */
@@ -79,6 +80,16 @@ export class SurveyPanel {
       if ((e as KeyboardEvent).key === 'Enter') {
         e.preventDefault(); // not the survey form's submit
         this.addTypedUav();
+      }
+    });
+    // Rally points: clicked or typed, like take-off points.
+    byId('place-rally').addEventListener('click', () => this.map.setMode(this.map.getMode() === 'place-rally' ? 'browse' : 'place-rally'));
+    byId('clear-rally').addEventListener('click', () => this.setRally([]));
+    byId('add-rally').addEventListener('click', () => this.addTypedRally());
+    byId('rally-add').addEventListener('keydown', (e) => {
+      if ((e as KeyboardEvent).key === 'Enter') {
+        e.preventDefault();
+        this.addTypedRally();
       }
     });
     byId<HTMLFormElement>('survey-form').addEventListener('submit', (e) => {
@@ -194,6 +205,45 @@ export class SurveyPanel {
     const place = byId('place-uavs');
     place.setAttribute('aria-pressed', String(mode === 'place-uav'));
     place.textContent = mode === 'place-uav' ? 'Done placing' : 'Place take-off points';
+    const rally = byId('place-rally');
+    rally.setAttribute('aria-pressed', String(mode === 'place-rally'));
+    rally.textContent = mode === 'place-rally' ? 'Done placing' : 'Place rally points';
+  }
+
+  private addTypedRally(): void {
+    const input = byId<HTMLInputElement>('rally-add');
+    const at = parseLonLat(input.value);
+    if (!at) {
+      this.errors.show('rally', 'Rally point: give it as “lon, lat” in degrees, e.g. -77.0551, 38.8089.', 'rally-add');
+      return;
+    }
+    input.value = '';
+    input.removeAttribute('aria-invalid');
+    this.placeRally(at);
+  }
+
+  placeRally(at: LonLat): void {
+    this.setRally([...this.rally, at]);
+  }
+
+  private setRally(points: LonLat[]): void {
+    this.rally = points;
+    this.markStale();
+    this.map.setRallyPoints(points);
+    const list = byId('rally-list');
+    list.replaceChildren(
+      ...points.map((p, i) => {
+        const input = h('input', { type: 'text', id: `rally-point-${i}`, value: formatLonLat(p), 'aria-describedby': 'survey-rally-error' });
+        input.addEventListener('change', () => {
+          const q = parseLonLat(input.value);
+          if (q) this.setRally(this.rally.map((x, j) => (j === i ? q : x)));
+          else this.errors.show('rally', badRally(i), input.id);
+        });
+        const remove = h('button', { type: 'button', 'aria-label': `Remove rally point R${i + 1}` }, 'Remove');
+        remove.addEventListener('click', () => this.setRally(this.rally.filter((_, j) => j !== i)));
+        return h('li', {}, h('label', { for: input.id }, `R${i + 1}`), input, remove);
+      }),
+    );
   }
 
   private setUavs(uavs: UavStart[]): void {
@@ -269,6 +319,7 @@ export class SurveyPanel {
       assignment: val('assignment') as SurveyFormValues['assignment'],
       batteryMin: numberValue('battery'),
       uavs: this.uavs,
+      rallyPoints: this.rally,
       extra: this.extra,
     };
   }
@@ -280,7 +331,9 @@ export class SurveyPanel {
     // A take-off point typed wrong is not planned from where it was before.
     const badStarts = this.uavs.map((u, i) => ({ id: u.id, input: `uav-start-${i}` })).filter((b) => !parseLonLat(byId<HTMLInputElement>(b.input).value));
     for (const b of badStarts) this.errors.show('uavs', badStart(b.id), b.input);
-    if (!body || badStarts.length > 0) return;
+    const badRallies = this.rally.map((_, i) => i).filter((i) => !parseLonLat(byId<HTMLInputElement>(`rally-point-${i}`).value));
+    for (const i of badRallies) this.errors.show('rally', badRally(i), `rally-point-${i}`);
+    if (!body || badStarts.length > 0 || badRallies.length > 0) return;
     const button = byId<HTMLButtonElement>('plan-survey');
     button.disabled = true;
     byId('survey-busy').textContent = 'Planning…';
@@ -361,11 +414,13 @@ export class SurveyPanel {
       byId<HTMLInputElement>('follow-terrain').checked = follow;
 
       this.setUavs(v.uavs);
+      this.setRally(v.rallyPoints);
       this.extra = v.extra;
       this.showFlightGeometry();
     } else {
       // Surveys saved by older servers do not keep their request: only the take-off points come back.
       this.setUavs(survey.uavs.map((u) => ({ id: u.id, start: u.start })));
+      this.setRally([]);
       this.extra = {};
       notes.push('This survey was saved without its settings: only its take-off points are restored.');
     }
@@ -438,6 +493,7 @@ export class SurveyPanel {
           link(so.files.route, 'GeoJSON', `${u.id} route GeoJSON${tag}`),
           link(so.files.kml, 'KML', `${u.id} route KML${tag}`),
           link(so.files.fence, 'fence', `${u.id} fence mission${tag}`),
+          ...(so.files.rally ? [link(so.files.rally, 'rally', `${u.id} rally points${tag}`)] : []),
         );
       }),
     );
@@ -521,6 +577,10 @@ export class SurveyPanel {
 
 function badStart(id: string): string {
   return `${id} start: give it as “lon, lat” in degrees, e.g. -77.0551, 38.8089.`;
+}
+
+function badRally(index: number): string {
+  return `Rally point R${index + 1}: give it as “lon, lat” in degrees, e.g. -77.0551, 38.8089.`;
 }
 
 function link(href: string, text: string, label: string): HTMLAnchorElement {

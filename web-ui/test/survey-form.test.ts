@@ -36,6 +36,7 @@ function values(over: Partial<SurveyFormValues> = {}): SurveyFormValues {
     assignment: 'balanced',
     batteryMin: NaN,
     uavs: [],
+    rallyPoints: [],
     extra: {},
     ...over,
   };
@@ -85,6 +86,13 @@ describe('buildSurveyRequest', () => {
     });
     expect(body).not.toHaveProperty('altitude_m');
     expect(body).not.toHaveProperty('camera_preset');
+  });
+
+  it('sends rally points as [lon, lat] pairs, and none when there are none', () => {
+    const { body, errors } = buildSurveyRequest(values({ rallyPoints: [[5.0101, 52.0005], [4.999, 52.004]] }));
+    expect(errors).toEqual([]);
+    expect(body).toMatchObject({ rally_points: [[5.0101, 52.0005], [4.999, 52.004]] });
+    expect(buildSurveyRequest(values()).body).not.toHaveProperty('rally_points');
   });
 
   it('refuses empty number fields instead of sending 0', () => {
@@ -233,6 +241,7 @@ describe('formFromRequest', () => {
       altitude_frame: 'terrain',
       assignment: 'competition',
       uavs: [{ id: 'a', start: [5, 52], speed_m_s: 6, max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }],
+      rally_points: [[5.01, 52.001]],
       turn_penalty_s: 3,
       line_spacing_m: null,
     };
@@ -249,6 +258,7 @@ describe('formFromRequest', () => {
       sideOverlapPct: 65,
       sliceAngle: '30',
       altitudeFrame: 'terrain',
+      rallyPoints: [[5.01, 52.001]],
       extra: { turn_penalty_s: 3 },
     });
     const { body } = buildSurveyRequest(values);

@@ -11,7 +11,19 @@ pub mod cmd {
     pub const DO_SET_CAM_TRIGG_DIST: u16 = 206;
     pub const NAV_FENCE_POLYGON_VERTEX_INCLUSION: u16 = 5001;
     pub const NAV_FENCE_POLYGON_VERTEX_EXCLUSION: u16 = 5002;
+    pub const NAV_RALLY_POINT: u16 = 5100;
 }
+
+/// Param 4 (yaw) of take-off and waypoint items: NaN, which MAVLink defines
+/// as "keep the current yaw behaviour" for MAV_CMD_NAV_WAYPOINT and
+/// MAV_CMD_NAV_TAKEOFF. PX4 then yaws by its yaw mode (towards the next
+/// waypoint by default) where 0 would turn it north at every waypoint;
+/// ArduPilot accepts NaN in exactly this parameter (AP_Mission's
+/// sanity_check_params) and yaws by `WP_YAW_BEHAVIOR` either way.
+/// `.waypoints` files carry it as `NaN` (how Mission Planner prints it; read
+/// by pymavlink, MAVProxy, MAVSDK's strtod and Qt), `.plan` files as `null`
+/// (how QGroundControl stores NaN).
+pub const KEEP_HEADING: f64 = f64::NAN;
 
 /// MAV_FRAME values.
 pub mod frame {
@@ -85,7 +97,82 @@ pub struct Mission {
     pub over_terrain: bool,
 }
 
+/// One MAVLink mission item as every mission format writes it: command,
+/// frame, params 1–4 and position (params 5–7; 0 where the command has
+/// none). Both the `.waypoints` and the `.plan` writer render these, so the
+/// two files of a mission agree item by item.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MavItem {
+    pub command: u16,
+    pub frame: u8,
+    pub params: [f64; 4],
+    pub lat: f64,
+    pub lon: f64,
+    pub alt: f64,
+}
+
+impl MavItem {
+    /// A command without a position (frame MAV_FRAME_MISSION).
+    fn action(command: u16, params: [f64; 4]) -> MavItem {
+        MavItem {
+            command,
+            frame: frame::MISSION,
+            params,
+            lat: 0.0,
+            lon: 0.0,
+            alt: 0.0,
+        }
+    }
+}
+
 impl Mission {
+    /// The mission items in flight order, without home (which the
+    /// `.waypoints` file writes as item 0 and the `.plan` file as
+    /// `plannedHomePosition`).
+    pub fn mav_items(&self) -> Vec<MavItem> {
+        let home = self.home;
+        let f = self.frame.mav_frame();
+        self.items
+            .iter()
+            .map(|item| match *item {
+                MissionItem::Takeoff { alt } => MavItem {
+                    command: cmd::NAV_TAKEOFF,
+                    frame: f,
+                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
+                    lat: home.lat,
+                    lon: home.lon,
+                    alt,
+                },
+                // param1 1 = ground speed; param3 -1 = leave throttle unchanged.
+                MissionItem::ChangeSpeed { speed_m_s } => {
+                    MavItem::action(cmd::DO_CHANGE_SPEED, [1.0, speed_m_s, -1.0, 0.0])
+                }
+                MissionItem::Waypoint(p) => MavItem {
+                    command: cmd::NAV_WAYPOINT,
+                    frame: f,
+                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
+                    lat: p.lat,
+                    lon: p.lon,
+                    alt: p.alt,
+                },
+                // param3 1 = take a photo at once when a distance is set.
+                MissionItem::CameraTriggerDistance { distance_m } => MavItem::action(
+                    cmd::DO_SET_CAM_TRIGG_DIST,
+                    [
+                        distance_m,
+                        0.0,
+                        if distance_m > 0.0 { 1.0 } else { 0.0 },
+                        0.0,
+                    ],
+                ),
+                MissionItem::ReturnToLaunch => MavItem {
+                    frame: f,
+                    ..MavItem::action(cmd::NAV_RETURN_TO_LAUNCH, [0.0; 4])
+                },
+            })
+            .collect()
+    }
+
     /// The positions flown, home first, as (lon, lat, alt).
     pub fn waypoints(&self) -> impl Iterator<Item = &GeoPoint> {
         self.items.iter().filter_map(|i| match i {

@@ -1,19 +1,31 @@
 //! QGroundControl `.plan` files (fileType "Plan", version 1, mission
-//! version 2) with the no-fly zones as exclusion fences and the survey area
-//! as an inclusion fence.
+//! version 2) with the no-fly zones as exclusion fences, the survey area as
+//! an inclusion fence, and rally points.
 
 use serde_json::{Value, json};
 
-use super::mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem, cmd, frame};
+use super::mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, cmd};
 
 /// QGC's `firmwareType` for ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
 const FIRMWARE_ARDUPILOT: u8 = 3;
 /// QGC's `vehicleType` for a multirotor (MAV_TYPE_QUADROTOR).
 const VEHICLE_MULTIROTOR: u8 = 2;
+/// `fenceAction` of each fence polygon. QGroundControl builds that know the
+/// key require it (QGCFencePolygon::loadFromJson) and send it as param3 of
+/// the polygon's vertices; 0 keeps param3 as MAVLink reserves it and as the
+/// `.fence.waypoints` file writes it, so the breach action is the vehicle's
+/// own (ArduPilot's `FENCE_ACTION`, PX4's `GF_ACTION`). Other builds ignore
+/// the key.
+const FENCE_ACTION: u8 = 0;
 
-/// The mission and fences as a QGroundControl plan document.
-pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
-    let f = mission.frame.mav_frame();
+/// A mission parameter as QGC stores it: NaN (e.g. `KEEP_HEADING`) as null.
+fn param(v: f64) -> Value {
+    if v.is_nan() { Value::Null } else { v.into() }
+}
+
+/// The mission, fences and rally points (altitude above home) as a
+/// QGroundControl plan document.
+pub fn write_plan(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]) -> Value {
     // QGC's AltMode: 1 relative, 2 absolute (AMSL), 4 terrain frame.
     let altitude_mode = match mission.frame {
         AltitudeFrame::Relative => 1,
@@ -22,91 +34,24 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
     };
     let home = mission.home;
     let items: Vec<Value> = mission
-        .items
+        .mav_items()
         .iter()
         .enumerate()
-        .map(|(i, item)| {
-            let (command, fr, params): (u16, u8, [Value; 7]) = match *item {
-                MissionItem::Takeoff { alt } => (
-                    cmd::NAV_TAKEOFF,
-                    f,
-                    [
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        Value::Null,
-                        home.lat.into(),
-                        home.lon.into(),
-                        alt.into(),
-                    ],
-                ),
-                MissionItem::ChangeSpeed { speed_m_s } => (
-                    cmd::DO_CHANGE_SPEED,
-                    frame::MISSION,
-                    [
-                        1.into(),
-                        speed_m_s.into(),
-                        (-1).into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                    ],
-                ),
-                MissionItem::Waypoint(p) => (
-                    cmd::NAV_WAYPOINT,
-                    f,
-                    [
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        Value::Null,
-                        p.lat.into(),
-                        p.lon.into(),
-                        p.alt.into(),
-                    ],
-                ),
-                MissionItem::CameraTriggerDistance { distance_m } => (
-                    cmd::DO_SET_CAM_TRIGG_DIST,
-                    frame::MISSION,
-                    [
-                        distance_m.into(),
-                        0.into(),
-                        (if distance_m > 0.0 { 1 } else { 0 }).into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                    ],
-                ),
-                MissionItem::ReturnToLaunch => (
-                    cmd::NAV_RETURN_TO_LAUNCH,
-                    f,
-                    [
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                        0.into(),
-                    ],
-                ),
-            };
+        .map(|(i, m)| {
+            let [p1, p2, p3, p4] = m.params;
+            let params = [p1, p2, p3, p4, m.lat, m.lon, m.alt].map(param);
             let mut out = json!({
                 "autoContinue": true,
-                "command": command,
+                "command": m.command,
                 "doJumpId": i + 1,
-                "frame": fr,
+                "frame": m.frame,
                 "params": params,
                 "type": "SimpleItem",
             });
             // QGC's own altitude fields on positional items, so its editor
             // shows the same altitude mode as the frame.
-            if let MissionItem::Takeoff { alt } | MissionItem::Waypoint(GeoPoint { alt, .. }) =
-                *item
-            {
-                out["Altitude"] = alt.into();
+            if m.command == cmd::NAV_TAKEOFF || m.command == cmd::NAV_WAYPOINT {
+                out["Altitude"] = m.alt.into();
                 out["AltitudeMode"] = altitude_mode.into();
                 out["AMSLAltAboveTerrain"] = Value::Null;
             }
@@ -117,18 +62,20 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
         .iter()
         .map(|p| {
             json!({
+                "fenceAction": FENCE_ACTION,
                 "inclusion": p.inclusion,
                 "polygon": p.vertices.iter().map(|v| [v[1], v[0]]).collect::<Vec<_>>(),
                 "version": 1,
             })
         })
         .collect();
+    let rally_points: Vec<[f64; 3]> = rally.iter().map(|p| [p.lat, p.lon, p.alt]).collect();
     json!({
         "fileType": "Plan",
         "version": 1,
         "groundStation": "terraplan",
         "geoFence": { "circles": [], "polygons": polygons, "version": 2 },
-        "rallyPoints": { "points": [], "version": 2 },
+        "rallyPoints": { "points": rally_points, "version": 2 },
         "mission": {
             "cruiseSpeed": mission.cruise_speed_m_s,
             "hoverSpeed": mission.cruise_speed_m_s,
@@ -145,7 +92,8 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon]) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::export::mission::{AltitudeFrame, GeoPoint};
+    use crate::export::mission::MissionItem;
+    use crate::export::write_waypoints;
 
     #[test]
     fn plan_structure_matches_qgc() {
@@ -172,7 +120,7 @@ mod tests {
             inclusion: false,
             vertices: vec![[8.5, 47.4], [8.6, 47.4], [8.6, 47.5]],
         }];
-        let plan = write_plan(&m, &fences);
+        let plan = write_plan(&m, &fences, &[]);
         assert_eq!(plan["fileType"], "Plan");
         assert_eq!(plan["version"], 1);
         assert_eq!(plan["mission"]["version"], 2);
@@ -190,5 +138,71 @@ mod tests {
         let poly = &plan["geoFence"]["polygons"][0];
         assert_eq!(poly["inclusion"], false);
         assert_eq!(poly["polygon"][1], json!([47.4, 8.6]));
+        // The keys QGroundControl's fence loader requires.
+        assert_eq!(poly["version"], 1);
+        assert_eq!(poly["fenceAction"], 0);
+        assert_eq!(plan["rallyPoints"], json!({"points": [], "version": 2}));
+        // Take-off and waypoint yaw: null (NaN, keep the heading); RTL: 0.
+        assert_eq!(items[0]["params"][3], Value::Null);
+        assert_eq!(items[1]["params"][3], Value::Null);
+        assert_eq!(items[2]["params"][3], 0.0);
+    }
+
+    #[test]
+    fn plan_items_agree_with_waypoints_rows() {
+        let mut m = crate::export::mission::sample_mission(GeoPoint {
+            lon: 1.001,
+            lat: 2.002,
+            alt: 40.0,
+        });
+        m.items
+            .insert(1, MissionItem::ChangeSpeed { speed_m_s: 7.0 });
+        m.items
+            .insert(2, MissionItem::CameraTriggerDistance { distance_m: 12.5 });
+        let plan = write_plan(&m, &[], &[]);
+        let text = write_waypoints(&m);
+        let rows: Vec<Vec<f64>> = text
+            .lines()
+            .skip(2)
+            .map(|l| l.split('\t').map(|c| c.parse().unwrap()).collect())
+            .collect();
+        let items = plan["mission"]["items"].as_array().unwrap();
+        assert_eq!(rows.len(), items.len());
+        for (row, item) in rows.iter().zip(items) {
+            assert_eq!(row[3], item["command"].as_f64().unwrap());
+            assert_eq!(row[2], item["frame"].as_f64().unwrap());
+            for k in 0..7 {
+                let p = item["params"][k].as_f64().unwrap_or(f64::NAN);
+                let w = row[4 + k];
+                // .waypoints rounds to 6 (params, alt) or 8 (lat/lon) decimals.
+                assert!(
+                    (p.is_nan() && w.is_nan()) || (p - w).abs() <= 5e-7,
+                    "param {}: plan {p} vs waypoints {w}",
+                    k + 1
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn rally_points_are_lat_lon_alt() {
+        let m = crate::export::mission::sample_mission(GeoPoint {
+            lon: 1.001,
+            lat: 2.002,
+            alt: 40.0,
+        });
+        let plan = write_plan(
+            &m,
+            &[],
+            &[GeoPoint {
+                lon: 1.01,
+                lat: 2.02,
+                alt: 45.5,
+            }],
+        );
+        assert_eq!(
+            plan["rallyPoints"],
+            json!({"points": [[2.02, 1.01, 45.5]], "version": 2})
+        );
     }
 }

@@ -3,24 +3,13 @@
 
 use std::fmt::Write;
 
-use super::mission::{FencePolygon, Mission, MissionItem, cmd, frame};
-
-/// One row of a WPL file.
-struct Row {
-    command: u16,
-    frame: u8,
-    params: [f64; 4],
-    lat: f64,
-    lon: f64,
-    alt: f64,
-}
+use super::mission::{FencePolygon, GeoPoint, MavItem, Mission, cmd, frame};
 
 /// The mission as a `QGC WPL 110` file. Item 0 is home (frame 0, AMSL), as
 /// ArduPilot expects; then the mission items in order.
 pub fn write_waypoints(mission: &Mission) -> String {
     let home = mission.home;
-    let f = mission.frame.mav_frame();
-    let mut rows = vec![Row {
+    let mut rows = vec![MavItem {
         command: cmd::NAV_WAYPOINT,
         frame: frame::GLOBAL,
         params: [0.0; 4],
@@ -28,57 +17,7 @@ pub fn write_waypoints(mission: &Mission) -> String {
         lon: home.lon,
         alt: home.alt,
     }];
-    for item in &mission.items {
-        rows.push(match *item {
-            MissionItem::Takeoff { alt } => Row {
-                command: cmd::NAV_TAKEOFF,
-                frame: f,
-                params: [0.0; 4],
-                lat: home.lat,
-                lon: home.lon,
-                alt,
-            },
-            MissionItem::ChangeSpeed { speed_m_s } => Row {
-                command: cmd::DO_CHANGE_SPEED,
-                frame: frame::MISSION,
-                // param1 1 = ground speed; param3 -1 = leave throttle unchanged.
-                params: [1.0, speed_m_s, -1.0, 0.0],
-                lat: 0.0,
-                lon: 0.0,
-                alt: 0.0,
-            },
-            MissionItem::Waypoint(p) => Row {
-                command: cmd::NAV_WAYPOINT,
-                frame: f,
-                params: [0.0; 4],
-                lat: p.lat,
-                lon: p.lon,
-                alt: p.alt,
-            },
-            MissionItem::CameraTriggerDistance { distance_m } => Row {
-                command: cmd::DO_SET_CAM_TRIGG_DIST,
-                frame: frame::MISSION,
-                // param3 1 = take a photo at once when a distance is set.
-                params: [
-                    distance_m,
-                    0.0,
-                    if distance_m > 0.0 { 1.0 } else { 0.0 },
-                    0.0,
-                ],
-                lat: 0.0,
-                lon: 0.0,
-                alt: 0.0,
-            },
-            MissionItem::ReturnToLaunch => Row {
-                command: cmd::NAV_RETURN_TO_LAUNCH,
-                frame: f,
-                params: [0.0; 4],
-                lat: 0.0,
-                lon: 0.0,
-                alt: 0.0,
-            },
-        });
-    }
+    rows.extend(mission.mav_items());
     render(&rows, true)
 }
 
@@ -94,7 +33,7 @@ pub fn write_fence(polygons: &[FencePolygon]) -> String {
             cmd::NAV_FENCE_POLYGON_VERTEX_EXCLUSION
         };
         for v in &p.vertices {
-            rows.push(Row {
+            rows.push(MavItem {
                 command,
                 frame: frame::GLOBAL,
                 params: [p.vertices.len() as f64, 0.0, 0.0, 0.0],
@@ -107,11 +46,33 @@ pub fn write_fence(polygons: &[FencePolygon]) -> String {
     render(&rows, false)
 }
 
-fn render(rows: &[Row], first_is_current: bool) -> String {
+/// Rally points as a WPL rally mission (MAV_CMD_NAV_RALLY_POINT 5100,
+/// altitude above home, frame 3): what MAVProxy's `rally load` sends to
+/// ArduPilot with the MAVLink mission protocol (mission type RALLY), and the
+/// items PX4 and QGroundControl use for rally (safe) points. The older
+/// `RALLY lat lon alt …` text is not written: MAVProxy's current rally
+/// module reads its altitude ×1000.
+pub fn write_rally(points: &[GeoPoint]) -> String {
+    let rows: Vec<MavItem> = points
+        .iter()
+        .map(|p| MavItem {
+            command: cmd::NAV_RALLY_POINT,
+            frame: frame::GLOBAL_RELATIVE_ALT,
+            params: [0.0; 4],
+            lat: p.lat,
+            lon: p.lon,
+            alt: p.alt,
+        })
+        .collect();
+    render(&rows, false)
+}
+
+fn render(rows: &[MavItem], first_is_current: bool) -> String {
     let mut out = String::from("QGC WPL 110\n");
     for (seq, r) in rows.iter().enumerate() {
         let current = u8::from(first_is_current && seq == 0);
         let _ = write!(out, "{seq}\t{current}\t{}\t{}", r.frame, r.command);
+        // A NaN param prints as `NaN` (see `KEEP_HEADING`).
         for p in r.params {
             let _ = write!(out, "\t{p:.6}");
         }
@@ -123,7 +84,7 @@ fn render(rows: &[Row], first_is_current: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::export::mission::{AltitudeFrame, GeoPoint};
+    use crate::export::mission::{AltitudeFrame, MissionItem};
 
     fn mission() -> Mission {
         let home = GeoPoint {
@@ -175,6 +136,53 @@ mod tests {
         let cols: Vec<&str> = lines[5].split('\t').collect();
         assert_eq!((cols[3], cols[4]), ("206", "12.500000"));
         assert!(lines[8].split('\t').nth(3) == Some("20"));
+    }
+
+    #[test]
+    fn takeoff_and_waypoints_keep_the_heading() {
+        let text = write_waypoints(&mission());
+        for line in text.lines().skip(2) {
+            let cols: Vec<&str> = line.split('\t').collect();
+            let yaw = cols[7];
+            match cols[3] {
+                // Take-off and waypoints: NaN, "keep the yaw behaviour".
+                "22" | "16" => assert_eq!(yaw, "NaN", "{line}"),
+                _ => assert_eq!(yaw, "0.000000", "{line}"),
+            }
+            // Every field parses as a number (Rust, like strtod and
+            // Python's float, reads `NaN`).
+            for c in &cols {
+                assert!(c.parse::<f64>().is_ok(), "{c:?} in {line}");
+            }
+        }
+        // Home (item 0) is no flown waypoint: its yaw stays 0.
+        assert_eq!(
+            text.lines().nth(1).unwrap().split('\t').nth(7),
+            Some("0.000000")
+        );
+    }
+
+    #[test]
+    fn rally_rows_are_relative_rally_points() {
+        let text = write_rally(&[
+            GeoPoint {
+                lon: 5.1,
+                lat: 52.2,
+                alt: 60.0,
+            },
+            GeoPoint {
+                lon: 5.123456789,
+                lat: 52.25,
+                alt: 72.5,
+            },
+        ]);
+        assert_eq!(
+            text,
+            "QGC WPL 110\n\
+             0\t0\t3\t5100\t0.000000\t0.000000\t0.000000\t0.000000\t52.20000000\t5.10000000\t60.000000\t1\n\
+             1\t0\t3\t5100\t0.000000\t0.000000\t0.000000\t0.000000\t52.25000000\t5.12345679\t72.500000\t1\n"
+        );
+        assert_eq!(write_rally(&[]), "QGC WPL 110\n");
     }
 
     #[test]

@@ -19,8 +19,10 @@ use crate::geo::{
 use crate::terrain::{Dem, TerrainModel};
 
 mod flock_plan;
+mod rally;
 mod terrain_flight;
 
+pub use rally::{MAX_RALLY_DISTANCE_M, MAX_RALLY_POINTS, RallyPoint};
 pub use terrain_flight::{FlightLeg, LegKind, ProfilePoint, UavTerrain};
 use terrain_flight::{FlightRules, cell_length_3d, fly_tour, lanes_known_fraction};
 
@@ -190,6 +192,10 @@ pub struct SurveyParams {
     /// shortest makespan), `competition` (thesis Algorithm 3) or
     /// `min_reach` (thesis policy 1, least summed reach distance).
     pub assignment: Policy,
+    /// Rally points, [lon, lat] each (at most 64): where a UAV may return
+    /// instead of home; exported in each `.plan` and as a rally file.
+    #[cfg_attr(feature = "openapi", schema(max_items = 64))]
+    pub rally_points: Vec<[f64; 2]>,
 }
 
 impl Default for SurveyParams {
@@ -216,6 +222,7 @@ impl Default for SurveyParams {
             max_descent_rate_m_s: None,
             allow_partial_dem: false,
             assignment: Policy::Balanced,
+            rally_points: Vec::new(),
         }
     }
 }
@@ -450,6 +457,29 @@ impl SurveyParams {
         }
         if let Some(r) = self.max_descent_rate_m_s {
             check_range(&mut issues, &p("max_descent_rate_m_s"), r, 0.0, 50.0, true);
+        }
+        if self.rally_points.len() > MAX_RALLY_POINTS {
+            issues.push(Issue::new(
+                &p("rally_points"),
+                &format!(
+                    "{} rally points given; a survey takes at most {MAX_RALLY_POINTS}",
+                    self.rally_points.len()
+                ),
+            ));
+        }
+        for (i, &[lon, lat]) in self.rally_points.iter().enumerate() {
+            if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
+                issues.push(Issue::new(
+                    &p(&format!("rally_points/{i}/0")),
+                    &format!("longitude {lon} is outside [-180, 180]"),
+                ));
+            }
+            if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
+                issues.push(Issue::new(
+                    &p(&format!("rally_points/{i}/1")),
+                    &format!("latitude {lat} is outside [-90, 90]"),
+                ));
+            }
         }
         if issues.is_empty() {
             Ok(())
@@ -776,6 +806,9 @@ pub struct SurveyPlan {
     pub uavs: Vec<UavPlan>,
     /// Fence polygons (lon/lat): the inclusion area, then every no-fly zone.
     pub fences: Vec<FencePolygon>,
+    /// Rally points, in the inclusion fence and clear of the no-fly zones.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rally_points: Vec<RallyPoint>,
     pub warnings: Vec<String>,
 }
 
@@ -1009,6 +1042,9 @@ pub fn plan_survey_over(
         }
     };
 
+    let (rally_points, rally_utm) =
+        rally::check_rally_points(&params.rally_points, &area, params.nfz_clearance_m, dem)?;
+
     let speeds: Vec<f64> = uav_specs
         .iter()
         .map(|u| u.speed_m_s.unwrap_or(params.speed_m_s))
@@ -1142,6 +1178,8 @@ pub fn plan_survey_over(
         })
         .collect::<Result<Vec<_>, GeoError>>()?;
 
+    // The inclusion fence holds the rally points (a UAV flies there on RTL).
+    all_paths.extend(rally_utm);
     let fences = fences(&area, &all_paths, params.fence_margin_m)?;
     let times: Vec<f64> = uav_plans.iter().map(|u| u.stats.flight_time_s).collect();
     let lengths: Vec<f64> = uav_plans.iter().map(|u| u.stats.length_3d_m).collect();
@@ -1195,6 +1233,7 @@ pub fn plan_survey_over(
         cells: cells_out,
         uavs: uav_plans,
         fences,
+        rally_points,
         warnings,
     })
 }
@@ -1581,6 +1620,7 @@ impl SurveyPlan {
             }
             out.push(format!("{}.{FENCE_FILE_SUFFIX}", u.id));
         }
+        out.extend(self.rally_file_names());
         out.push(CELLS_FILE.to_string());
         out
     }
@@ -1607,6 +1647,9 @@ impl SurveyPlan {
         if name == CELLS_FILE {
             return done("application/geo+json", pretty(&self.cells_geojson()));
         }
+        if let Some(rally) = self.rally_file(name) {
+            return Some(rally);
+        }
         // The fence is the UAV's; it is also served under each sortie's stem.
         let fence = format!(".{FENCE_FILE_SUFFIX}");
         if self.uavs.iter().any(|u| {
@@ -1626,7 +1669,11 @@ impl SurveyPlan {
             "waypoints" => done(text, export::write_waypoints(&s.mission)),
             "plan" => done(
                 "application/json",
-                pretty(&export::write_plan(&s.mission, &self.fences)),
+                pretty(&export::write_plan(
+                    &s.mission,
+                    &self.fences,
+                    &self.rally_for(u),
+                )),
             ),
             "route.geojson" => {
                 let mut props = Map::new();

@@ -102,6 +102,10 @@ pub struct UavFiles {
     route: String,
     /// Fence mission (commands 5001/5002).
     fence: String,
+    /// Rally points (command 5100, altitude above home), when the survey
+    /// has rally points.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    rally: Option<String>,
     /// KML of the route and the UAV's cells, for Google Earth.
     kml: String,
 }
@@ -258,6 +262,8 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                 id: u.id.clone(),
                 start: u.start,
                 speed_m_s: u.speed_m_s,
+                            rally: (!plan.rally_points.is_empty())
+                                .then(|| format!("{base}/uavs/{}/rally.waypoints", u.id)),
                 max_flight_time_s: u.max_flight_time_s,
                 cells: u.cells.clone(),
                 pieces: u.pieces.clone(),
@@ -509,7 +515,8 @@ pub struct SortieQuery {
 }
 
 /// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
-/// (QGroundControl), `route.geojson`, `route.kml` or `fence.waypoints`.
+/// (QGroundControl), `route.geojson`, `route.kml`, `fence.waypoints` or
+/// `rally.waypoints` (a survey with rally points).
 /// A UAV whose battery needs several sorties has one mission per sortie,
 /// chosen with `?sortie=k`.
 #[utoipa::path(
@@ -519,7 +526,7 @@ pub struct SortieQuery {
     params(
         ("id" = String, Path, description = "Survey id"),
         ("uav" = String, Path, description = "UAV id"),
-        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints"),
+        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints, rally.waypoints"),
         SortieQuery,
     ),
     responses(
@@ -564,11 +571,12 @@ pub async fn uav_file(
         other => {
             return Err(ApiError::NotFound(format!(
                 "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, route.kml, \
-                 fence.waypoints"
+                 fence.waypoints, rally.waypoints"
             )));
         }
     };
     // Per-sortie files are named `<uav>.sortie<k>.<suffix>` in the plan
+        "rally.waypoints" => ("rally.waypoints", "rally.waypoints"),
     // when the UAV flies several sorties; the fence is the UAV's.
     let stem = match sortie {
         Some(k) => format!("{uav}.sortie{k}"),
@@ -590,6 +598,9 @@ pub async fn uav_file(
                  ?sortie=1, 2, …"
             ),
         },
+            _ if file == "rally.waypoints" => {
+                format!("survey {id} has no rally points (rally_points), or no UAV {uav:?}")
+            }
     )
     .await
 }
