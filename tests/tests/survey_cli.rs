@@ -154,13 +154,6 @@ fn fields2cover_fields_with_generated_nfzs() {
     }
 }
 
-#[test]
-fn netherlands_field_default_params() {
-    let dir = tempfile::tempdir().unwrap();
-    let roi = shared_data("polygons/fields2cover__test.json");
-    let (plan, summary) = plan_and_validate(&roi, &[], &json!({}), dir.path());
-    assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
-    // Default camera at 60 m: GSD = 60·13.2·100/(5472·8.8) ≈ 1.645 cm/px.
 /// Rally points next to the fences: in every `.plan`, in a rally file per
 /// UAV (sorties included), inside the inclusion fence, at the flight
 /// altitude above home; MAVSDK and MAVProxy load them (check_missions.py).
@@ -242,6 +235,13 @@ fn rally_points_in_every_format() {
     }
 }
 
+#[test]
+fn netherlands_field_default_params() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test.json");
+    let (plan, summary) = plan_and_validate(&roi, &[], &json!({}), dir.path());
+    assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
+    // Default camera at 60 m: GSD = 60·13.2·100/(5472·8.8) ≈ 1.645 cm/px.
     let gsd = plan["stats"]["gsd_cm_px"].as_f64().unwrap();
     assert!((gsd - 1.6447).abs() < 1e-3, "{gsd}");
     // Starts at the ROI's first vertex by default.
@@ -346,6 +346,20 @@ fn bad_input_names_its_fault() {
             json!({"uavs": [{"id": "a", "start": [5.0015, 52.0015]}]}),
             "inside a no-fly zone",
         ),
+        (
+            "rally point in NFZ",
+            rect(5.0, 52.0, 5.005, 52.003),
+            Some(rect(5.001, 52.001, 5.002, 52.002)),
+            json!({"rally_points": [[4.999, 52.0], [5.0015, 52.0015]]}),
+            "/rally_points/1: rally point 2 (5.0015, 52.0015) is inside a no-fly zone",
+        ),
+        (
+            "rally point with lon and lat swapped",
+            rect(5.0, 52.0, 5.005, 52.003),
+            None,
+            json!({"rally_points": [[52.0, 5.0]]}),
+            "/rally_points/0: rally point 1 (52, 5) is",
+        ),
     ];
     for (name, roi, nfz, params, expect) in cases {
         let roi_p = write(d, "case-roi.json", &roi);
@@ -413,20 +427,6 @@ fn survey_over_a_dem_file() {
     let (hx, hy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
     let roi = write(
         dir.path(),
-        (
-            "rally point in NFZ",
-            rect(5.0, 52.0, 5.005, 52.003),
-            Some(rect(5.001, 52.001, 5.002, 52.002)),
-            json!({"rally_points": [[4.999, 52.0], [5.0015, 52.0015]]}),
-            "/rally_points/1: rally point 2 (5.0015, 52.0015) is inside a no-fly zone",
-        ),
-        (
-            "rally point with lon and lat swapped",
-            rect(5.0, 52.0, 5.005, 52.003),
-            None,
-            json!({"rally_points": [[52.0, 5.0]]}),
-            "/rally_points/0: rally point 1 (52, 5) is",
-        ),
         "roi.json",
         &rect(cx - hx, cy - hy, cx + hx, cy + hy),
     );
@@ -466,21 +466,6 @@ fn survey_over_a_dem_file() {
     );
     let wp = validator("load_waypoints.py", &[&out.join("t1.waypoints")]);
     assert!(wp.status.success(), "{}", text(&wp.stderr));
-
-    let far = write(dir.path(), "far.json", &rect(10.0, 50.0, 10.001, 50.001));
-    let o = terraplan(&[
-        "survey",
-        "--roi",
-        far.to_str().unwrap(),
-        "--dem",
-        dem.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    let err = text(&o.stderr);
-    assert!(err.contains("DEM ") && err.contains("no heights"), "{err}");
-}
     check_missions(&out);
     // The rally point is flown at least 35 m above the DEM under it, and
     // no lower than the mission's highest point (heights above home).
@@ -498,3 +483,18 @@ fn survey_over_a_dem_file() {
         (alt - (ground + 35.0 - home).max(highest)).abs() < 1e-5,
         "rally altitude {alt}, ground {ground}, home {home}, highest {highest}"
     );
+
+    let far = write(dir.path(), "far.json", &rect(10.0, 50.0, 10.001, 50.001));
+    let o = terraplan(&[
+        "survey",
+        "--roi",
+        far.to_str().unwrap(),
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(err.contains("DEM ") && err.contains("no heights"), "{err}");
+}

@@ -253,6 +253,8 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                             plan: f("mission.plan"),
                             route: f("route.geojson"),
                             fence: format!("{base}/uavs/{}/fence.waypoints", u.id),
+                            rally: (!plan.rally_points.is_empty())
+                                .then(|| format!("{base}/uavs/{}/rally.waypoints", u.id)),
                             kml: f("route.kml"),
                         },
                     }
@@ -262,8 +264,6 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                 id: u.id.clone(),
                 start: u.start,
                 speed_m_s: u.speed_m_s,
-                            rally: (!plan.rally_points.is_empty())
-                                .then(|| format!("{base}/uavs/{}/rally.waypoints", u.id)),
                 max_flight_time_s: u.max_flight_time_s,
                 cells: u.cells.clone(),
                 pieces: u.pieces.clone(),
@@ -567,6 +567,7 @@ pub async fn uav_file(
         "mission.plan" => ("plan", "plan"),
         "route.geojson" => ("route.geojson", "route.geojson"),
         "fence.waypoints" => ("fence.waypoints", "fence.waypoints"),
+        "rally.waypoints" => ("rally.waypoints", "rally.waypoints"),
         "route.kml" => ("kml", "kml"),
         other => {
             return Err(ApiError::NotFound(format!(
@@ -576,7 +577,6 @@ pub async fn uav_file(
         }
     };
     // Per-sortie files are named `<uav>.sortie<k>.<suffix>` in the plan
-        "rally.waypoints" => ("rally.waypoints", "rally.waypoints"),
     // when the UAV flies several sorties; the fence is the UAV's.
     let stem = match sortie {
         Some(k) => format!("{uav}.sortie{k}"),
@@ -589,6 +589,9 @@ pub async fn uav_file(
         &format!("{stem}.{suffix}"),
         &download_name,
         || match sortie {
+            _ if file == "rally.waypoints" => {
+                format!("survey {id} has no rally points (rally_points), or no UAV {uav:?}")
+            }
             Some(k) => format!(
                 "survey {id} has no sortie {k} of UAV {uav:?} (a UAV flying one sortie takes no \
                  sortie number)"
@@ -598,9 +601,6 @@ pub async fn uav_file(
                  ?sortie=1, 2, …"
             ),
         },
-            _ if file == "rally.waypoints" => {
-                format!("survey {id} has no rally points (rally_points), or no UAV {uav:?}")
-            }
     )
     .await
 }
