@@ -30,6 +30,9 @@ if [ "${1:-}" = "--with-validators" ]; then
   need_gdal=()
   command -v gdalinfo >/dev/null 2>&1 || need_gdal+=(gdal-bin)
   /usr/bin/python3 -c "import osgeo.gdal, numpy" >/dev/null 2>&1 || need_gdal+=(python3-gdal python3-numpy)
+  # PROJ's EGM96 grid: the independent geoid undulations the GeoJSON
+  # heights are checked against (tests/validators/egm96_proj.py).
+  [ -e /usr/share/proj/egm96_15.gtx ] || need_gdal+=(proj-data)
   if [ "${#need_gdal[@]}" -gt 0 ]; then
     echo "setup: installing ${need_gdal[*]} with apt-get" >&2
     SUDO=""

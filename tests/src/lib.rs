@@ -472,6 +472,27 @@ pub fn class_page(costmap_tif: &Path) -> PathBuf {
     PathBuf::from(format!("GTIFF_DIR:2:{}", costmap_tif.display()))
 }
 
+/// The EGM96 geoid undulation (m, geoid above the WGS 84 ellipsoid) at
+/// each [lon, lat], from PROJ with the EGM96 grid of Debian's proj-data
+/// (`tests/validators/egm96_proj.py`): independent of terraplan's own.
+pub fn egm96_undulations(points: &[[f64; 2]]) -> Vec<f64> {
+    let input: String = points
+        .iter()
+        .map(|p| format!("{} {}\n", p[0], p[1]))
+        .collect();
+    let script = workspace().join("tests/validators/egm96_proj.py");
+    let values: Vec<f64> = run_tool(
+        "/usr/bin/python3",
+        &[script.to_str().unwrap()],
+        Some(&input),
+    )
+    .lines()
+    .map(|l| l.parse().expect("egm96_proj.py prints numbers"))
+    .collect();
+    assert_eq!(values.len(), points.len());
+    values
+}
+
 /// Every value of band `band`, row-major from the top row (NaN for nan),
 /// as `gdal_translate -of XYZ` reads them.
 pub fn band_values(path: &Path, band: usize) -> Vec<f64> {

@@ -9,7 +9,9 @@ use std::process::Command;
 use geo::Intersects;
 use geo_types::{Coord, LineString, Polygon};
 use serde_json::{Value, json};
-use terraplan_e2e::{dtm, shared_data, terraplan, text, validator, venv_python, workspace};
+use terraplan_e2e::{
+    dtm, egm96_undulations, shared_data, terraplan, text, validator, venv_python, workspace,
+};
 
 fn mcp(args: &[&str]) -> Value {
     let out = Command::new(venv_python())
@@ -215,12 +217,24 @@ fn dtm_route_files_and_replan() {
         "{path_cost} vs Dijkstra's {dijkstra}"
     );
 
-    // GeoJSON with heights; CSV of UTM waypoints.
+    // GeoJSON: a FeatureCollection, heights above the WGS 84 ellipsoid (the
+    // terrain's plus the EGM96 undulation, which PROJ gives independently).
     let gj = read_json(&out.join("route.geojson"));
-    assert_eq!(gj["geometry"]["type"], "LineString");
-    let coords = gj["geometry"]["coordinates"].as_array().unwrap();
+    assert_eq!(gj["type"], "FeatureCollection");
+    let feature = &gj["features"][0];
+    assert_eq!(feature["geometry"]["type"], "LineString");
+    let coords = feature["geometry"]["coordinates"].as_array().unwrap();
     assert_eq!(coords.len(), wps.len());
-    assert!(coords.iter().all(|c| c.as_array().unwrap().len() == 3));
+    let points: Vec<[f64; 2]> = wps
+        .iter()
+        .map(|p| [p["lon"].as_f64().unwrap(), p["lat"].as_f64().unwrap()])
+        .collect();
+    for ((c, p), n) in coords.iter().zip(wps).zip(egm96_undulations(&points)) {
+        assert_eq!(c.as_array().unwrap().len(), 3, "{c}");
+        let above = c[2].as_f64().unwrap() - p["height_m"].as_f64().unwrap();
+        assert!((above - n).abs() <= 0.5, "{c}: {above} vs EGM96 (PROJ) {n}");
+    }
+    // CSV of UTM waypoints.
     let csv = std::fs::read_to_string(out.join("route.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().collect();
     assert_eq!(rows[0], "index,easting,northing,zone,height");

@@ -18,8 +18,8 @@ use geo_types::{Coord, Line, LineString, Polygon};
 use serde_json::{Value, json};
 use terraplan_e2e::{
     Reply, Server, assert_invalid_at, assert_problem, band_values, class_page, close, delete, dtm,
-    gdalinfo, get, pixel_values, post, post_json, run_tool, slow_costmap_options, text,
-    upload_dem, validator, wait_costmap_finished,
+    egm96_undulations, gdalinfo, get, pixel_values, post, post_json, run_tool,
+    slow_costmap_options, text, upload_dem, validator, wait_costmap_finished,
 };
 
 /// Metres per degree of latitude, near enough for one-cell tolerances.
@@ -335,12 +335,25 @@ fn check_route(route: &Value, start: (usize, usize), goal: (usize, usize), heigh
     let coords = route["geometry"]["coordinates"].as_array().unwrap();
     assert_eq!(route["geometry"]["type"], "LineString");
     assert_eq!(coords.len(), wp.len());
-    for (c, p) in coords.iter().zip(wp) {
+    // Heights above the WGS 84 ellipsoid (RFC 7946): the terrain's height
+    // plus the EGM96 undulation, which PROJ gives independently.
+    let undulations = if heights {
+        let points: Vec<[f64; 2]> = wp.iter().map(lonlat_of).collect();
+        egm96_undulations(&points)
+    } else {
+        vec![]
+    };
+    for (i, (c, p)) in coords.iter().zip(wp).enumerate() {
         assert_eq!(c[0], p["lon"]);
         assert_eq!(c[1], p["lat"]);
         if heights {
             assert_eq!(c.as_array().unwrap().len(), 3, "{c}");
-            assert_eq!(c[2], p["height_m"]);
+            let n = num(&c[2]) - num(&p["height_m"]);
+            assert!(
+                (n - undulations[i]).abs() <= 0.5,
+                "{c}: {n} m above the terrain's height, EGM96 (PROJ) {}",
+                undulations[i]
+            );
         } else {
             assert_eq!(c.as_array().unwrap().len(), 2, "{c}");
             assert!(p["height_m"].is_null());
@@ -442,12 +455,38 @@ fn route_end_to_end() {
             .unwrap()
             .starts_with("attachment")
     );
-    let feature = r.json();
+    // A FeatureCollection like a survey's route files; heights above the
+    // WGS 84 ellipsoid, the terrain's as properties.
+    let collection = r.json();
+    assert_eq!(collection["type"], "FeatureCollection");
+    assert_eq!(collection["features"].as_array().unwrap().len(), 1);
+    let feature = &collection["features"][0];
     assert_eq!(feature["type"], "Feature");
     assert_eq!(feature["geometry"], route["geometry"]);
-    assert_eq!(feature["properties"]["id"], id.as_str());
-    for c in feature["geometry"]["coordinates"].as_array().unwrap() {
+    let props = &feature["properties"];
+    assert_eq!(props["id"], id.as_str());
+    assert!(
+        props["height_reference"]
+            .as_str()
+            .unwrap()
+            .starts_with("WGS 84 ellipsoid"),
+        "{props}"
+    );
+    // The terrain's heights, to the millimetre.
+    let terrain = props["terrain_heights_m"].as_array().unwrap();
+    assert_eq!(terrain.len(), wp.len());
+    for (t, p) in terrain.iter().zip(&wp) {
+        assert!((num(t) - num(&p["height_m"])).abs() <= 0.0005, "{t} vs {p}");
+    }
+    let points: Vec<[f64; 2]> = wp.iter().map(lonlat_of).collect();
+    let coords = feature["geometry"]["coordinates"].as_array().unwrap();
+    for ((c, n), proj_n) in coords
+        .iter()
+        .zip(props["egm96_undulations_m"].as_array().unwrap())
+        .zip(egm96_undulations(&points))
+    {
         assert_eq!(c.as_array().unwrap().len(), 3, "{c}");
+        assert!((num(n) - proj_n).abs() <= 0.5, "{n} vs PROJ's {proj_n}");
     }
     let r = get(&server.url(&format!("{base}/route.csv")));
     assert_eq!(r.status, 200);

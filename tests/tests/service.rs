@@ -40,7 +40,14 @@ fn create_get_list_download_delete() {
     assert_eq!(created["cells"]["type"], "FeatureCollection");
     let uav = &created["uavs"][0]["sorties"][0];
     assert_eq!(uav["route"]["type"], "LineString");
-    assert_eq!(uav["route"]["coordinates"][1].as_array().unwrap().len(), 3);
+    // No DEM: the ground's height above the ellipsoid is unknown, so the
+    // positions are 2D (RFC 7946) and the mission's altitudes stand beside.
+    let route = uav["route"]["coordinates"].as_array().unwrap();
+    assert_eq!(route[1].as_array().unwrap().len(), 2);
+    let altitudes = uav["mission_altitudes_m"].as_array().unwrap();
+    assert_eq!(altitudes.len(), route.len());
+    assert_eq!(altitudes[0], 0.0);
+    assert_eq!(altitudes[1], created["stats"]["altitude_m"]);
 
     let r = get(&server.url(&format!("/api/v1/surveys/{id}")));
     assert_eq!(r.status, 200);
@@ -112,6 +119,14 @@ fn create_get_list_download_delete() {
         Some("application/geo+json")
     );
     assert_eq!(route_file.json()["features"][0]["geometry"], uav["route"]);
+    let props = &route_file.json()["features"][0]["properties"];
+    assert_eq!(props["mission_altitudes_m"], uav["mission_altitudes_m"]);
+    assert!(
+        props["height_reference"]
+            .as_str()
+            .unwrap()
+            .starts_with("none")
+    );
     let kml = get(&server.url(files["kml"].as_str().unwrap()));
     assert_eq!(
         kml.header("content-type"),

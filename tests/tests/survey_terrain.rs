@@ -93,12 +93,26 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
         }
     }
 
+    // The GeoJSON route, whose heights check_terrain.py compares with the
+    // .waypoints file's plus PROJ's EGM96 undulation; the answer's route is
+    // its geometry.
+    let route = get(&server.url(uav["files"]["route"].as_str().unwrap()));
+    assert_eq!(route.status, 200);
+    assert_eq!(route.json()["features"][0]["geometry"], uav["route"]);
+    assert_eq!(
+        route.json()["features"][0]["properties"]["mission_altitudes_m"],
+        uav["mission_altitudes_m"]
+    );
+    let route_path = dir.path().join("uav.route.geojson");
+    std::fs::write(&route_path, &route.body).unwrap();
+
     let out = Command::new(GDAL_PYTHON)
         .arg(workspace().join("tests/validators/check_terrain.py"))
         .arg(dem_file)
         .arg(&survey_path)
         .arg(survey["uavs"][0]["id"].as_str().unwrap())
         .arg(&wp_path)
+        .arg(&route_path)
         .output()
         .expect("run check_terrain.py");
     assert!(
@@ -188,8 +202,12 @@ fn terrain_following_is_safe_over_every_real_dem() {
             "{}: samples without DEM data",
             case.file
         );
+        // Every position of the GeoJSON checked against PROJ's EGM96.
+        assert!(summary["geoid_positions"].as_u64().unwrap() >= 4);
+        assert!(summary["geoid_max_error_m"].as_f64().unwrap() <= 0.5);
         report.push(format!(
-            "{}: lane min AGL {:.2} m (≥ {}), transit min clearance {:.2} m, lane length within ±tol {:.1} %, {} legs",
+            "{}: lane min AGL {:.2} m (≥ {}), transit min clearance {:.2} m, lane length within ±tol {:.1} %, {} legs, \
+             GeoJSON height − AMSL − EGM96 (PROJ) ≤ {:.3} m at {} positions (N ≈ {:.2} m)",
             case.file,
             summary["lane_min_agl"].as_f64().unwrap(),
             survey["stats"]["altitude_m"].as_f64().unwrap()
@@ -197,6 +215,9 @@ fn terrain_following_is_safe_over_every_real_dem() {
             summary["transit_min_clearance"].as_f64().unwrap_or(f64::NAN),
             summary["lane_within_fraction"].as_f64().unwrap() * 100.0,
             t["legs"].as_array().unwrap().len(),
+            summary["geoid_max_error_m"].as_f64().unwrap(),
+            summary["geoid_positions"],
+            summary["egm96_undulation_m"].as_f64().unwrap(),
         ));
     }
     println!("{}", report.join("\n"));

@@ -2,7 +2,7 @@
 GDAL (osgeo, Debian's python3-gdal) doing the reading and the coordinate
 transformations, and numpy the bilinear sampling between cell centres.
 
-usage: check_terrain.py DEM SURVEY_JSON UAV_ID WAYPOINTS_FILE
+usage: check_terrain.py DEM SURVEY_JSON UAV_ID WAYPOINTS_FILE [ROUTE_GEOJSON]
 
 SURVEY_JSON is the service's answer to POST /api/v1/surveys (or plan.json).
 Checks, for the UAV:
@@ -10,9 +10,16 @@ Checks, for the UAV:
     converting its altitudes from the mission frame to the DEM's datum);
   * along every flown segment, sampled at half the DEM's cell size, the
     height above the DEM is >= altitude_m - agl_tolerance_m on lanes and
-    links and >= transit_clearance_m on transits.
+    links and >= transit_clearance_m on transits;
+  * with ROUTE_GEOJSON (the UAV's route.geojson), its heights are RFC 7946
+    heights: at home and at every waypoint, the height minus the AMSL height
+    of the .waypoints file (converted as above) is the EGM96 geoid
+    undulation within 0.5 m, the undulation taken from PROJ with the EGM96
+    15' grid of Debian's proj-data (egm96_proj.py beside this script), nothing
+    of terraplan's; its mission_altitudes_m are the file's altitudes.
 Prints JSON: min margins, the fraction of lane length within
-+-agl_tolerance_m of altitude_m, sample counts. Exit 1 with a message on
++-agl_tolerance_m of altitude_m, sample counts (and the largest GeoJSON
+height error). Exit 1 with a message on
 the first violation."""
 import json
 import math
@@ -20,6 +27,8 @@ import sys
 
 import numpy as np
 from osgeo import gdal, osr
+
+import egm96_proj  # beside this script
 
 gdal.UseExceptions()
 
@@ -30,6 +39,7 @@ def fail(msg):
 
 
 dem_path, survey_path, uav_id, wp_path = sys.argv[1:5]
+route_path = sys.argv[5] if len(sys.argv) > 5 else None
 survey = json.load(open(survey_path))
 ds = gdal.Open(dem_path)
 band = ds.GetRasterBand(1)
@@ -94,6 +104,8 @@ frame = survey["altitude_frame"]
 # 1. The waypoints file flies the legs.
 rows = [l.rstrip("\n").split("\t") for l in open(wp_path).read().splitlines()[1:]]
 home_alt = float(rows[0][10])
+home_lon, home_lat = float(rows[0][9]), float(rows[0][8])
+file_alts = []  # the altitudes as written, in the mission's frame
 if abs(home_alt - terrain["home_amsl_m"]) > 1e-3:
     fail(f"home altitude {home_alt} != plan's {terrain['home_amsl_m']}")
 flown = []
@@ -102,6 +114,7 @@ for r in rows[1:]:
     if cmd != 16:
         continue
     lat, lon, alt = float(r[8]), float(r[9]), float(r[10])
+    file_alts.append(alt)
     if fr == 3:
         z = alt + home_alt
     elif fr == 0:
@@ -162,4 +175,42 @@ for leg in terrain["legs"]:
                 if abs(above - agl) <= tol:
                     out["lane_within_m"] += d / n
 out["lane_within_fraction"] = out["lane_within_m"] / max(out["lane_length_m"], 1e-9)
+
+
+# 3. The GeoJSON route's heights are above the WGS 84 ellipsoid.
+if route_path is not None:
+    route = json.load(open(route_path))
+    if route.get("type") != "FeatureCollection" or len(route.get("features", [])) != 1:
+        fail("route.geojson: not a FeatureCollection of one Feature")
+    feature = route["features"][0]
+    props = feature["properties"]
+    coords = feature["geometry"]["coordinates"]
+    expect = [(home_lon, home_lat, home_alt)] + flown + [(home_lon, home_lat, home_alt)]
+    if len(coords) != len(expect):
+        fail(f"route.geojson: {len(coords)} positions, expected home, {len(flown)} waypoints, home")
+    if props.get("altitude_frame") != frame:
+        fail(f"route.geojson: altitude_frame {props.get('altitude_frame')} != {frame}")
+    alts = props["mission_altitudes_m"]
+    if len(alts) != len(coords):
+        fail(f"route.geojson: {len(alts)} mission altitudes for {len(coords)} positions")
+    home_in_frame = home_alt if frame == "amsl" else 0.0
+    for i, (a, b) in enumerate(zip(alts, [home_in_frame] + file_alts + [home_in_frame])):
+        if abs(a - b) > 1e-3:
+            fail(f"route.geojson: mission altitude {i} is {a}, the .waypoints file has {b}")
+    undulation = egm96_proj.undulation_function()
+    worst = 0.0
+    for i, (c, (lon, lat, z)) in enumerate(zip(coords, expect)):
+        if len(c) != 3:
+            fail(f"route.geojson: position {i} {c} has no height")
+        if abs(c[0] - lon) > 1e-7 or abs(c[1] - lat) > 1e-7:
+            fail(f"route.geojson: position {i} {c} is not the file's {lon},{lat}")
+        n = undulation(lon, lat)
+        err = c[2] - z - n
+        if abs(err) > 0.5:
+            fail(f"route.geojson: position {i}: height {c[2]:.3f} - AMSL {z:.3f} = {c[2] - z:.3f} m, "
+                 f"EGM96 undulation (PROJ) {n:.3f} m")
+        worst = max(worst, abs(err))
+    out["geoid_positions"] = len(coords)
+    out["geoid_max_error_m"] = worst
+    out["egm96_undulation_m"] = undulation(home_lon, home_lat)
 print(json.dumps(out))

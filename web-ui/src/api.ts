@@ -81,7 +81,10 @@ export interface UavFiles {
 export interface Sortie {
   number: number;
   stats: UavStats;
+  /** [lon, lat, height above the WGS 84 ellipsoid] over a DEM, [lon, lat] without one. */
   route: { type: 'LineString'; coordinates: number[][] };
+  /** The mission's altitude (in the survey's altitude_frame) at each route position. */
+  mission_altitudes_m: number[];
   terrain?: { home_amsl_m: number; profile: ProfilePoint[] } | null;
   files: UavFiles;
 }

@@ -75,13 +75,19 @@ export function profileScale(points: ProfilePoint[], box: ChartBox = DEFAULT_BOX
   };
 }
 
-/** Profile points from a route's [lon, lat, alt] coordinates (no terrain), for surveys without a DEM. */
-export function profileFromRoute(coords: number[][]): ProfilePoint[] {
+/**
+ * Profile points from a route's coordinates and the mission's altitude at
+ * each (no terrain), for surveys without a DEM. The altitudes come from the
+ * sortie's `mission_altitudes_m`, not the coordinates: a GeoJSON position's
+ * third value is a height above the WGS 84 ellipsoid, and a survey without a
+ * DEM has 2D positions.
+ */
+export function profileFromRoute(coords: number[][], altitudes: number[]): ProfilePoint[] {
   const out: ProfilePoint[] = [];
   let dist = 0;
   for (let i = 0; i < coords.length; i++) {
     if (i > 0) dist += haversine(coords[i - 1], coords[i]);
-    out.push({ distance_m: dist, altitude_m: coords[i][2] ?? 0, terrain_m: null });
+    out.push({ distance_m: dist, altitude_m: altitudes[i] ?? 0, terrain_m: null });
   }
   return out;
 }
@@ -99,7 +105,7 @@ export interface SortieProfile {
 
 /**
  * The profile of one sortie of a UAV: its terrain profile when the survey
- * followed a DEM, else one derived from the route's altitudes.
+ * followed a DEM, else one derived from the route and its mission altitudes.
  *
  * One sortie at a time, chosen by the user, rather than all of them one after
  * another: each sortie starts again from the take-off point (distance 0,
@@ -113,7 +119,7 @@ export function sortieProfile(uav: Uav, sortie: number): SortieProfile {
   const s = uav.sorties[index];
   const terrain = s?.terrain?.profile;
   if (terrain && terrain.length > 1) return { index, count, points: terrain, overTerrain: true };
-  return { index, count, points: profileFromRoute(s?.route.coordinates ?? []), overTerrain: false };
+  return { index, count, points: profileFromRoute(s?.route.coordinates ?? [], s?.mission_altitudes_m ?? []), overTerrain: false };
 }
 
 function haversine(a: number[], b: number[]): number {

@@ -47,9 +47,9 @@ describe('profileScale', () => {
 });
 
 describe('profileFromRoute', () => {
-  it('measures distance along [lon, lat, alt] coordinates', () => {
-    // 0.001° of latitude ≈ 111.2 m.
-    const p = profileFromRoute([[5, 52, 0], [5, 52.001, 60], [5, 52.002, 60]]);
+  it('measures distance along the coordinates, with the mission altitudes', () => {
+    // 0.001° of latitude ≈ 111.2 m; 2D positions, as a survey without a DEM has.
+    const p = profileFromRoute([[5, 52], [5, 52.001], [5, 52.002]], [0, 60, 60]);
     expect(p.map((x) => x.altitude_m)).toEqual([0, 60, 60]);
     expect(p[1].distance_m).toBeCloseTo(111.2, 0);
     expect(p[2].distance_m).toBeCloseTo(222.4, 0);
@@ -73,10 +73,10 @@ describe('sortieProfile', () => {
     speed_m_s: 10,
     stats,
     sorties: [
-      { number: 1, stats, files, route: { type: 'LineString', coordinates: [] }, terrain: terrain(70) },
-      { number: 2, stats, files, route: { type: 'LineString', coordinates: [] }, terrain: terrain(90) },
-      // Without a DEM: the route's altitudes, no terrain.
-      { number: 3, stats, files, route: { type: 'LineString', coordinates: [[0, 0, 60], [0, 0.001, 60]] }, terrain: null },
+      { number: 1, stats, files, route: { type: 'LineString', coordinates: [] }, mission_altitudes_m: [], terrain: terrain(70) },
+      { number: 2, stats, files, route: { type: 'LineString', coordinates: [] }, mission_altitudes_m: [], terrain: terrain(90) },
+      // Without a DEM: 2D positions and the mission's altitudes, no terrain.
+      { number: 3, stats, files, route: { type: 'LineString', coordinates: [[0, 0], [0, 0.001]] }, mission_altitudes_m: [60, 60], terrain: null },
     ],
   };
 

@@ -1,32 +1,31 @@
-//! A ground robot's route as files: GeoJSON (a LineString with terrain
-//! heights), CSV of UTM waypoints (what the thesis hands to the rover),
-//! and an ArduPilot Rover mission.
+//! A ground robot's route as files: GeoJSON (a LineString at the terrain's
+//! heights above the WGS 84 ellipsoid), CSV of UTM waypoints (what the
+//! thesis hands to the rover), and an ArduPilot Rover mission.
 
 use std::fmt::Write;
 
 use serde_json::{Map, Value, json};
 
+use super::geojson::{line_feature, mm};
 use super::mission::{AltitudeFrame, GeoPoint, Mission, MissionItem};
 use crate::route::on_map::MapRoute;
 
 /// The route as a GeoJSON Feature: a LineString through the waypoints,
-/// `[lon, lat, height]` when every waypoint's height is known, else
-/// `[lon, lat]`; `properties` plus the route's figures. A route whose
+/// `[lon, lat, height above the WGS 84 ellipsoid]` when every waypoint's
+/// terrain height is known (the DEM's height, taken as above mean sea
+/// level, plus the EGM96 undulation), else `[lon, lat]`; `properties`
+/// plus the route's figures, `terrain_heights_m` (the DEM's to the
+/// millimetre, `null` where unknown) and the height properties of [`line_feature`]. A route whose
 /// start is its goal has one waypoint, given twice (a LineString needs two
 /// positions, RFC 7946 §3.1.4).
-pub fn route_geojson(route: &MapRoute, mut properties: Map<String, Value>) -> Value {
-    let with_height = route.waypoints.iter().all(|p| p.height_m.is_some());
-    let mut coords: Vec<Value> = route
-        .waypoints
-        .iter()
-        .map(|p| match p.height_m {
-            Some(h) if with_height => json!([p.lon, p.lat, h]),
-            _ => json!([p.lon, p.lat]),
-        })
-        .collect();
-    if coords.len() == 1 {
-        coords.push(coords[0].clone());
+pub fn route_feature(route: &MapRoute, mut properties: Map<String, Value>) -> Value {
+    let mut positions: Vec<[f64; 2]> = route.waypoints.iter().map(|p| [p.lon, p.lat]).collect();
+    let mut heights: Vec<Option<f64>> = route.waypoints.iter().map(|p| p.height_m).collect();
+    if positions.len() == 1 {
+        positions.push(positions[0]);
+        heights.push(heights[0]);
     }
+    let amsl: Option<Vec<f64>> = heights.iter().copied().collect();
     let figures = [
         ("length_2d_m", json!(route.length_2d_m)),
         ("length_3d_m", json!(route.length_3d_m)),
@@ -39,11 +38,15 @@ pub fn route_geojson(route: &MapRoute, mut properties: Map<String, Value>) -> Va
     for (k, v) in figures {
         properties.entry(k).or_insert(v);
     }
-    json!({
-        "type": "Feature",
-        "properties": properties,
-        "geometry": { "type": "LineString", "coordinates": coords },
-    })
+    let terrain: Vec<Option<f64>> = heights.iter().map(|h| h.map(mm)).collect();
+    properties.insert("terrain_heights_m".into(), json!(terrain));
+    line_feature(&positions, amsl.as_deref(), properties)
+}
+
+/// The route as a GeoJSON FeatureCollection of its one [`route_feature`],
+/// like a survey's route files.
+pub fn route_geojson(route: &MapRoute, properties: Map<String, Value>) -> Value {
+    json!({ "type": "FeatureCollection", "features": [route_feature(route, properties)] })
 }
 
 /// The waypoints as CSV: `index,easting,northing,zone,height` (metres,
@@ -94,6 +97,8 @@ pub fn rover_mission(route: &MapRoute, speed_m_s: Option<f64>) -> Mission {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::export::geoid::egm96_undulation_m;
+    use crate::export::geojson::{ELLIPSOIDAL_HEIGHTS, NO_HEIGHTS};
     use crate::export::write_waypoints;
     use crate::route::on_map::RoutePoint;
 
@@ -128,22 +133,47 @@ mod tests {
     }
 
     #[test]
-    fn geojson_has_heights_only_when_all_are_known() {
+    fn geojson_has_ellipsoidal_heights_only_when_all_are_known() {
         let g = route_geojson(&sample_route(true), Map::new());
+        assert_eq!(g["type"], "FeatureCollection");
+        let f = &g["features"][0];
+        assert_eq!(f["type"], "Feature");
+        let c = &f["geometry"]["coordinates"][2];
+        let n = egm96_undulation_m(-74.998, 38.8);
+        // EGM96 off Delaware: PROJ with NGA's 15′ grid gives −36.80 m.
+        assert!((n + 36.80).abs() < 0.1, "{n}");
+        assert_eq!(c[0], -74.998);
+        assert!((c[2].as_f64().unwrap() - (12.0 + n)).abs() <= 0.0005, "{c}");
+        let p = &f["properties"];
+        assert_eq!(p["utm_zone"], "18N");
+        assert_eq!(p["terrain_heights_m"], json!([10.0, 11.0, 12.0]));
+        assert_eq!(p["heights_amsl_m"], json!([10.0, 11.0, 12.0]));
+        assert_eq!(p["height_reference"], ELLIPSOIDAL_HEIGHTS);
+
+        let f = route_feature(&sample_route(false), Map::new());
+        assert_eq!(f["geometry"]["coordinates"][0], json!([-75.0, 38.8]));
         assert_eq!(
-            g["geometry"]["coordinates"][2],
-            json!([-74.998, 38.8, 12.0])
+            f["properties"]["terrain_heights_m"],
+            json!([null, null, null])
         );
-        assert_eq!(g["properties"]["utm_zone"], "18N");
-        let g = route_geojson(&sample_route(false), Map::new());
-        assert_eq!(g["geometry"]["coordinates"][0], json!([-75.0, 38.8]));
+        assert_eq!(f["properties"]["height_reference"], NO_HEIGHTS);
+        // One height missing: 2D, the known ones kept as properties.
+        let mut partial = sample_route(true);
+        partial.waypoints[1].height_m = None;
+        let f = route_feature(&partial, Map::new());
+        assert_eq!(f["geometry"]["coordinates"][2], json!([-74.998, 38.8]));
+        assert_eq!(
+            f["properties"]["terrain_heights_m"],
+            json!([10.0, null, 12.0])
+        );
+
         let mut one = sample_route(true);
         one.waypoints.truncate(1);
-        let g = route_geojson(&one, Map::new());
-        assert_eq!(
-            g["geometry"]["coordinates"],
-            json!([[-75.0, 38.8, 10.0], [-75.0, 38.8, 10.0]])
-        );
+        let f = route_feature(&one, Map::new());
+        let c = f["geometry"]["coordinates"].as_array().unwrap();
+        assert_eq!(c.len(), 2);
+        assert_eq!(c[0], c[1]);
+        assert_eq!(c[0].as_array().unwrap().len(), 3);
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Export stage: missions and their file formats (SPEC §3.6), and
 //! georeferenced Float32 and Byte rasters (costmaps, SPEC §4.2).
 
+pub mod geoid;
 pub mod geojson;
 pub mod geotiff;
 pub mod ground_route;

@@ -720,6 +720,20 @@ pub struct SortiePlan {
     pub terrain: Option<UavTerrain>,
 }
 
+impl SortiePlan {
+    /// The flown route as a GeoJSON Feature (positions at heights above the
+    /// WGS 84 ellipsoid over a DEM, 2D without one; the mission's altitudes
+    /// as properties): see [`gj::route_feature`].
+    pub fn route_feature(&self, properties: Map<String, Value>) -> Value {
+        let flown: Vec<[f64; 3]> = self
+            .terrain
+            .iter()
+            .flat_map(|t| t.legs.iter().flat_map(|l| l.points.iter().copied()))
+            .collect();
+        gj::route_feature(&self.mission, &flown, properties)
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(from = "StoredUavPlan")]
 pub struct UavPlan {
@@ -1682,7 +1696,8 @@ impl SurveyPlan {
                 props.insert("altitude_frame".into(), json!(self.altitude_frame));
                 props.insert("length_m".into(), json!(s.stats.length_m));
                 props.insert("flight_time_s".into(), json!(s.stats.flight_time_s));
-                let route = json!({"type": "FeatureCollection", "features": [gj::route_feature(&s.mission, props)]});
+                let route =
+                    json!({"type": "FeatureCollection", "features": [s.route_feature(props)]});
                 done("application/geo+json", pretty(&route))
             }
             "kml" => {
@@ -1889,6 +1904,7 @@ mod tests {
         let dem = slope_dem();
         let start = [4.999, 51.999];
         let home_amsl = dem.sample(start[0], start[1]).unwrap();
+        let mut route_heights = Vec::new();
         for frame in ["relative", "amsl", "terrain"] {
             let doc = json!({
                 "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
@@ -1920,6 +1936,7 @@ mod tests {
                 .iter()
                 .flat_map(|l| l.points.iter().map(|p| p[2]))
                 .collect();
+            let mut amsl = vec![home_amsl];
             for p in uav.mission.waypoints() {
                 let ground = dem.sample(p.lon, p.lat).unwrap();
                 let z = match frame {
@@ -1928,6 +1945,7 @@ mod tests {
                     _ => p.alt + ground,
                 };
                 assert!(leg_z.iter().any(|lz| (lz - z).abs() < 1e-6), "{frame}: {z}");
+                amsl.push(z);
                 assert!(
                     z - ground >= 48.0 - 1e-6,
                     "{frame}: {} above ground",
@@ -1943,6 +1961,35 @@ mod tests {
                 _ => "\t10\t16\t",
             };
             assert!(wpl.lines().skip(2).any(|l| l.contains(want)), "{frame}");
+            // route.geojson: those heights above mean sea level, home at
+            // both ends, plus the EGM96 undulation above the ellipsoid.
+            amsl.push(home_amsl);
+            let route: Value =
+                serde_json::from_str(&plan.file("a.route.geojson").unwrap().content).unwrap();
+            let f = &route["features"][0];
+            let got: Vec<f64> =
+                serde_json::from_value(f["properties"]["heights_amsl_m"].clone()).unwrap();
+            assert_eq!(got.len(), amsl.len(), "{frame}");
+            assert!(
+                got.iter().zip(&amsl).all(|(a, b)| (a - b).abs() < 1e-3),
+                "{frame}"
+            );
+            let h: Vec<f64> = f["geometry"]["coordinates"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c[2].as_f64().unwrap())
+                .collect();
+            route_heights.push(h);
+        }
+        // The same flight in every frame: the same GeoJSON heights.
+        for h in &route_heights[1..] {
+            assert_eq!(h.len(), route_heights[0].len());
+            assert!(
+                h.iter()
+                    .zip(&route_heights[0])
+                    .all(|(a, b)| (a - b).abs() < 1e-3)
+            );
         }
         // Without the DEM, a dem_id cannot be planned.
         let doc = json!({

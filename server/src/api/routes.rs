@@ -34,7 +34,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use geo::{CoordsIter, Orient, orient::Direction};
 use geo_types::{LineString, Polygon};
-use planner_core::export::ground_route::{route_csv, route_geojson, rover_mission};
+use planner_core::export::ground_route::{route_csv, route_feature, route_geojson, rover_mission};
 use planner_core::export::write_waypoints;
 use planner_core::geo::{Issue, parse_polygons, polygon_issues};
 use planner_core::route::{
@@ -222,7 +222,8 @@ pub struct RouteUrls {
     this: String,
     /// The costmap it was planned on.
     costmap: String,
-    /// The route as a GeoJSON Feature (LineString with heights).
+    /// The route as a GeoJSON FeatureCollection of one Feature (a
+    /// LineString at heights above the WGS 84 ellipsoid).
     geojson: String,
     /// The waypoints as CSV: `index,easting,northing,zone,height`.
     csv: String,
@@ -261,7 +262,9 @@ pub struct RouteResponse {
     #[serde(flatten)]
     route: MapRoute,
     /// The route as a GeoJSON LineString, `[lon, lat, height]` when every
-    /// waypoint's height is known, else `[lon, lat]`.
+    /// waypoint's terrain height is known, else `[lon, lat]`; the height is
+    /// above the WGS 84 ellipsoid (RFC 7946): the DEM's height plus the
+    /// EGM96 geoid undulation.
     #[schema(value_type = Object)]
     geometry: Value,
     /// Every area blocked so far (this replan's and its ancestors'), as
@@ -1218,7 +1221,7 @@ fn ready(state: &AppState, row: &CostmapRow) -> Result<(), ApiError> {
 
 /// The route as GeoJSON geometry.
 fn geometry(route: &MapRoute) -> Value {
-    route_geojson(route, Map::new())["geometry"].take()
+    route_feature(route, Map::new())["geometry"].take()
 }
 
 fn response(row: &RouteRow) -> Result<RouteResponse, ApiError> {
@@ -1629,9 +1632,10 @@ async fn route_file(
     Ok(res)
 }
 
-/// The route as a GeoJSON Feature: a LineString through the waypoints
-/// (`[lon, lat, height]` when every height is known), with the route's
-/// figures as properties.
+/// The route as a GeoJSON FeatureCollection of one Feature: a LineString
+/// through the waypoints (`[lon, lat, height above the WGS 84 ellipsoid]`
+/// when every terrain height is known), with the route's figures, the
+/// terrain heights and the EGM96 undulations as properties.
 #[utoipa::path(
     get,
     path = "/api/v1/routes/{id}/route.geojson",

@@ -5,7 +5,7 @@ use axum::Json;
 use axum::extract::{Path, Query, State, rejection::QueryRejection};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use planner_core::export::{AltitudeFrame, FencePolygon, geojson as gj};
+use planner_core::export::{AltitudeFrame, FencePolygon};
 use planner_core::flock::Piece;
 use planner_core::geo::Issue;
 use planner_core::survey::{
@@ -120,9 +120,16 @@ pub struct SortieResponse {
     /// The parts of cells flown, in order.
     pieces: Vec<Piece>,
     stats: UavStats,
-    /// GeoJSON LineString of [lon, lat, alt] (altitude in the survey's frame).
+    /// GeoJSON LineString of home, the waypoints and home again:
+    /// [lon, lat, height above the WGS 84 ellipsoid] (RFC 7946) when the
+    /// survey follows a DEM, [lon, lat] without one; the same geometry as
+    /// the `route.geojson` file.
     #[schema(value_type = Object)]
     route: Value,
+    /// The mission's altitude at each position of `route`, m, in the
+    /// survey's `altitude_frame` (0 at home except in the `amsl` frame).
+    #[schema(value_type = Vec<f64>)]
+    mission_altitudes_m: Value,
     /// The flight over the DEM (legs in 3D, altitude profile, heights
     /// above the terrain), for surveys planned with `dem_id`.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -241,12 +248,14 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                         String::new()
                     };
                     let f = |name: &str| format!("{base}/uavs/{}/{name}{query}", u.id);
+                    let mut route = s.route_feature(Map::new());
                     SortieResponse {
                         number: k + 1,
                         cells: s.cells.clone(),
                         pieces: s.pieces.clone(),
                         stats: s.stats.clone(),
-                        route: gj::route_feature(&s.mission, Map::new())["geometry"].clone(),
+                        route: route["geometry"].take(),
+                        mission_altitudes_m: route["properties"]["mission_altitudes_m"].take(),
                         terrain: s.terrain.clone(),
                         files: UavFiles {
                             waypoints: f("mission.waypoints"),
