@@ -21,7 +21,7 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   const survey = await post('/api/v1/surveys', JSON.stringify({
     name: 'saved field', roi, no_fly_zones: [nfz], dem_id: dem.id,
     camera_preset: 'dji_mavic2_pro', gsd_cm_px: 2, front_overlap: 0.75, side_overlap: 0.65, slice_angle_deg: 30,
-    speed_m_s: 8, assignment: 'competition', turn_penalty_s: 3,
+    speed_m_s: 8, assignment: 'competition', turn_penalty_s: 3, nfz_clearance_m: 6.5,
     uavs: [{ id: 'a', start: [-77.0551, 38.8089], speed_m_s: 6 }, { id: 'b', start: [-77.0526, 38.8089] }],
   }));
   let costmap = await post('/api/v1/costmaps', JSON.stringify({ name: 'u-go map', dem_id: dem.id }));
@@ -69,6 +69,7 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   assert.equal(await page.inputValue('#side-overlap'), '65');
   assert.equal(await page.inputValue('#slice-angle'), '30');
   assert.equal(await page.inputValue('#speed'), '8');
+  assert.equal(await page.inputValue('#nfz-clearance'), '6.5');
   assert.equal(await page.inputValue('#altitude-frame'), 'relative');
   assert.equal(await page.inputValue('#assignment'), 'competition');
   assert.equal(await page.isChecked('#follow-terrain'), true);
@@ -102,6 +103,7 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   assert.equal(again.request.camera_preset, 'dji_mavic2_pro');
   assert.equal(again.request.gsd_cm_px, 2);
   assert.equal(again.request.turn_penalty_s, 3);
+  assert.equal(again.request.nfz_clearance_m, 6.5);
   assert.equal(again.request.dem_id, dem.id);
   assert.deepEqual(again.request.uavs, [{ id: 'a', start: [-77.0551, 38.8089], speed_m_s: 6 }, { id: 'b', start: [-77.0526, 38.8089] }]);
 

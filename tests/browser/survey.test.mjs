@@ -53,6 +53,9 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   for (const [lon, lat] of STARTS) await clickLonLat(page, lon, lat);
   await page.keyboard.press('Escape'); // the map has focus after the clicks
   assert.equal(await page.locator('#uav-list li').count(), 3);
+  // A wider clearance from the no-fly zone than the default 5 m.
+  assert.equal(await page.inputValue('#nfz-clearance'), '5');
+  await page.fill('#nfz-clearance', '7.5');
 
   await page.click('#plan-survey');
   await page.waitForSelector('#survey-results:not([hidden])', { timeout: 60_000 });
@@ -76,6 +79,13 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   assert.match(totals, new RegExp(`Slice angle${planStats.slice_angle_deg.toFixed(1)}°`));
   assert.match(totals, new RegExp(`Lane spacing${planStats.line_spacing_m.toFixed(1)} m`));
   assert.match(totals, new RegExp(`Photo spacing${planStats.trigger_distance_m.toFixed(1)} m`));
+  // The clearance typed was planned with, and what the cells tile is shown beside the free area.
+  assert.equal(planStats.nfz_clearance_m, 7.5);
+  assert.match(totals, /NFZ clearance7\.5 m/);
+  const freeHa = Number(/Free area([\d.]+) ha/.exec(totals)[1]);
+  const flyableHa = Number(/Flyable area([\d.]+) ha/.exec(totals)[1]);
+  assert.equal(flyableHa, Number((planStats.flyable_area_m2 / 10_000).toFixed(2)));
+  assert.ok(flyableHa < freeHa, `the clearance band is left out: ${flyableHa} < ${freeHa} ha`);
   // The flight geometry shown before planning is the server's.
   const gsd = /GSD([\d.]+) cm\/px/.exec(totals)[1];
   assert.match(await page.textContent('#flight-geometry'), new RegExp(`^GSD ${gsd.replace('.', '\\.')} cm/px; each photo covers`));
@@ -298,11 +308,24 @@ test('import the area from GeoJSON and no-fly zones from KML', async () => {
   await page.locator('#survey-front-overlap-error').waitFor({ state: 'visible' });
   assert.equal(await page.textContent('#survey-front-overlap-error'), 'Front overlap (%): give a number.');
   await page.fill('#front-overlap', '80');
+  // So is an emptied clearance, and one out of range is the server's fault shown at the field.
+  await page.fill('#nfz-clearance', '');
+  await page.click('#plan-survey');
+  await page.locator('#survey-nfz-clearance-error').waitFor({ state: 'visible' });
+  assert.equal(await page.textContent('#survey-nfz-clearance-error'), 'Clearance from no-fly zones (m): give a number.');
+  assert.equal(await page.getAttribute('#nfz-clearance', 'aria-invalid'), 'true');
+  await page.fill('#nfz-clearance', '150');
+  await page.click('#plan-survey');
+  await page.waitForFunction(() => /outside the allowed range/.test(document.querySelector('#survey-nfz-clearance-error').textContent));
+  assert.equal(await page.textContent('#survey-nfz-clearance-error'), 'Clearance from no-fly zones: 150 is outside the allowed range [0, 100]');
+  await page.fill('#nfz-clearance', '5');
   // Without a DEM and without UAVs placed: one UAV at the area's first corner.
   await page.click('#plan-survey');
   await page.waitForSelector('#survey-results:not([hidden])', { timeout: 60_000 });
   assert.equal(await page.locator('#uav-table tbody tr').count(), 1);
   await screenshot(page, 'survey-imported');
-  assert.deepEqual(problems, []);
+  // The one 422 is the clearance out of range, asked for above.
+  assert.deepEqual(problems.filter((p) => !/422/.test(p)), []);
+  assert.equal(problems.length, 1);
   await context.close();
 });

@@ -98,6 +98,10 @@ export interface Uav {
 export interface SurveyStats {
   area_m2: number;
   free_area_m2: number;
+  /** The free area less the band within the clearance of the no-fly zones: what the cells tile (absent from older surveys). */
+  flyable_area_m2?: number;
+  /** The clearance kept from the no-fly zones and the inclusion fence, m (absent from older surveys). */
+  nfz_clearance_m?: number;
   altitude_m: number;
   gsd_cm_px: number;
   photos: number;

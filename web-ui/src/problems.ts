@@ -39,6 +39,7 @@ export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/line_spacing_m', field: 'side-overlap', label: 'Line spacing' },
   { prefix: '/slice_angle_deg', field: 'slice-angle', label: 'Slice angle' },
   { prefix: '/speed_m_s', field: 'speed', label: 'Speed' },
+  { prefix: '/nfz_clearance_m', field: 'nfz-clearance', label: 'Clearance from no-fly zones' },
   { prefix: '/altitude_frame', field: 'altitude-frame', label: 'Altitude frame' },
   { prefix: '/uavs/*/max_flight_time_s', field: 'battery', label: 'Battery' },
   { prefix: '/uavs', field: 'uavs', label: 'UAVs' },
@@ -122,6 +123,9 @@ const PAGE_WORDS: [RegExp, string][] = [
   [/\baltitude_m\b/g, 'altitude'],
   [/\bgsd_cm_px\b/g, 'GSD'],
   [/\bspeed_m_s\b/g, 'speed'],
+  // "the 5 m kept from them (nfz_clearance_m)" says it once in words already.
+  [/ \(nfz_clearance_m\)/g, ''],
+  [/\bnfz_clearance_m\b/g, 'the clearance from no-fly zones'],
   [/\bslice_angle_deg\b/g, 'slice angle'],
   [/\bresolution_m\b/g, 'cell size'],
   [/\bfront_overlap\b/g, 'front overlap'],

@@ -45,6 +45,8 @@ export interface SurveyFormValues {
   /** "auto" or degrees in [0, 180). */
   sliceAngle: string;
   speedMS: number;
+  /** Distance kept by everything flown from every no-fly zone and from the inclusion fence, m, in [0, 100]. */
+  nfzClearanceM: number;
   altitudeFrame: 'relative' | 'amsl' | 'terrain';
   assignment: 'balanced' | 'competition' | 'min_reach';
   /** Flight time on one battery, minutes, for every UAV (NaN: unlimited, or each UAV's own from a reopened survey). */
@@ -82,6 +84,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     ['front-overlap', 'Front overlap (%)', v.frontOverlapPct, 'front-overlap'],
     ['side-overlap', 'Side overlap (%)', v.sideOverlapPct, 'side-overlap'],
     ['speed', 'Speed (m/s)', v.speedMS, 'speed'],
+    ['nfz-clearance', 'Clearance from no-fly zones (m)', v.nfzClearanceM, 'nfz-clearance'],
   ];
   if (v.camera === 'custom') {
     const c = v.customCamera;
@@ -110,6 +113,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     side_overlap: round(v.sideOverlapPct / 100, 4),
     slice_angle_deg: slice === 'auto' || slice === '' ? 'auto' : Number(slice),
     speed_m_s: v.speedMS,
+    nfz_clearance_m: v.nfzClearanceM,
     altitude_frame: v.altitudeFrame,
     assignment: v.assignment,
   };
@@ -122,9 +126,11 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     body.dem_id = v.demId;
     if (v.allowPartialDem) body.allow_partial_dem = true;
   }
-  // No UAVs placed: the server puts one at the ROI's first vertex; with a
-  // battery limit that UAV is spelled out here, as the limit is per UAV.
-  const uavs: UavStart[] = v.uavs.length > 0 || battery === null ? v.uavs : [{ id: 'uav1', start: v.roi![0][0] }];
+  // No UAVs placed: the server puts one at the ROI's first corner clear of the
+  // NFZs; with a battery limit that UAV is spelled out here (the limit is per
+  // UAV), at the point the server would choose.
+  const uavs: UavStart[] =
+    v.uavs.length > 0 || battery === null ? v.uavs : [{ id: 'uav1', start: defaultStart(v.roi!, v.noFlyZones, v.nfzClearanceM) }];
   if (uavs.length > 0) {
     body.uavs = uavs.map((u) => {
       const uav: Record<string, unknown> = { id: u.id, start: u.start };
@@ -136,6 +142,68 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   }
   if (v.rallyPoints.length > 0) body.rally_points = v.rallyPoints.map((p) => [p[0], p[1]]);
   return { body, errors };
+}
+
+/**
+ * Where the server takes off with the one UAV of a survey given none
+ * (planner-core survey/homes.rs): the area's first corner at least the
+ * clearance from every no-fly zone, else the clear point of the area's
+ * outline nearest that corner (sampled every metre), else the first corner
+ * (the server then says why). Distances are measured in a flat frame at the
+ * first corner: within a few centimetres of the server's UTM ones over such
+ * distances, and a start that close to the clearance is still accepted.
+ */
+export function defaultStart(roi: PolygonRings, noFlyZones: PolygonRings[], clearanceM: number): LonLat {
+  const origin = roi[0][0];
+  const mPerDegLat = (Math.PI / 180) * 6_371_008.8;
+  const mPerDegLon = mPerDegLat * Math.cos((origin[1] * Math.PI) / 180);
+  const flat = (p: number[]): [number, number] => [(p[0] - origin[0]) * mPerDegLon, (p[1] - origin[1]) * mPerDegLat];
+  const zones = noFlyZones.map((rings) => rings.map((ring) => ring.map(flat)));
+  const clear = (p: [number, number]) => zones.every((rings) => !insideRings(p, rings) && rings.every((ring) => ringDistance(p, ring) >= clearanceM));
+
+  const exterior = roi[0];
+  const closed = exterior.length > 1 && exterior[0][0] === exterior[exterior.length - 1][0] && exterior[0][1] === exterior[exterior.length - 1][1];
+  const corner = exterior.slice(0, closed ? -1 : undefined).find((p) => clear(flat(p)));
+  if (corner) return [corner[0], corner[1]];
+
+  let best: { p: [number, number]; d: number } | null = null;
+  for (const ring of roi.map((r) => r.map(flat))) {
+    for (let i = 0; i + 1 < ring.length; i++) {
+      const [a, b] = [ring[i], ring[i + 1]];
+      const steps = Math.max(1, Math.ceil(Math.hypot(b[0] - a[0], b[1] - a[1])));
+      for (let k = 0; k <= steps; k++) {
+        const p: [number, number] = [a[0] + ((b[0] - a[0]) * k) / steps, a[1] + ((b[1] - a[1]) * k) / steps];
+        const d = Math.hypot(p[0], p[1]);
+        if ((!best || d < best.d) && clear(p)) best = { p, d };
+      }
+    }
+  }
+  return best ? [origin[0] + best.p[0] / mPerDegLon, origin[1] + best.p[1] / mPerDegLat] : [origin[0], origin[1]];
+}
+
+/** Inside a polygon given by its rings (even-odd: a point in a hole is outside). */
+function insideRings(p: [number, number], rings: [number, number][][]): boolean {
+  let inside = false;
+  for (const ring of rings) {
+    for (let i = 0, j = ring.length - 1; i < ring.length; j = i++) {
+      const [a, b] = [ring[i], ring[j]];
+      if (a[1] > p[1] !== b[1] > p[1] && p[0] < ((b[0] - a[0]) * (p[1] - a[1])) / (b[1] - a[1]) + a[0]) inside = !inside;
+    }
+  }
+  return inside;
+}
+
+/** Distance from a point to a ring's edges (closing edge included). */
+function ringDistance(p: [number, number], ring: [number, number][]): number {
+  let best = Infinity;
+  for (let i = 0, j = ring.length - 1; i < ring.length; j = i++) {
+    const [a, b] = [ring[j], ring[i]];
+    const [dx, dy] = [b[0] - a[0], b[1] - a[1]];
+    const len2 = dx * dx + dy * dy;
+    const t = len2 > 0 ? Math.min(1, Math.max(0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2)) : 0;
+    best = Math.min(best, Math.hypot(p[0] - a[0] - t * dx, p[1] - a[1] - t * dy));
+  }
+  return best;
 }
 
 /** What a camera at a height gives on the ground (as the server computes it, coverage/camera.rs). */
@@ -206,6 +274,7 @@ export const FORM_DEFAULTS = {
   sideOverlapPct: 70,
   sliceAngle: 'auto',
   speedMS: 10,
+  nfzClearanceM: 5,
   altitudeFrame: 'relative',
   assignment: 'balanced',
 } as const satisfies Partial<SurveyFormValues>;
@@ -213,7 +282,7 @@ export const FORM_DEFAULTS = {
 /** Request members the form has controls for (the rest are kept as `extra`). */
 const FORM_MEMBERS = new Set([
   'name', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
-  'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
+  'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'nfz_clearance_m', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
 ]);
 
 export interface RestoredForm {
@@ -287,6 +356,7 @@ export function formFromRequest(
       sideOverlapPct: pct(r.side_overlap, d.sideOverlapPct),
       sliceAngle: typeof r.slice_angle_deg === 'number' ? String(r.slice_angle_deg) : d.sliceAngle,
       speedMS: num(r.speed_m_s, d.speedMS),
+      nfzClearanceM: num(r.nfz_clearance_m, d.nfzClearanceM),
       altitudeFrame: oneOf(r.altitude_frame, ['relative', 'amsl', 'terrain'] as const, d.altitudeFrame),
       assignment: oneOf(r.assignment, ['balanced', 'competition', 'min_reach'] as const, d.assignment),
       batteryMin: shared != null ? round(shared / 60, 3) : NaN,

@@ -315,6 +315,7 @@ export class SurveyPanel {
       sideOverlapPct: numberValue('side-overlap'),
       sliceAngle: val('slice-angle'),
       speedMS: numberValue('speed'),
+      nfzClearanceM: numberValue('nfz-clearance'),
       altitudeFrame: val('altitude-frame') as SurveyFormValues['altitudeFrame'],
       assignment: val('assignment') as SurveyFormValues['assignment'],
       batteryMin: numberValue('battery'),
@@ -400,6 +401,7 @@ export class SurveyPanel {
       setValue('side-overlap', v.sideOverlapPct);
       setValue('slice-angle', v.sliceAngle);
       setValue('speed', v.speedMS);
+      setValue('nfz-clearance', v.nfzClearanceM);
       setValue('altitude-frame', v.altitudeFrame);
       setValue('assignment', v.assignment);
       setValue('battery', Number.isFinite(v.batteryMin) ? v.batteryMin : '');
@@ -459,6 +461,12 @@ export class SurveyPanel {
       ['Lane spacing', formatNumber(s.line_spacing_m, 1, 'm')],
       ['Photo spacing', formatNumber(s.trigger_distance_m, 1, 'm')],
     ];
+    // What the cells tile and the clearance kept, after the free area; surveys saved before
+    // the clearance applied to lanes have neither, so they are shown only when given.
+    const clearance: [string, string][] = [];
+    if (s.flyable_area_m2 != null) clearance.push(['Flyable area', formatArea(s.flyable_area_m2)]);
+    if (s.nfz_clearance_m != null) clearance.push(['NFZ clearance', formatNumber(s.nfz_clearance_m, 1, 'm')]);
+    totals.splice(2, 0, ...clearance);
     byId('survey-totals').replaceChildren(...totals.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
     byId('survey-warnings').replaceChildren(...survey.warnings.map((w) => h('li', {}, w)));
 

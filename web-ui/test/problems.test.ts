@@ -48,6 +48,31 @@ describe('problemToMessages', () => {
     expect(messages[0].text).toBe('Start: the start (lon -77.05, lat 38.81) is on an obstacle (a step)');
   });
 
+  it('shows clearance faults at the clearance field, in the page’s words', () => {
+    expect(ruleFor('/nfz_clearance_m', SURVEY_FIELDS)?.field).toBe('nfz-clearance');
+    const messages = problemToMessages(
+      {
+        status: 422,
+        detail: 'x',
+        errors: [
+          { pointer: '/nfz_clearance_m', message: '150 is outside the allowed range [0, 100]' },
+          {
+            pointer: '/nfz_clearance_m',
+            message: 'the no-fly zones and the 40 m kept from them (nfz_clearance_m) leave nothing of the region of interest to fly over: lower nfz_clearance_m',
+          },
+        ],
+      },
+      SURVEY_FIELDS,
+    );
+    expect(messages).toEqual([
+      { field: 'nfz-clearance', text: 'Clearance from no-fly zones: 150 is outside the allowed range [0, 100]' },
+      {
+        field: 'nfz-clearance',
+        text: 'Clearance from no-fly zones: the no-fly zones and the 40 m kept from them leave nothing of the region of interest to fly over: lower the clearance from no-fly zones',
+      },
+    ]);
+  });
+
   it('sends a battery fault to the battery and unknown pointers to the form', () => {
     const messages = problemToMessages(
       { status: 422, detail: 'x', errors: [{ pointer: '/uavs/1/max_flight_time_s', message: 'too short' }, { pointer: '/weird', message: 'unknown field' }] },

@@ -2,6 +2,7 @@ import { describe, expect, it } from 'vitest';
 import {
   buildSurveyRequest,
   cameraSummary,
+  defaultStart,
   describeExtra,
   describeFlightGeometry,
   flightGeometry,
@@ -32,6 +33,7 @@ function values(over: Partial<SurveyFormValues> = {}): SurveyFormValues {
     sideOverlapPct: 70,
     sliceAngle: 'auto',
     speedMS: 10,
+    nfzClearanceM: 5,
     altitudeFrame: 'relative',
     assignment: 'balanced',
     batteryMin: NaN,
@@ -54,6 +56,7 @@ describe('buildSurveyRequest', () => {
       side_overlap: 0.7,
       slice_angle_deg: 'auto',
       speed_m_s: 10,
+      nfz_clearance_m: 5,
       altitude_frame: 'relative',
       assignment: 'balanced',
       altitude_m: 60,
@@ -88,6 +91,12 @@ describe('buildSurveyRequest', () => {
     expect(body).not.toHaveProperty('camera_preset');
   });
 
+  it('sends the clearance from no-fly zones as typed, the default 5 m like the other defaulted settings', () => {
+    expect(buildSurveyRequest(values({ nfzClearanceM: 12.5 })).body).toMatchObject({ nfz_clearance_m: 12.5 });
+    expect(buildSurveyRequest(values({ nfzClearanceM: 0 })).body).toMatchObject({ nfz_clearance_m: 0 });
+    expect(buildSurveyRequest(values()).body).toMatchObject({ nfz_clearance_m: 5 });
+  });
+
   it('sends rally points as [lon, lat] pairs, and none when there are none', () => {
     const { body, errors } = buildSurveyRequest(values({ rallyPoints: [[5.0101, 52.0005], [4.999, 52.004]] }));
     expect(errors).toEqual([]);
@@ -96,12 +105,13 @@ describe('buildSurveyRequest', () => {
   });
 
   it('refuses empty number fields instead of sending 0', () => {
-    const { body, errors } = buildSurveyRequest(values({ frontOverlapPct: NaN, speedMS: NaN, altitudeM: NaN }));
+    const { body, errors } = buildSurveyRequest(values({ frontOverlapPct: NaN, speedMS: NaN, altitudeM: NaN, nfzClearanceM: NaN }));
     expect(body).toBeNull();
     expect(errors).toEqual([
       { field: 'altitude', text: 'Altitude (m): give a number.', control: 'altitude' },
       { field: 'front-overlap', text: 'Front overlap (%): give a number.', control: 'front-overlap' },
       { field: 'speed', text: 'Speed (m/s): give a number.', control: 'speed' },
+      { field: 'nfz-clearance', text: 'Clearance from no-fly zones (m): give a number.', control: 'nfz-clearance' },
     ]);
     // The altitude is not needed when the GSD sets the height; the custom camera's numbers are when it is used.
     expect(buildSurveyRequest(values({ heightMode: 'gsd', altitudeM: NaN })).errors).toEqual([]);
@@ -137,6 +147,13 @@ describe('battery', () => {
     expect(buildSurveyRequest(values()).body).not.toHaveProperty('uavs');
   });
 
+  it('gives that UAV the corner the server would take off from when the first one is in or near a no-fly zone', () => {
+    const overCorner: [number, number][][] = [[[4.999, 51.999], [5.001, 51.999], [5.001, 52.001], [4.999, 52.001], [4.999, 51.999]]];
+    const { body, errors } = buildSurveyRequest(values({ batteryMin: 1, noFlyZones: [overCorner] }));
+    expect(errors).toEqual([]);
+    expect(body!.uavs).toEqual([{ id: 'uav1', start: [5.006, 52], max_flight_time_s: 60 }]);
+  });
+
   it('keeps each UAV’s own battery when the field is empty', () => {
     const { body } = buildSurveyRequest(values({ uavs: [{ id: 'a', start: [5, 52], max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }] }));
     expect(body!.uavs).toEqual([{ id: 'a', start: [5, 52], max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }]);
@@ -165,6 +182,39 @@ describe('battery', () => {
     expect(Number.isNaN(v.batteryMin)).toBe(true);
     expect(notes).toEqual([expect.stringMatching(/different batteries/)]);
     expect(buildSurveyRequest(v).body!.uavs).toEqual(uavs);
+  });
+});
+
+describe('defaultStart', () => {
+  // At lat 52°, 1 m east is 1 / (6371008.8 × π/180 × cos 52°) = 1.4607e-5° of longitude.
+  const degPerMEast = 1 / ((Math.PI / 180) * 6_371_008.8 * Math.cos((52 * Math.PI) / 180));
+  const box = (w: number, s: number, e: number, n: number): [number, number][][] => [[[w, s], [e, s], [e, n], [w, n], [w, s]]];
+
+  it('takes the first corner when no zone is within the clearance', () => {
+    expect(defaultStart(square, [], 5)).toEqual([5, 52]);
+    expect(defaultStart(square, [box(5.002, 52.001, 5.003, 52.002)], 5)).toEqual([5, 52]);
+  });
+
+  it('skips a corner closer than the clearance, and only then', () => {
+    // A zone 3 m west of the first corner (its east edge at lon 5 − 3 m).
+    const near = box(4.999, 51.9995, 5 - 3 * degPerMEast, 52.0005);
+    expect(defaultStart(square, [near], 5)).toEqual([5.006, 52]);
+    expect(defaultStart(square, [near], 2.9)).toEqual([5, 52]);
+    // A point in a zone's hole is outside the zone.
+    const holed = [box(4.99, 51.99, 5.01, 52.01)[0], box(4.999, 51.999, 5.001, 52.001)[0]];
+    expect(defaultStart(square, [holed], 5)).toEqual([5, 52]);
+  });
+
+  it('falls back to the nearest clear point of the outline, else the first corner', () => {
+    // One zone over the whole area but for a hole reaching over the south edge from lon 5.002 to 5.004.
+    const zone = [box(4.99, 51.99, 5.01, 52.01)[0], box(5.002, 51.999, 5.004, 52.001)[0]];
+    const [lon, lat] = defaultStart(square, [zone], 5);
+    expect(lat).toBeCloseTo(52, 9);
+    // 5 m inside the hole's west edge, within the 1-m sampling.
+    const east = (lon - 5.002) / degPerMEast;
+    expect(east).toBeGreaterThanOrEqual(5);
+    expect(east).toBeLessThan(6);
+    expect(defaultStart(square, [box(4.99, 51.99, 5.01, 52.01)], 5)).toEqual([5, 52]);
   });
 });
 
@@ -238,6 +288,7 @@ describe('formFromRequest', () => {
       side_overlap: 0.65,
       slice_angle_deg: 30,
       speed_m_s: 8,
+      nfz_clearance_m: 12.5,
       altitude_frame: 'terrain',
       assignment: 'competition',
       uavs: [{ id: 'a', start: [5, 52], speed_m_s: 6, max_flight_time_s: 900 }, { id: 'b', start: [5.006, 52] }],
@@ -257,6 +308,7 @@ describe('formFromRequest', () => {
       frontOverlapPct: 75,
       sideOverlapPct: 65,
       sliceAngle: '30',
+      nfzClearanceM: 12.5,
       altitudeFrame: 'terrain',
       rallyPoints: [[5.01, 52.001]],
       extra: { turn_penalty_s: 3 },
