@@ -1,5 +1,6 @@
 //! The whole survey pipeline on random fields with random no-fly zones:
-//! no flown segment enters an NFZ, survey lanes stay in the ROI, every
+//! no flown segment enters an NFZ or comes closer than the clearance to
+//! one (away from home), survey lanes stay in the ROI, every
 //! cell with lanes is flown exactly once, cells tile the free space, and
 //! the mission's waypoints are the tour's points.
 
@@ -91,6 +92,8 @@ proptest! {
             Err(planner_core::survey::PlanError::Invalid(issues)) => {
                 prop_assert!(issues.iter().any(|i| i.message.contains("cover the whole")
                     || i.message.contains("inside a no-fly zone")
+                    || i.message.contains("hemmed in")
+                    || i.message.contains("leave nothing")
                     || i.message.contains("within its battery")), "{issues:?}");
                 return Ok(());
             }
@@ -101,14 +104,19 @@ proptest! {
         let zones_utm: Vec<Polygon<f64>> = zones.iter().map(|z| proj.polygon_to_utm(z).unwrap()).collect();
         let roi_utm = proj.polygon_to_utm(&req.roi[0].polygon).unwrap();
 
+        let clearance = req.params.nfz_clearance_m;
+        prop_assert_eq!(clearance, 5.0, "the default clearance");
         prop_assert_eq!(plan.uavs.len(), starts.len());
         let mut pieces: Vec<Vec<(usize, f64, f64)>> = vec![Vec::new(); plan.cells.len()];
         let mut flown_lanes = 0.0;
         for uav in &plan.uavs {
             prop_assert!(!uav.sorties.is_empty());
             for sortie in &uav.sorties {
-                // The flown polyline, sampled every metre, never goes deep into an NFZ.
-                let mut pts = vec![utm(Coord { x: uav.start[0], y: uav.start[1] })];
+                // The flown polyline, sampled every metre, never goes deep
+                // into an NFZ, and keeps the clearance from every NFZ once
+                // away from home (take-off and landing are vertical there).
+                let home = utm(Coord { x: uav.start[0], y: uav.start[1] });
+                let mut pts = vec![home];
                 pts.extend(sortie.mission.waypoints().map(|w| utm(Coord { x: w.lon, y: w.lat })));
                 pts.push(pts[0]);
                 for w in pts.windows(2) {
@@ -119,6 +127,13 @@ proptest! {
                         let p = Coord { x: w[0].x + t * (w[1].x - w[0].x), y: w[0].y + t * (w[1].y - w[0].y) };
                         for z in &zones_utm {
                             prop_assert!(!deep_inside(z, p), "flown point {p:?} inside an NFZ");
+                        }
+                        if (p.x - home.x).hypot(p.y - home.y) > clearance {
+                            for z in &zones_utm {
+                                let d = Euclidean.distance(&Point(p), z);
+                                prop_assert!(d >= clearance - 0.01,
+                                    "flown point {p:?} {d:.3} m from an NFZ, clearance {clearance} m");
+                            }
                         }
                     }
                 }
@@ -172,8 +187,16 @@ proptest! {
         // The camera-on length flown equals the cells' lanes.
         let planned: f64 = plan.cells.iter().map(|c| c.lane_length_m).sum();
         prop_assert!((flown_lanes - planned).abs() <= 1e-3 * planned, "{flown_lanes} vs {planned}");
+        // The cells tile the flyable space: the free space less the
+        // clearance band, so between the two.
         let cell_area: f64 = plan.cells.iter().map(|c| c.area_m2).sum();
-        prop_assert!((cell_area - plan.stats.free_area_m2).abs() <= 1e-6 * plan.stats.free_area_m2);
+        let flyable = plan.stats.flyable_area_m2;
+        prop_assert!((cell_area - flyable).abs() <= 1e-6 * flyable, "{cell_area} vs {flyable}");
+        prop_assert!(flyable <= plan.stats.free_area_m2 * (1.0 + 1e-9));
         prop_assert!(plan.stats.coverage_ratio > 0.97, "coverage {}", plan.stats.coverage_ratio);
+        // Below 99.5 % the plan says how much is left out.
+        if plan.stats.coverage_ratio < 0.995 {
+            prop_assert!(plan.warnings.iter().any(|w| w.contains("are left out")), "{:?}", plan.warnings);
+        }
     }
 }

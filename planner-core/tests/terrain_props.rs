@@ -5,7 +5,8 @@
 //! between waypoints of a leg; the mission's waypoints are the legs' points
 //! in the requested frame.
 
-use geo_types::{Coord, LineString, Polygon};
+use geo::{Distance, Euclidean};
+use geo_types::{Coord, Line, LineString, Polygon};
 use planner_core::export::{AltitudeFrame, MissionItem};
 use planner_core::geo::{Limits, ParsedPolygon, UtmProjection};
 use planner_core::survey::{
@@ -226,5 +227,20 @@ proptest! {
             prop_assert!((z - p[2]).abs() < 1e-6, "waypoint height {z} vs leg {}", p[2]);
         }
         prop_assert!(narrow || plan.stats.coverage_ratio > 0.97);
+        // Horizontally, every leg keeps the NFZ clearance (the start lies
+        // outside the ROI, far from the NFZ).
+        if let Some(zone) = req.no_fly.first() {
+            let zone = proj.polygon_to_utm(&zone.polygon).unwrap();
+            let keep = plan.stats.nfz_clearance_m;
+            prop_assert_eq!(keep, 5.0);
+            for leg in &t.legs {
+                for w in leg.points.windows(2) {
+                    let (a, b) = (utm(&w[0]), utm(&w[1]));
+                    let line = Line::new(Coord { x: a.0, y: a.1 }, Coord { x: b.0, y: b.1 });
+                    let d = Euclidean.distance(&line, &zone);
+                    prop_assert!(d >= keep - 0.01, "{:?} leg {d:.3} m from the NFZ", leg.kind);
+                }
+            }
+        }
     }
 }

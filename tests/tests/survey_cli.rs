@@ -87,7 +87,8 @@ fn example_field_with_nfz_inside_and_across_border() {
             stats["cell_count"].as_u64().unwrap() >= 2,
             "an NFZ inside the field splits it"
         );
-        // Cells' union equals the free area within 1e-6 relative.
+        // Cells' union equals the flyable area (the free area less the band
+        // within the clearance of the NFZs) within 1e-6 relative.
         let cell_area: f64 = plan["cells"]
             .as_array()
             .unwrap()
@@ -95,10 +96,16 @@ fn example_field_with_nfz_inside_and_across_border() {
             .map(|c| c["area_m2"].as_f64().unwrap())
             .sum();
         let free = stats["free_area_m2"].as_f64().unwrap();
+        let flyable = stats["flyable_area_m2"].as_f64().unwrap();
         assert!(
-            (cell_area - free).abs() <= 1e-6 * free,
-            "cells {cell_area} vs free {free}"
+            (cell_area - flyable).abs() <= 1e-6 * flyable,
+            "cells {cell_area} vs flyable {flyable}"
         );
+        assert!(flyable < free, "flyable {flyable} vs free {free}");
+        // Every flown segment kept the 5 m clearance (checked by
+        // check_survey.py, which also reports the least distance).
+        let least = summary["min_nfz_distance_m"].as_f64().unwrap();
+        assert!((4.99..6.0).contains(&least), "least NFZ distance {least}");
         // Every cell is flown once.
         let mut flown: Vec<u64> = plan["uavs"][0]["cells"]
             .as_array()
@@ -249,6 +256,52 @@ fn netherlands_field_default_params() {
     assert!((start[0].as_f64().unwrap() - 6.062131843297665).abs() < 1e-12);
 }
 
+/// Defaults that never fail: an empty NFZ collection is no NFZ, and with no
+/// UAV given the start skips ROI vertices within the clearance of an NFZ.
+#[test]
+fn defaults_with_an_empty_nfz_file_and_an_nfz_on_the_first_vertex() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test.json");
+    let empty = write(
+        dir.path(),
+        "empty.geojson",
+        &json!({"type": "FeatureCollection", "features": []}),
+    );
+    let (plan, summary) = plan_and_validate(&roi, &[&empty], &json!({}), dir.path());
+    assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
+    assert_eq!(plan["stats"]["flyable_area_m2"], plan["stats"]["free_area_m2"]);
+    let first = [6.062131843297665, 51.51238564279176];
+    assert_eq!(plan["uavs"][0]["start"], json!(first));
+
+    // An NFZ over the first vertex (and 3 m round it): the UAV takes off
+    // at the next vertex that is 5 m clear, and the plan says where.
+    let nfz = write(
+        dir.path(),
+        "corner.geojson",
+        &rect(
+            first[0] - 0.0002,
+            first[1] - 0.0002,
+            first[0] + 0.00005,
+            first[1] + 0.00005,
+        ),
+    );
+    let (plan, summary) = plan_and_validate(&roi, &[&nfz], &json!({}), dir.path());
+    assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.99);
+    let start = plan["uavs"][0]["start"].clone();
+    assert_ne!(start, json!(first));
+    let warned = plan["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().contains("takes off at the ROI's vertex"));
+    assert!(warned, "{}", plan["warnings"]);
+    // The start is a vertex of the ROI, 5 m or more from the NFZ (the
+    // validator checked the clearance of the whole flight).
+    let ring = std::fs::read_to_string(&roi).unwrap();
+    let lon = start[0].as_f64().unwrap();
+    assert!(ring.contains(&format!("{lon}")), "{start} is not a vertex");
+}
+
 /// Each bad input exits with status 2 and a message naming the fault.
 #[test]
 fn bad_input_names_its_fault() {
@@ -324,6 +377,20 @@ fn bad_input_names_its_fault() {
             None,
             json!({}),
             "too large",
+        ),
+        (
+            "start inside an NFZ",
+            rect(5.0, 52.0, 5.005, 52.003),
+            Some(rect(5.001, 52.001, 5.002, 52.002)),
+            json!({"uavs": [{"id": "mapper", "start": [5.0012, 52.0015]}]}),
+            "UAV mapper's start position is inside a no-fly zone, 13.",
+        ),
+        (
+            "clearance swallowing the field",
+            rect(5.0, 52.0, 5.001, 52.0005),
+            Some(rect(5.0005, 51.99, 5.0006, 52.01)),
+            json!({"nfz_clearance_m": 40}),
+            "leave nothing of the region of interest to fly over",
         ),
         (
             "UAV id twice",

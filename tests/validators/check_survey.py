@@ -3,7 +3,8 @@
 Written against pymavlink, shapely and pyproj only (none of terraplan's
 code): loads every UAV's .waypoints with pymavlink's MAVWPLoader, compares
 item counts and positions with plan.json, and checks in UTM metres that no
-flown point or segment enters a no-fly zone, that survey lanes stay in the
+flown point or segment enters a no-fly zone or, away from home, comes closer
+than the plan's nfz_clearance_m to one or to the inclusion fence, that survey lanes stay in the
 ROI, and that the lanes' footprints cover the free area.
 
 usage: check_survey.py OUT_DIR ROI.geojson [NFZ.geojson ...]
@@ -19,6 +20,9 @@ from pyproj import Transformer
 from shapely.geometry import LineString, Point, shape
 import shapely
 from shapely.ops import unary_union
+
+sys.path.insert(0, str(Path(__file__).parent))
+from clearance import check as clearance_check, inclusion_rings  # noqa: E402
 
 CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
 CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
@@ -55,12 +59,14 @@ def main():
         return shapely.transform(g, fwd, interleaved=False)
 
     roi = project(roi_ll)
-    nfz = project(nfz_ll) if nfz_ll is not None else None
+    # An empty NFZ collection is no NFZ.
+    nfz = project(nfz_ll) if nfz_ll is not None and not nfz_ll.is_empty else None
     free = roi.difference(nfz) if nfz is not None else roi
     nfz_core = nfz.buffer(-GEOM_TOL_M) if nfz is not None else None
     roi_grown = roi.buffer(GEOM_TOL_M)
 
-    summary = {"uavs": {}}
+    clearance = plan["stats"].get("nfz_clearance_m", 0.0)
+    summary = {"uavs": {}, "nfz_clearance_m": clearance}
     lanes = []
     lane_cells = []
     flights = [(uav, sortie) for uav in plan["uavs"] for sortie in uav["sorties"]]
@@ -90,6 +96,14 @@ def main():
 
         # The flown polyline: home, waypoints, home.
         pts = [fwd(home.y, home.x)] + [fwd(w.y, w.x) for w in got_wps] + [fwd(home.y, home.x)]
+        # Away from home, every flown segment keeps the clearance from
+        # every NFZ and stays that far inside the inclusion fence.
+        try:
+            d_nfz, _ = clearance_check(clearance, pts, nfz, inclusion_rings(out / f"{uid}.plan", fwd), wp_path)
+        except ValueError as e:
+            fail(str(e))
+        if d_nfz is not None:
+            summary["min_nfz_distance_m"] = min(summary.get("min_nfz_distance_m", d_nfz), d_nfz)
         if nfz_core is not None:
             for p in pts:
                 if nfz_core.contains(Point(p)):

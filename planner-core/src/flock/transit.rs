@@ -31,7 +31,7 @@ use std::fmt;
 use geo::kernels::{Kernel, Orientation, RobustKernel};
 use geo_types::{Coord, LineString, MultiPolygon};
 use rstar::primitives::GeomWithData;
-use rstar::{AABB, RTree, RTreeObject, SelectionFunction};
+use rstar::{AABB, PointDistance, RTree, RTreeObject, SelectionFunction};
 
 /// Geometric tolerance in metres. Lane ends computed on an NFZ border may be
 /// off it by rounding noise; a point closer than this to an obstacle boundary
@@ -100,6 +100,18 @@ impl RTreeObject for Edge {
     }
 }
 
+/// Nearest-edge queries (the exit of an endpoint inside an obstacle).
+impl PointDistance for Edge {
+    fn distance_2(&self, point: &[f64; 2]) -> f64 {
+        let c = Coord {
+            x: point[0],
+            y: point[1],
+        };
+        let d = closest_on_segment(c, self.p, self.q) - c;
+        d.x * d.x + d.y * d.y
+    }
+}
+
 /// Bounding box of one obstacle polygon, for point-in-obstacle queries.
 #[derive(Clone, Debug)]
 struct ObstacleBox {
@@ -155,6 +167,10 @@ pub struct ObstacleMap {
     /// narrower than the clearance); `None` without clearance.
     bare: Option<Graph>,
     clearance_m: f64,
+    /// Points inside an obstacle from which transits may start or end, each
+    /// with its exit: the nearest point outside (see
+    /// [`ObstacleMap::allow_endpoint`]).
+    exits: Vec<(Coord<f64>, Coord<f64>)>,
     /// Closed nodes after which a search pauses to probe from the goal
     /// ([`PROBE_CLOSED`]; tests lower it to exercise every branch).
     probe_closed: usize,
@@ -234,6 +250,7 @@ impl ObstacleMap {
             graph: Graph::new(Vec::new()),
             bare: None,
             clearance_m,
+            exits: Vec::new(),
             probe_closed: PROBE_CLOSED,
         };
 
@@ -325,6 +342,20 @@ impl ObstacleMap {
             if !is_finite(p) {
                 return Err(TransitError::NonFinite { endpoint });
             }
+        }
+        let exit_a = self.exit_of(a);
+        let exit_b = self.exit_of(b);
+        if exit_a.is_some() || exit_b.is_some() {
+            // Straight out of the obstacle to the exit, the transit between
+            // the exits, straight in again.
+            let (ea, eb) = (exit_a.unwrap_or(a), exit_b.unwrap_or(b));
+            let mut path = vec![a];
+            path.extend(self.shortest_path(ea, eb)?);
+            path.push(b);
+            path.dedup();
+            return Ok(path);
+        }
+        for (endpoint, p) in [(Endpoint::Start, a), (Endpoint::End, b)] {
             if self.contains_point(p) {
                 return Err(TransitError::InsideObstacle { endpoint, point: p });
             }
@@ -335,6 +366,46 @@ impl ObstacleMap {
         self.find(&self.graph, a, b)
             .or_else(|| self.find(self.bare.as_ref()?, a, b))
             .ok_or(TransitError::NoPath { from: a, to: b })
+    }
+
+    /// Let transits start or end at `p` although it lies inside an obstacle
+    /// (a take-off point within the clearance band of an NFZ, where the
+    /// vehicle climbs and lands vertically): they leave it straight to the
+    /// nearest point outside every obstacle, which is returned. `None` when
+    /// `p` is not inside an obstacle (nothing to do) or is not finite.
+    pub fn allow_endpoint(&mut self, p: Coord<f64>) -> Option<Coord<f64>> {
+        if !is_finite(p) || !self.contains_point(p) {
+            return None;
+        }
+        let exit = self.nearest_outside(p)?;
+        self.exits.push((p, exit));
+        Some(exit)
+    }
+
+    /// The exit recorded for `p` by [`ObstacleMap::allow_endpoint`].
+    fn exit_of(&self, p: Coord<f64>) -> Option<Coord<f64>> {
+        self.exits.iter().find(|(q, _)| *q == p).map(|&(_, e)| e)
+    }
+
+    /// The nearest point outside every obstacle to `p`, which is inside one:
+    /// the nearest boundary point, nudged a centimetre outward so that it is
+    /// clear of the boundary tolerance. Boundary points inside another
+    /// obstacle (shared edges of touching obstacles) are skipped.
+    fn nearest_outside(&self, p: Coord<f64>) -> Option<Coord<f64>> {
+        const NUDGE: f64 = 0.01;
+        self.edge_tree
+            .nearest_neighbor_iter_with_distance_2(&[p.x, p.y])
+            .take(256)
+            .find_map(|(edge, _)| {
+                let q = closest_on_segment(p, edge.p, edge.q);
+                let d = q - p;
+                let len = d.x.hypot(d.y);
+                if len <= 0.0 {
+                    return None;
+                }
+                let out = q + d * (NUDGE / len);
+                (!self.contains_point(out)).then_some(out)
+            })
     }
 
     /// Length of [`ObstacleMap::shortest_path`].
@@ -872,15 +943,19 @@ fn is_finite(c: Coord<f64>) -> bool {
     c.x.is_finite() && c.y.is_finite()
 }
 
-fn point_segment_distance(c: Coord<f64>, a: Coord<f64>, b: Coord<f64>) -> f64 {
+/// The point of segment `a`–`b` nearest to `c`.
+fn closest_on_segment(c: Coord<f64>, a: Coord<f64>, b: Coord<f64>) -> Coord<f64> {
     let d = b - a;
     let len2 = d.x * d.x + d.y * d.y;
-    let t = if len2 > 0.0 {
-        (((c - a).x * d.x + (c - a).y * d.y) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    dist(c, a + d * t)
+    if len2 <= 0.0 {
+        return a;
+    }
+    let t = (((c.x - a.x) * d.x + (c.y - a.y) * d.y) / len2).clamp(0.0, 1.0);
+    a + d * t
+}
+
+fn point_segment_distance(c: Coord<f64>, a: Coord<f64>, b: Coord<f64>) -> f64 {
+    dist(c, closest_on_segment(c, a, b))
 }
 
 /// Unit vector pointing out of the obstacle at convex corner `c` (interior
@@ -1089,6 +1164,43 @@ mod tests {
             })
         );
         assert!(!map.is_clear(outside, nan));
+    }
+
+    #[test]
+    fn allowed_endpoint_inside_leaves_straight_by_the_nearest_exit() {
+        // The keep-out band of an NFZ: 10 × 10 m, home 1 m inside its west
+        // edge, goal east of it.
+        let mut map = ObstacleMap::new(&MultiPolygon(vec![rect(0.0, 0.0, 10.0, 10.0)]), 0.0);
+        let home = coord! { x: 1.0, y: 4.0 };
+        let goal = coord! { x: 20.0, y: 4.0 };
+        assert_eq!(map.allow_endpoint(goal), None, "outside: nothing to do");
+        let exit = map.allow_endpoint(home).expect("an exit");
+        assert!(
+            (exit.x - -0.01).abs() < 1e-9 && (exit.y - 4.0).abs() < 1e-9,
+            "{exit:?}"
+        );
+        for (a, b) in [(home, goal), (goal, home)] {
+            let path = map.shortest_path(a, b).unwrap();
+            assert_eq!(path.first(), Some(&a));
+            assert_eq!(path.last(), Some(&b));
+            let k = if a == home { 1 } else { path.len() - 2 };
+            assert_eq!(path[k], exit);
+            // Outside the exit leg the path stays out of the obstacle.
+            let rest: Vec<Coord<f64>> = if a == home {
+                path[1..].to_vec()
+            } else {
+                path[..path.len() - 1].to_vec()
+            };
+            assert_path_clear(&map, &rest);
+            // Round the obstacle: longer than the straight line.
+            assert!(polyline_length(&path) > 19.0 + 2.0);
+        }
+        // Between two allowed points: both exits.
+        let other = coord! { x: 9.5, y: 9.0 };
+        let exit2 = map.allow_endpoint(other).unwrap();
+        assert!((exit2.x - 10.01).abs() < 1e-9, "{exit2:?}");
+        let path = map.shortest_path(home, other).unwrap();
+        assert_eq!((path[1], path[path.len() - 2]), (exit, exit2));
     }
 
     #[test]

@@ -30,6 +30,7 @@ const MAX_SORTIES_PER_UAV: usize = 100;
 pub(super) struct FlockInput<'a> {
     pub plans: &'a [CellPlan],
     pub cells: &'a [Polygon<f64>],
+    /// Where lanes and links may run: the ROI less the NFZs' keep-out area.
     pub free: &'a MultiPolygon<f64>,
     pub obstacles: &'a ObstacleMap,
     pub uavs: Vec<FlockUav>,

@@ -19,6 +19,7 @@ use crate::geo::{
 use crate::terrain::{Dem, TerrainModel};
 
 mod flock_plan;
+mod homes;
 mod rally;
 mod terrain_flight;
 
@@ -28,6 +29,9 @@ use terrain_flight::{FlightRules, cell_length_3d, fly_tour, lanes_known_fraction
 
 /// Most UAVs in one survey.
 pub const MAX_UAVS: usize = 64;
+
+/// Default `nfz_clearance_m`: see [`SurveyParams::nfz_clearance_m`].
+pub const DEFAULT_NFZ_CLEARANCE_M: f64 = 5.0;
 
 /// Free space smaller than this (m²) is treated as nothing left to survey.
 const MIN_FREE_AREA_M2: f64 = 1.0;
@@ -161,10 +165,17 @@ pub struct SurveyParams {
     pub uavs: Vec<UavSpec>,
     /// Altitude frame of the mission; default relative.
     pub altitude_frame: AltitudeFrame,
-    /// Distance kept from no-fly-zone corners by transits, m, in [0, 100]; default 2.
+    /// Distance every flown point (lanes, links, transits; not the vertical
+    /// take-off and landing at home) keeps from every no-fly zone and from
+    /// the inclusion fence, m, in [0, 100]; default 5. The NFZs are exported
+    /// as exclusion fences: with the fence enabled, a vehicle flying on an
+    /// NFZ's edge breaches it with ordinary GNSS error and triggers its
+    /// fence action. 5 m covers ArduPilot's default FENCE_MARGIN (2 m) plus
+    /// a multirotor's usual position error (GNSS and tracking, 2–3 m).
     #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 100))]
     pub nfz_clearance_m: f64,
-    /// Margin of the inclusion geofence around the flown area, m, in [0, 1000]; default 30.
+    /// Margin of the inclusion geofence around the flown area, m, in [0, 1000]; default 30
+    /// (never less than `nfz_clearance_m`).
     #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1000))]
     pub fence_margin_m: f64,
     /// A stored DEM (`POST /api/v1/dems`) to follow the terrain over;
@@ -213,7 +224,7 @@ impl Default for SurveyParams {
             turn_penalty_s: 2.0,
             uavs: Vec::new(),
             altitude_frame: AltitudeFrame::Relative,
-            nfz_clearance_m: 2.0,
+            nfz_clearance_m: DEFAULT_NFZ_CLEARANCE_M,
             fence_margin_m: 30.0,
             dem_id: None,
             agl_tolerance_m: 5.0,
@@ -570,7 +581,13 @@ impl SurveyRequest {
         match obj.get("no_fly_zones") {
             None | Some(Value::Null) => {}
             Some(Value::Array(zones)) => {
-                for (i, v) in zones.iter().enumerate() {
+                // An empty collection (a GIS layer with no zones drawn)
+                // means no NFZs, not a fault.
+                for (i, v) in zones
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| !is_empty_collection(v))
+                {
                     match parse_polygons(v, &format!("{NO_FLY_POINTER}/{i}")) {
                         Ok(p) => no_fly.extend(p),
                         Err(e) => issues.extend(e),
@@ -601,12 +618,32 @@ impl SurveyRequest {
     }
 }
 
+/// A GeoJSON FeatureCollection or GeometryCollection with no members.
+fn is_empty_collection(v: &Value) -> bool {
+    let members = match v.get("type").and_then(Value::as_str) {
+        Some("FeatureCollection") => "features",
+        Some("GeometryCollection") => "geometries",
+        _ => return false,
+    };
+    v.get(members)
+        .and_then(Value::as_array)
+        .is_some_and(Vec::is_empty)
+}
+
 /// Statistics of the whole survey.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurveyStats {
     pub area_m2: f64,
     pub free_area_m2: f64,
+    /// The free area less the band within `nfz_clearance_m` of the NFZs
+    /// (and pockets no way into keeps that clearance): what the cells tile
+    /// and the lanes are flown over. Coverage is still of the free area.
+    #[serde(default)]
+    pub flyable_area_m2: f64,
+    /// The distance kept from every NFZ and the inclusion fence, m.
+    #[serde(default)]
+    pub nfz_clearance_m: f64,
     pub altitude_m: f64,
     pub gsd_cm_px: f64,
     pub footprint_side_m: f64,
@@ -867,7 +904,7 @@ pub fn plan_survey_over(
     let area = prepare_area(&req.roi, &req.no_fly, ROI_POINTER, NO_FLY_POINTER, limits)?;
     let proj = &area.projection;
 
-    let free = free_space(&area);
+    let free = roi_minus(&area, &area.no_fly);
     let free_area = free.unsigned_area();
     if free_area < MIN_FREE_AREA_M2 {
         return Err(PlanError::Invalid(vec![Issue::new(
@@ -931,20 +968,30 @@ pub fn plan_survey_over(
             ),
         )]));
     }
-    let Decomposition {
-        slice_angle_deg: slice_angle,
-        cells,
-        mut plans,
-        ..
-    } = decompose_and_cover(&free, params.slice_angle_deg, geometry.line_spacing_m)?;
+    // Everything flown keeps the clearance from the NFZs (they are exported
+    // as exclusion fences): lanes, links and transits are planned outside
+    // this keep-out area, coverage is still measured over the free space.
+    let clearance = params.nfz_clearance_m;
+    let nfz_union = nfz_union(&area.no_fly);
+    let keep_out = crate::geo::keep_out_area(&nfz_union, clearance);
+    let flyable = if clearance > 0.0 {
+        roi_minus(&area, &keep_out.0)
+    } else {
+        free.clone()
+    };
+    if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
+        return Err(homes::nothing_flyable(clearance));
+    }
+    let mut warnings = Vec::new();
 
-    // The flock: every UAV's start in planning coordinates, out of the NFZs.
+    // The flock: every UAV's start in planning coordinates.
     let default_uav;
     let uav_specs: &[UavSpec] = if params.uavs.is_empty() {
-        let c = req.roi[0].polygon.exterior().0[0];
+        let (start, note) = homes::default_start(&req.roi[0].polygon, &area, &keep_out, clearance)?;
+        warnings.extend(note);
         default_uav = [UavSpec {
             id: "uav1".to_string(),
-            start: [c.x, c.y],
+            start,
             speed_m_s: None,
             max_flight_time_s: None,
         }];
@@ -968,26 +1015,35 @@ pub fn plan_survey_over(
             })
         })
         .collect::<Result<_, _>>()?;
-    let nfz_union = nfz_union(&area.no_fly);
-    let obstacles = ObstacleMap::new(&nfz_union, params.nfz_clearance_m);
-    let inside: Vec<Issue> = homes
-        .iter()
-        .enumerate()
-        .filter(|(_, h)| obstacles.contains_point(**h))
-        .map(|(i, _)| {
-            Issue::new(
-                &pointer(i, "start"),
-                &format!(
-                    "UAV {}'s start position is inside a no-fly zone",
-                    uav_specs[i].id
-                ),
-            )
-        })
-        .collect();
-    if !inside.is_empty() {
-        return Err(PlanError::Invalid(inside));
+    // Pockets the keep-out area encloses cannot be reached (gaps between
+    // NFZs narrower than twice the clearance): not flown, unless a UAV
+    // takes off inside.
+    let (keep_out, enclosed_m2) = crate::geo::fill_enclosed(&keep_out, &homes);
+    let flyable = if enclosed_m2 > 0.0 {
+        roi_minus(&area, &keep_out.0)
+    } else {
+        flyable
+    };
+    if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
+        return Err(homes::nothing_flyable(clearance));
     }
-    let mut warnings = Vec::new();
+    let mut obstacles = ObstacleMap::new(&keep_out, 0.0);
+    let ids: Vec<String> = uav_specs.iter().map(|u| u.id.clone()).collect();
+    warnings.extend(homes::check_homes(
+        &homes,
+        &ids,
+        &pointer,
+        &area.no_fly,
+        clearance,
+        &mut obstacles,
+        proj,
+    )?);
+    let Decomposition {
+        slice_angle_deg: slice_angle,
+        cells,
+        mut plans,
+        ..
+    } = decompose_and_cover(&flyable, params.slice_angle_deg, geometry.line_spacing_m)?;
     let terrain = match dem {
         None => None,
         Some(dem) => {
@@ -1017,7 +1073,11 @@ pub fn plan_survey_over(
                     return Err(PlanError::Invalid(missing));
                 }
             }
-            let t = prepare_terrain(dem, &area, &homes, &geometry, &plans, params, &free)?;
+            let spaces = Spaces {
+                free: &free,
+                flyable: &flyable,
+            };
+            let t = prepare_terrain(dem, &area, &homes, &geometry, &plans, params, spaces)?;
             if t.known_fraction < 1.0 {
                 warnings.push(format!(
                     "the DEM has no heights under {:.1} % of the survey area: flown there at the \
@@ -1057,7 +1117,7 @@ pub fn plan_survey_over(
     };
 
     let (rally_points, rally_utm) =
-        rally::check_rally_points(&params.rally_points, &area, params.nfz_clearance_m, dem)?;
+        rally::check_rally_points(&params.rally_points, &area, clearance, dem)?;
 
     let speeds: Vec<f64> = uav_specs
         .iter()
@@ -1066,7 +1126,7 @@ pub fn plan_survey_over(
     let input = flock_plan::FlockInput {
         plans: &plans,
         cells: &cells,
-        free: &free,
+        free: &flyable,
         obstacles: &obstacles,
         uavs: homes
             .iter()
@@ -1168,10 +1228,20 @@ pub fn plan_survey_over(
 
     let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
     let coverage_ratio = coverage::coverage_ratio(&lanes, geometry.footprint_side_m, &free);
+    if enclosed_m2 > 0.0 {
+        warnings.push(format!(
+            "{:.0} m² of the free area are enclosed by no-fly zones with gaps narrower than twice \
+             nfz_clearance_m ({clearance} m): no way in keeps the clearance, so they are not flown",
+            enclosed_m2
+        ));
+    }
     if coverage_ratio < 0.995 {
         warnings.push(format!(
-            "footprints cover {:.2} % of the free area (narrow corners between no-fly zones)",
-            coverage_ratio * 100.0
+            "footprints cover {:.2} % of the free area: {:.0} m² are left out (narrow corners \
+             between no-fly zones, or strips the lanes cannot reach while keeping \
+             nfz_clearance_m = {clearance} m from them)",
+            coverage_ratio * 100.0,
+            (1.0 - coverage_ratio) * free_area
         ));
     }
 
@@ -1192,9 +1262,15 @@ pub fn plan_survey_over(
         })
         .collect::<Result<Vec<_>, GeoError>>()?;
 
-    // The inclusion fence holds the rally points (a UAV flies there on RTL).
+    // The inclusion fence holds the rally points (a UAV flies there on
+    // RTL) and keeps the NFZs' clearance too: a vehicle flying on its edge
+    // would breach it with ordinary GPS error.
     all_paths.extend(rally_utm);
-    let fences = fences(&area, &all_paths, params.fence_margin_m)?;
+    let fences = fences(
+        &area,
+        &all_paths,
+        params.fence_margin_m.max(params.nfz_clearance_m),
+    )?;
     let times: Vec<f64> = uav_plans.iter().map(|u| u.stats.flight_time_s).collect();
     let lengths: Vec<f64> = uav_plans.iter().map(|u| u.stats.length_3d_m).collect();
     let spread = |v: &[f64]| {
@@ -1206,6 +1282,8 @@ pub fn plan_survey_over(
     let stats = SurveyStats {
         area_m2: area.roi.unsigned_area(),
         free_area_m2: free_area,
+        flyable_area_m2: flyable.unsigned_area(),
+        nfz_clearance_m: clearance,
         altitude_m: altitude,
         gsd_cm_px: geometry.gsd_cm_px,
         footprint_side_m: geometry.footprint_side_m,
@@ -1307,6 +1385,13 @@ struct SurveyTerrain {
     known_fraction: f64,
 }
 
+/// The free space (ROI − NFZs: what is to be covered) and the flyable
+/// space (less the NFZs' keep-out area: where lanes and links run).
+struct Spaces<'a> {
+    free: &'a MultiPolygon<f64>,
+    flyable: &'a MultiPolygon<f64>,
+}
+
 /// Crop and dilate the DEM around the survey (ROI, no-fly zones — transits
 /// go round them — and the start), and check that it has heights under the
 /// lanes of `plans`.
@@ -1317,8 +1402,9 @@ fn prepare_terrain(
     geometry: &SurveyGeometry,
     plans: &[CellPlan],
     params: &SurveyParams,
-    free: &MultiPolygon<f64>,
+    spaces: Spaces,
 ) -> Result<SurveyTerrain, PlanError> {
+    let Spaces { free, flyable } = spaces;
     use geo::BoundingRect;
     let mut pts: Vec<Coord<f64>> = area
         .roi
@@ -1377,16 +1463,18 @@ fn prepare_terrain(
     }
     Ok(SurveyTerrain {
         model,
-        free_space: coverage::FreeSpace::new(free),
+        free_space: coverage::FreeSpace::new(flyable),
         known_fraction,
     })
 }
 
-/// ROI minus the no-fly zones, over every part of the ROI.
-fn free_space(area: &SurveyArea) -> MultiPolygon<f64> {
+/// ROI minus `zones`, over every part of the ROI: the free space (minus
+/// the NFZs), or the flyable space (minus their keep-out area, where lanes,
+/// links and transits may run).
+fn roi_minus(area: &SurveyArea, zones: &[Polygon<f64>]) -> MultiPolygon<f64> {
     let mut parts = Vec::new();
     for roi in &area.roi.0 {
-        parts.extend(decompose::free_space(roi, &area.no_fly).0);
+        parts.extend(decompose::free_space(roi, zones).0);
     }
     if area.roi.0.len() > 1 {
         // Overlapping ROI parts must not be surveyed twice.
@@ -1569,7 +1657,7 @@ fn build_mission(
 }
 
 /// The inclusion fence (convex hull of the ROI and the flown path, grown by
-/// `margin`) followed by every no-fly zone as an exclusion fence.
+/// at least `margin`) followed by every no-fly zone as an exclusion fence.
 fn fences(
     area: &SurveyArea,
     path: &[Coord<f64>],
@@ -1583,14 +1671,16 @@ fn fences(
         .flat_map(|p| p.exterior().0.iter().map(|&c| Point(c)))
         .collect();
     pts.extend(path.iter().map(|&c| Point(c)));
-    // Grow the hull by `margin`: a 16-gon around every hull vertex, hulled
-    // again, stays within 2 % of a true buffer.
+    // Grow the hull by `margin`: a 16-gon circumscribed about a circle of
+    // that radius round every hull vertex, hulled again. Its edges touch
+    // the circles, so every flown point is at least `margin` inside.
     let hull = MultiPoint(pts).convex_hull();
+    let radius = margin / (std::f64::consts::PI / 16.0).cos();
     let mut grown = Vec::new();
     for c in &hull.exterior().0 {
         for k in 0..16 {
             let t = f64::from(k) * std::f64::consts::TAU / 16.0;
-            grown.push(Point::new(c.x + margin * t.cos(), c.y + margin * t.sin()));
+            grown.push(Point::new(c.x + radius * t.cos(), c.y + radius * t.sin()));
         }
     }
     let hull = MultiPoint(grown).convex_hull();
