@@ -33,6 +33,8 @@ if [ "${1:-}" = "--with-validators" ]; then
   # PROJ's EGM96 grid: the independent geoid undulations the GeoJSON
   # heights are checked against (tests/validators/egm96_proj.py).
   [ -e /usr/share/proj/egm96_15.gtx ] || need_gdal+=(proj-data)
+  # curl: the DEM tests check that it hears the server's early refusals.
+  command -v curl >/dev/null 2>&1 || need_gdal+=(curl)
   if [ "${#need_gdal[@]}" -gt 0 ]; then
     echo "setup: installing ${need_gdal[*]} with apt-get" >&2
     SUDO=""

@@ -451,7 +451,7 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
             } else {
                 max_body_bytes
             };
-            reject_declared_oversize(req, next, limit)
+            early_answers(req, next, limit)
         }))
         .layer(CompressionLayer::new())
         .layer(CatchPanicLayer::custom(panic_response))
@@ -500,22 +500,80 @@ fn is_dem_upload(req: &Request) -> bool {
     req.method() == Method::POST && req.uri().path() == "/api/v1/dems"
 }
 
-/// Refuse a body whose declared Content-Length is over the limit before
-/// reading any of it (DefaultBodyLimit alone only notices once that much
-/// has arrived).
-async fn reject_declared_oversize(req: Request, next: Next, limit: usize) -> Response {
+/// Bodies declared this small (Content-Length) are read whole before the
+/// handler runs.
+const SMALL_BODY_BYTES: u64 = 64 * 1024;
+
+/// Request bodies and answers given before them.
+///
+/// - A body whose declared Content-Length is over `limit` is refused at
+///   once (DefaultBodyLimit alone only notices once that much has
+///   arrived), with `Connection: close`: none of it is read.
+/// - A small body is read first, so that a handler answering without it
+///   (a 415 from the Content-Type, a 400 from the query) leaves nothing
+///   unread and the connection stays open for the client's next request.
+/// - A larger or chunked body streams to the handler; when the answer
+///   comes before its end, hyper closes the connection after the answer,
+///   and the answer says so (`Connection: close`). The rest of the body
+///   is then read and discarded by the lingering close (`crate::linger`),
+///   so the client gets the answer rather than a reset.
+async fn early_answers(req: Request, next: Next, limit: usize) -> Response {
+    use axum::body::{Body, HttpBody};
     let declared = req
         .headers()
         .get(axum::http::header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.parse::<u64>().ok());
-    match declared {
-        Some(n) if n > limit as u64 => ApiError::PayloadTooLarge(format!(
-            "the request body is too large: {n} bytes declared, the limit is {limit} bytes"
-        ))
-        .into_response(),
-        _ => next.run(req).await,
+    if let Some(n) = declared.filter(|&n| n > limit as u64) {
+        return closing(
+            ApiError::PayloadTooLarge(format!(
+                "the request body is too large: {n} bytes declared, the limit is {limit} bytes"
+            ))
+            .into_response(),
+        );
     }
+    if req.body().is_end_stream() {
+        return next.run(req).await;
+    }
+    let (parts, body) = req.into_parts();
+    if let Some(n) = declared.filter(|&n| n <= SMALL_BODY_BYTES) {
+        return match axum::body::to_bytes(body, n as usize).await {
+            Ok(bytes) => {
+                next.run(Request::from_parts(parts, Body::from(bytes)))
+                    .await
+            }
+            Err(e) => closing(
+                ApiError::BadRequest(format!("cannot read the request body: {e}")).into_response(),
+            ),
+        };
+    }
+    let ended = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let seen = ended.clone();
+    let mut data = body.into_data_stream();
+    let tracked = futures_util::stream::poll_fn(move |cx| {
+        let next = futures_util::StreamExt::poll_next_unpin(&mut data, cx);
+        if let std::task::Poll::Ready(None) = next {
+            seen.store(true, std::sync::atomic::Ordering::Release);
+        }
+        next
+    });
+    let res = next
+        .run(Request::from_parts(parts, Body::from_stream(tracked)))
+        .await;
+    if ended.load(std::sync::atomic::Ordering::Acquire) {
+        res
+    } else {
+        closing(res)
+    }
+}
+
+/// `res` with `Connection: close`: hyper closes the connection after it.
+fn closing(mut res: Response) -> Response {
+    res.headers_mut().insert(
+        axum::http::header::CONNECTION,
+        HeaderValue::from_static("close"),
+    );
+    res
 }
 
 /// Unknown `/api` paths are problem+json 404s; every other path is the

@@ -9,6 +9,7 @@ mod costmap_jobs;
 mod db;
 mod error;
 mod experiment;
+mod linger;
 mod serve;
 mod web_ui;
 

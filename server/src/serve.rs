@@ -74,7 +74,9 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     println!("listening on http://{addr}");
     tracing::info!(%addr, "terraplan serving");
     let stopping = jobs.clone();
-    let served = axum::serve(listener, app)
+    // Connections close with a linger, so a client still sending a body
+    // the server refused reads the answer instead of a reset.
+    let served = axum::serve(crate::linger::LingeringListener(listener), app)
         .with_graceful_shutdown(async move {
             shutdown_signal().await;
             // Cancel the costmap runs and end the event streams, so that

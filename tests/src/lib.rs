@@ -80,6 +80,8 @@ pub struct Server {
     child: Option<std::process::Child>,
     pub base: String,
     pub data_dir: PathBuf,
+    /// The lines it logs, when started by [`Server::start_logging`].
+    log: Option<std::sync::mpsc::Receiver<String>>,
 }
 
 impl Server {
@@ -87,6 +89,34 @@ impl Server {
     /// test command sets it for the PostgreSQL run) the server uses that
     /// database instead of the embedded SQLite.
     pub fn start(data_dir: &Path, extra_args: &[&str]) -> Server {
+        Server::spawn(data_dir, extra_args, None)
+    }
+
+    /// [`Server::start`] with the log filter `filter` (`TERRAPLAN_LOG`),
+    /// its lines kept for [`Server::wait_for_log`] (and still shown).
+    pub fn start_logging(data_dir: &Path, extra_args: &[&str], filter: &str) -> Server {
+        Server::spawn(data_dir, extra_args, Some(filter))
+    }
+
+    /// Wait until the server logs a line holding every one of `needles`
+    /// (lines logged earlier count); that line. Panics after `timeout`.
+    pub fn wait_for_log(&self, needles: &[&str], timeout: std::time::Duration) -> String {
+        let log = self
+            .log
+            .as_ref()
+            .expect("a server started by Server::start_logging");
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match log.recv_timeout(left) {
+                Ok(line) if needles.iter().all(|n| line.contains(n)) => return line,
+                Ok(_) => {}
+                Err(e) => panic!("the server logged no line with {needles:?} ({e})"),
+            }
+        }
+    }
+
+    fn spawn(data_dir: &Path, extra_args: &[&str], log_filter: Option<&str>) -> Server {
         use std::io::{BufRead, BufReader};
         let mut cmd = Command::new(terraplan_bin());
         cmd.args(["serve", "--host", "127.0.0.1", "--port", "0", "--data-dir"])
@@ -98,7 +128,21 @@ impl Server {
         if let Ok(url) = std::env::var("TERRAPLAN_TEST_DATABASE_URL") {
             cmd.env("DATABASE_URL", url);
         }
+        if let Some(filter) = log_filter {
+            cmd.env("TERRAPLAN_LOG", filter)
+                .stderr(std::process::Stdio::piped());
+        }
         let mut child = cmd.spawn().expect("start terraplan serve");
+        let log = child.stderr.take().map(|stderr| {
+            let (tx, rx) = std::sync::mpsc::channel();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                    eprintln!("{line}");
+                    let _ = tx.send(line);
+                }
+            });
+            rx
+        });
         let stdout = child.stdout.take().expect("stdout");
         let mut line = String::new();
         BufReader::new(stdout)
@@ -113,6 +157,7 @@ impl Server {
             child: Some(child),
             base,
             data_dir: data_dir.to_path_buf(),
+            log,
         }
     }
 
@@ -252,13 +297,293 @@ pub fn delete(url: &str) -> Reply {
     reply(agent().delete(url).call())
 }
 
+/// POST `body` as `content_type` (see [`send`]: an answer given before the
+/// whole body was sent is returned, not a broken pipe).
 pub fn post(url: &str, content_type: &str, body: &[u8]) -> Reply {
-    reply(
-        agent()
-            .post(url)
-            .header("Content-Type", content_type)
-            .send(body),
+    send(
+        "POST",
+        url,
+        &[("Content-Type", content_type)],
+        body,
+        Framing::Length,
     )
+}
+
+/// How [`send`] frames a request body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Framing {
+    /// `Content-Length`, the body as is.
+    Length,
+    /// `Transfer-Encoding: chunked`, in chunks of 64 KiB.
+    Chunked,
+}
+
+/// Longest [`send`] waits for the server between two reads: far above any
+/// request of the tests on a loaded machine, but a hang still fails.
+pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(300);
+
+/// One HTTP/1.1 request on a connection of its own (`Connection: close`),
+/// its answer read whole.
+///
+/// The body is written from another thread while the answer is read, as
+/// curl and browsers do: a server may answer from the headers alone (413
+/// from the Content-Length, 415 from the Content-Type) and stop reading,
+/// after which writing the rest fails with EPIPE or ECONNRESET. That
+/// failure is no error when a complete answer arrived; ureq, used for the
+/// other methods, gives up at the failed write instead.
+pub fn send(
+    method: &str,
+    url: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+    framing: Framing,
+) -> Reply {
+    let (reply, written, received) = exchange(method, url, headers, body, framing);
+    reply.unwrap_or_else(|e| {
+        panic!(
+            "{method} {url}: {e} (writing the request: {written:?}); received {:?}",
+            text(&received[..received.len().min(2000)])
+        )
+    })
+}
+
+/// [`send`]'s work: the answer (or why there is none), how writing the
+/// request went, and the bytes received.
+fn exchange(
+    method: &str,
+    url: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+    framing: Framing,
+) -> (Result<Reply, String>, std::io::Result<()>, Vec<u8>) {
+    use std::net::{Shutdown, TcpStream};
+    let rest = url
+        .strip_prefix("http://")
+        .unwrap_or_else(|| panic!("not an http:// URL: {url}"));
+    let (authority, path) = rest.find('/').map_or((rest, "/"), |i| rest.split_at(i));
+    let mut stream =
+        TcpStream::connect(authority).unwrap_or_else(|e| panic!("connect to {authority}: {e}"));
+    stream.set_read_timeout(Some(REPLY_TIMEOUT)).unwrap();
+    let mut head =
+        format!("{method} {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n");
+    for (k, v) in headers {
+        head.push_str(&format!("{k}: {v}\r\n"));
+    }
+    match framing {
+        Framing::Length => head.push_str(&format!("Content-Length: {}\r\n\r\n", body.len())),
+        Framing::Chunked => head.push_str("Transfer-Encoding: chunked\r\n\r\n"),
+    }
+    let mut w = stream.try_clone().expect("clone the socket");
+    w.set_write_timeout(Some(REPLY_TIMEOUT)).unwrap();
+    let body = body.to_vec();
+    let writer = std::thread::spawn(move || -> std::io::Result<()> {
+        w.write_all(head.as_bytes())?;
+        match framing {
+            Framing::Length => w.write_all(&body)?,
+            Framing::Chunked => {
+                for chunk in body.chunks(64 * 1024) {
+                    write!(w, "{:x}\r\n", chunk.len())?;
+                    w.write_all(chunk)?;
+                    w.write_all(b"\r\n")?;
+                }
+                w.write_all(b"0\r\n\r\n")?;
+            }
+        }
+        w.flush()
+    });
+    let (reply, buf) = read_reply(&mut stream);
+    // Unblock the writer if the server stopped reading without closing.
+    let _ = stream.shutdown(Shutdown::Both);
+    let written = writer.join().expect("request writer thread");
+    (reply, written, buf)
+}
+
+/// An answer whose head has arrived and whose body is still coming (an
+/// event stream): see [`get_streaming`].
+pub struct Streaming {
+    stream: std::net::TcpStream,
+    received: Vec<u8>,
+    deadline: std::time::Instant,
+    url: String,
+}
+
+/// GET `url` and return once the answer's head has arrived: the server is
+/// then serving the request (an event stream follows its job), which a
+/// thread started to make the request does not tell. [`Streaming::finish`]
+/// reads the rest; the whole exchange must end within `timeout`.
+pub fn get_streaming(url: &str, timeout: std::time::Duration) -> Streaming {
+    use std::io::Read;
+    let deadline = std::time::Instant::now() + timeout;
+    let authority = url
+        .strip_prefix("http://")
+        .and_then(|r| r.split('/').next())
+        .unwrap_or_else(|| panic!("not an http:// URL: {url}"));
+    let path = &url["http://".len() + authority.len()..];
+    let mut stream = std::net::TcpStream::connect(authority)
+        .unwrap_or_else(|e| panic!("connect to {authority}: {e}"));
+    stream.set_read_timeout(Some(timeout)).unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap_or_else(|e| panic!("GET {url}: {e}"));
+    let mut received = Vec::new();
+    let mut chunk = [0u8; 4096];
+    while !received.windows(4).any(|w| w == b"\r\n\r\n") {
+        match stream.read(&mut chunk) {
+            Ok(0) => panic!("GET {url}: closed before an answer: {:?}", text(&received)),
+            Ok(n) => received.extend_from_slice(&chunk[..n]),
+            Err(e) => panic!("GET {url}: {e}"),
+        }
+    }
+    Streaming {
+        stream,
+        received,
+        deadline,
+        url: url.to_string(),
+    }
+}
+
+impl Streaming {
+    /// The answer's status code.
+    pub fn status(&self) -> u16 {
+        let line = text(&self.received);
+        line.split(' ')
+            .nth(1)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("bad status line in {line:?}"))
+    }
+
+    /// Read the rest of the answer; panics if it is not whole by the deadline.
+    pub fn finish(mut self) -> Reply {
+        use std::io::Read;
+        let mut chunk = vec![0u8; 64 * 1024];
+        loop {
+            if let Some(reply) = parse_reply(&self.received, false) {
+                return reply;
+            }
+            let left = self
+                .deadline
+                .saturating_duration_since(std::time::Instant::now());
+            assert!(!left.is_zero(), "GET {}: unfinished in time", self.url);
+            self.stream.set_read_timeout(Some(left)).unwrap();
+            match self.stream.read(&mut chunk) {
+                Ok(0) => {
+                    return parse_reply(&self.received, true).unwrap_or_else(|| {
+                        panic!("GET {}: cut short: {:?}", self.url, text(&self.received))
+                    });
+                }
+                Ok(n) => self.received.extend_from_slice(&chunk[..n]),
+                Err(e) => panic!("GET {}: {e}", self.url),
+            }
+        }
+    }
+}
+
+/// Read one whole answer from `stream` (which may stay open for another
+/// request); panics if it ends or fails first.
+pub fn read_answer(stream: &mut std::net::TcpStream) -> Reply {
+    let (reply, received) = read_reply(stream);
+    reply.unwrap_or_else(|e| panic!("{e}; received {:?}", text(&received)))
+}
+
+/// Read from `stream` until a whole answer is there; also the bytes read.
+fn read_reply(stream: &mut std::net::TcpStream) -> (Result<Reply, String>, Vec<u8>) {
+    use std::io::Read;
+    let mut buf = Vec::new();
+    let mut chunk = vec![0u8; 64 * 1024];
+    let reply = loop {
+        if let Some(reply) = parse_reply(&buf, false) {
+            break Ok(reply);
+        }
+        match stream.read(&mut chunk) {
+            Ok(0) => {
+                break parse_reply(&buf, true)
+                    .ok_or_else(|| "the connection closed before a whole answer".to_string());
+            }
+            Ok(n) => buf.extend_from_slice(&chunk[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            // A reset after the answer arrived (the server closed with the
+            // rest of the body unread) still leaves the answer readable;
+            // a reset before it is a failure.
+            Err(e) => {
+                break parse_reply(&buf, false).ok_or_else(|| format!("reading the answer: {e}"));
+            }
+        }
+    };
+    (reply, buf)
+}
+
+/// The first final (non-1xx) answer in `buf`, once it is complete; `eof`:
+/// nothing more will arrive (ends a body framed by the connection's close).
+fn parse_reply(buf: &[u8], eof: bool) -> Option<Reply> {
+    let mut start = 0;
+    loop {
+        let head_len = buf[start..].windows(4).position(|w| w == b"\r\n\r\n")? + 4;
+        let head = std::str::from_utf8(&buf[start..start + head_len]).expect("UTF-8 head");
+        let mut lines = head.split("\r\n");
+        let status_line = lines.next().unwrap_or("");
+        let status: u16 = status_line
+            .split(' ')
+            .nth(1)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("bad status line {status_line:?}"));
+        let headers: Vec<(String, String)> = lines
+            .filter(|l| !l.is_empty())
+            .map(|l| {
+                let (k, v) = l.split_once(':').unwrap_or((l, ""));
+                (k.trim().to_string(), v.trim().to_string())
+            })
+            .collect();
+        let body_start = start + head_len;
+        if (100..200).contains(&status) {
+            start = body_start; // 100 Continue and the like: the answer follows.
+            continue;
+        }
+        let find = |name: &str| {
+            headers
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(name))
+                .map(|(_, v)| v.clone())
+        };
+        let rest = &buf[body_start..];
+        let body = if status == 204 || status == 304 {
+            Vec::new()
+        } else if find("transfer-encoding").is_some_and(|t| t.eq_ignore_ascii_case("chunked")) {
+            dechunk(rest)?
+        } else if let Some(n) = find("content-length") {
+            let n: usize = n.parse().expect("Content-Length");
+            rest.get(..n)?.to_vec()
+        } else if eof {
+            rest.to_vec()
+        } else {
+            return None;
+        };
+        return Some(Reply {
+            status,
+            headers,
+            body,
+        });
+    }
+}
+
+/// A whole chunked body decoded, or None while it is incomplete.
+fn dechunk(mut data: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::new();
+    loop {
+        let line_end = data.windows(2).position(|w| w == b"\r\n")?;
+        let size_text = std::str::from_utf8(&data[..line_end]).expect("chunk size");
+        let size_text = size_text.split(';').next().unwrap_or("").trim();
+        let size = usize::from_str_radix(size_text, 16).expect("hexadecimal chunk size");
+        data = &data[line_end + 2..];
+        if size == 0 {
+            // Then an empty line, or trailer fields ending with one.
+            let done = data.starts_with(b"\r\n") || data.windows(4).any(|w| w == b"\r\n\r\n");
+            return done.then_some(out);
+        }
+        out.extend_from_slice(data.get(..size)?);
+        data = data.get(size + 2..)?;
+    }
 }
 
 /// GET with extra request headers.
@@ -533,4 +858,121 @@ pub fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<
         .collect();
     assert_eq!(values.len(), pixels.len(), "{out}");
     values
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{Read, Write};
+    use std::net::TcpListener;
+
+    use super::*;
+
+    /// Read a request's head from `s` (and whatever of the body came with it).
+    fn read_head(s: &mut std::net::TcpStream) -> String {
+        let mut got = Vec::new();
+        let mut b = [0u8; 4096];
+        while !got.windows(4).any(|w| w == b"\r\n\r\n") {
+            let n = s.read(&mut b).unwrap();
+            assert!(n > 0, "the client closed before its head");
+            got.extend_from_slice(&b[..n]);
+        }
+        text(&got)
+    }
+
+    const EARLY: &[u8] = b"HTTP/1.1 415 Unsupported Media Type\r\n\
+        content-type: application/problem+json\r\ncontent-length: 26\r\nconnection: close\r\n\r\n\
+        {\"status\":415,\"title\":\"x\"}";
+
+    /// A server that answers 415 from the head alone and closes with the
+    /// body unread (so the kernel resets the connection): the client's
+    /// write fails, and it still returns the answer.
+    #[test]
+    fn an_answer_before_the_body_is_returned() {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}/up", listener.local_addr().unwrap());
+        let server = std::thread::spawn(move || {
+            let (mut s, _) = listener.accept().unwrap();
+            let head = read_head(&mut s);
+            s.write_all(EARLY).unwrap();
+            head
+        });
+        // 64 MiB: far more than the socket buffers of both ends hold, so
+        // the write cannot complete before the server has closed.
+        let body = vec![7u8; 64 * 1024 * 1024];
+        let (reply, written, received) = exchange(
+            "POST",
+            &url,
+            &[("Content-Type", "image/png")],
+            &body,
+            Framing::Length,
+        );
+        let head = server.join().unwrap();
+        assert!(head.starts_with("POST /up HTTP/1.1\r\n"), "{head}");
+        assert!(head.contains("Content-Length: 67108864\r\n"), "{head}");
+        let err = written.expect_err("the server read none of the body");
+        assert!(
+            matches!(
+                err.kind(),
+                std::io::ErrorKind::BrokenPipe | std::io::ErrorKind::ConnectionReset
+            ),
+            "{err:?}"
+        );
+        let reply = reply.unwrap_or_else(|e| panic!("{e}: received {:?}", text(&received)));
+        assert_eq!(reply.status, 415);
+        assert_eq!(
+            reply.header("Content-Type"),
+            Some("application/problem+json")
+        );
+        assert_eq!(reply.json()["status"], 415);
+    }
+
+    /// The ordinary exchange: the whole body (chunked here) is read, and a
+    /// chunked answer is decoded.
+    #[test]
+    fn a_whole_exchange_with_chunked_bodies() {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}/echo?x=1", listener.local_addr().unwrap());
+        let server = std::thread::spawn(move || {
+            let (mut s, _) = listener.accept().unwrap();
+            let mut got = Vec::new();
+            let mut b = [0u8; 65536];
+            while !got.ends_with(b"\r\n0\r\n\r\n") {
+                let n = s.read(&mut b).unwrap();
+                assert!(n > 0, "the client closed early");
+                got.extend_from_slice(&b[..n]);
+            }
+            s.write_all(
+                b"HTTP/1.1 100 Continue\r\n\r\nHTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n\
+                  5\r\nhello\r\n7;ext=1\r\n, world\r\n0\r\nTrailer: x\r\n\r\n",
+            )
+            .unwrap();
+            got
+        });
+        let body = vec![b'a'; 200_000];
+        let reply = send("POST", &url, &[("X-Test", "1")], &body, Framing::Chunked);
+        assert_eq!(reply.status, 200);
+        assert_eq!(reply.text(), "hello, world");
+        let got = server.join().unwrap();
+        let at = got.windows(4).position(|w| w == b"\r\n\r\n").unwrap() + 4;
+        let head = text(&got[..at]);
+        assert!(head.starts_with("POST /echo?x=1 HTTP/1.1\r\n"), "{head}");
+        assert!(head.contains("X-Test: 1\r\n"), "{head}");
+        assert_eq!(dechunk(&got[at..]).expect("whole body"), body);
+    }
+
+    #[test]
+    fn incomplete_answers_are_not_taken() {
+        let whole = b"HTTP/1.1 201 Created\r\ncontent-length: 4\r\n\r\nabcd";
+        for cut in 0..whole.len() {
+            assert!(parse_reply(&whole[..cut], false).is_none(), "{cut}");
+        }
+        let r = parse_reply(whole, false).unwrap();
+        assert_eq!((r.status, r.text().as_str()), (201, "abcd"));
+        // No length: the body ends with the connection.
+        let open = b"HTTP/1.1 200 OK\r\n\r\nab";
+        assert!(parse_reply(open, false).is_none());
+        assert_eq!(parse_reply(open, true).unwrap().text(), "ab");
+        assert!(dechunk(b"4\r\nabcd\r\n0\r\n").is_none());
+        assert!(dechunk(b"4\r\nab").is_none());
+    }
 }

@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 use serde_json::{Value, json};
 use terraplan_e2e::{
     JOB_DEADLINE, Reply, Server, assert_invalid_at, assert_problem, band_values, class_page, close,
-    costmap_job, delete, dtm, gdalinfo, get, get_with_headers, get_with_timeout, pixel_values,
-    png_size, post, post_json, slow_costmap_options, sse_events, terraplan, text, upload_dem,
-    wait_costmap_finished,
+    costmap_job, delete, dtm, gdalinfo, get, get_streaming, get_with_headers, get_with_timeout,
+    pixel_values, png_size, post, post_json, slow_costmap_options, sse_events, terraplan, text,
+    upload_dem, wait_costmap_finished,
 };
 
 /// POST a costmap request: 202 with a Location and the job.
@@ -417,7 +417,8 @@ fn progress_events_conflicts_cancel_and_failure() {
     );
     let slow_id = slow["id"].as_str().unwrap().to_string();
     let events_url = server.url(&format!("/api/v1/costmaps/{slow_id}/events"));
-    let stream = std::thread::spawn(move || get_with_timeout(&events_url, JOB_DEADLINE));
+    let stream = get_streaming(&events_url, JOB_DEADLINE);
+    assert_eq!(stream.status(), 200);
 
     // While it runs, its files are a 409 saying how far it got.
     let r = file(&server, slow["urls"]["costmap_tif"].as_str().unwrap());
@@ -433,7 +434,7 @@ fn progress_events_conflicts_cancel_and_failure() {
         assert_eq!(r.status, 200, "{}", r.text());
     }
 
-    let r = stream.join().unwrap();
+    let r = stream.finish();
     assert_eq!(r.status, 200);
     let events = sse_events(&r.text());
     let (last, progress) = events.split_last().expect("events");
@@ -477,15 +478,17 @@ fn progress_events_conflicts_cancel_and_failure() {
         assert_eq!(costmap_job(&server, &second_id)["status"], "queued");
     }
     // Delete the running job: cancelled, gone, and the queued one runs.
+    // The stream is open before the delete (after it, there is nothing to
+    // follow: a 404).
     let events_url = server.url(&format!("/api/v1/costmaps/{first_id}/events"));
-    let stream = std::thread::spawn(move || get_with_timeout(&events_url, JOB_DEADLINE));
-    std::thread::sleep(Duration::from_millis(300));
+    let stream = get_streaming(&events_url, JOB_DEADLINE);
+    assert_eq!(stream.status(), 200);
     let deleted_at = Instant::now();
     assert_eq!(
         delete(&server.url(&format!("/api/v1/costmaps/{first_id}"))).status,
         204
     );
-    let r = stream.join().unwrap();
+    let r = stream.finish();
     let events = sse_events(&r.text());
     let last = events.last().expect("events");
     assert!(

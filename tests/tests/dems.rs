@@ -6,14 +6,15 @@
 //! Runs on SQLite, and on PostgreSQL when the test command sets
 //! `TERRAPLAN_TEST_DATABASE_URL`.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Part, Reply, Server, assert_problem, close, delete, get, get_with_headers, multipart_body,
-    png_size, post, post_json, post_multipart, run_tool, shared_data, terraplan, text,
+    Framing, Part, REPLY_TIMEOUT, Reply, Server, assert_problem, close, delete, get,
+    get_with_headers, multipart_body, png_size, post, post_json, post_multipart, read_answer,
+    run_tool, send, shared_data, terraplan, text,
 };
 
 /// A DEM to test with: its file, the CRS to give when the file has none,
@@ -940,30 +941,29 @@ fn dem_body_limit() {
     );
     let big = case("codem__AOI-DigitalSurfaceModel.tif", None, 32616); // 1.6 MB
     let data = std::fs::read(&big.path).unwrap();
-    // Declared by Content-Length: refused before the body is read (so
-    // sent over a raw socket: a client may fail writing the rest).
-    let resp = raw_post(&server, "image/tiff", &data, false);
-    assert!(resp.starts_with("HTTP/1.1 413"), "{resp}");
-    assert!(
-        resp.contains("application/problem+json") && resp.contains("too large"),
-        "{resp}"
-    );
-    let (content_type, form) = multipart_body(&[Part {
+    // Declared by Content-Length: refused before the body is read; or
+    // streamed without one: stopped once 1 MiB has arrived. The client
+    // still sending when the answer comes hears it either way.
+    let (form_type, form) = multipart_body(&[Part {
         name: "file",
         file_name: Some("big.tif"),
         content_type: None,
         data: &data,
     }]);
-    let resp = raw_post(&server, &content_type, &form, false);
-    assert!(resp.starts_with("HTTP/1.1 413"), "{resp}");
-    assert!(resp.contains("too large"), "{resp}");
-    // Streamed without a Content-Length: stopped once 1 MiB has arrived.
-    let resp = raw_post(&server, "image/tiff", &data, true);
-    assert!(resp.starts_with("HTTP/1.1 413"), "{resp}");
-    assert!(resp.contains("too large"), "{resp}");
-    let resp = raw_post(&server, &content_type, &form, true);
-    assert!(resp.starts_with("HTTP/1.1 413"), "{resp}");
-    assert!(resp.contains("too large"), "{resp}");
+    for (content_type, body) in [("image/tiff", &data), (form_type.as_str(), &form)] {
+        for framing in [Framing::Length, Framing::Chunked] {
+            let r = send(
+                "POST",
+                &server.url("/api/v1/dems"),
+                &[("Content-Type", content_type)],
+                body,
+                framing,
+            );
+            let what = format!("{content_type} {framing:?}");
+            assert_problem(&r, 413, "too large");
+            assert_eq!(r.header("connection"), Some("close"), "{what}");
+        }
+    }
 
     // 210 KB: over the JSON limit, within the DEM limit.
     let dtm = case("opengeos_data__elevation_dtm.tif", None, 26918);
@@ -972,48 +972,122 @@ fn dem_body_limit() {
     assert_eq!(get(&server.url("/healthz")).status, 200);
 }
 
-/// POST `body` to `/api/v1/dems` over a raw socket, with a Content-Length
-/// or chunked; returns the response as text. The body is written from
-/// another thread, as the server may answer (and stop reading) first.
-fn raw_post(server: &Server, content_type: &str, body: &[u8], chunked: bool) -> String {
-    let addr = server.base.trim_start_matches("http://").to_string();
-    let mut s = std::net::TcpStream::connect(&addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    let mut w = s.try_clone().unwrap();
-    w.set_write_timeout(Some(Duration::from_secs(30))).unwrap();
-    let framing = if chunked {
-        "Transfer-Encoding: chunked".to_string()
-    } else {
-        format!("Content-Length: {}", body.len())
-    };
-    let head = format!(
-        "POST /api/v1/dems HTTP/1.1\r\nHost: {addr}\r\nContent-Type: {content_type}\r\n{framing}\r\nConnection: close\r\n\r\n"
-    );
-    let body = body.to_vec();
-    let writer = std::thread::spawn(move || {
-        if w.write_all(head.as_bytes()).is_err() {
-            return;
+/// Refusals from the headers alone (415 from the Content-Type, 413 from
+/// the Content-Length or once the limit has streamed in) reach every kind
+/// of client while it is still sending a large body: the server reads and
+/// discards the rest after its answer instead of resetting the connection.
+#[test]
+fn early_refusals_reach_clients_still_sending() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &["--max-dem-mb", "32"]);
+    let url = server.url("/api/v1/dems");
+    const MIB: usize = 1024 * 1024;
+    // 20 MiB of the wrong type (within the limit), 40 MiB over it.
+    let cases = [
+        ("image/png", 20 * MIB, 415, "not supported"),
+        ("image/tiff", 40 * MIB, 413, "too large"),
+    ];
+    for (content_type, len, status, says) in cases {
+        let body = vec![0x5au8; len];
+        // The simplest client: the whole request, then the answer. Were
+        // the connection reset, its write would fail.
+        let (written, r) = post_then_read(&server, content_type, &body);
+        written.unwrap_or_else(|e| panic!("{status}: writing the body failed: {e}"));
+        assert_problem(&r, status, says);
+        assert_eq!(r.header("connection"), Some("close"), "{status}");
+        // The harness's client, which reads while it sends.
+        for framing in [Framing::Length, Framing::Chunked] {
+            let r = send(
+                "POST",
+                &url,
+                &[("Content-Type", content_type)],
+                &body,
+                framing,
+            );
+            // Chunked, the 40 MiB stop at the limit of the DEM route.
+            assert_problem(&r, status, says);
         }
-        for chunk in body.chunks(64 * 1024) {
-            let ok = if chunked {
-                write!(w, "{:x}\r\n", chunk.len()).is_ok()
-                    && w.write_all(chunk).is_ok()
-                    && w.write_all(b"\r\n").is_ok()
-            } else {
-                w.write_all(chunk).is_ok()
-            };
-            if !ok {
-                return;
+        // curl, with its Expect: 100-continue, without it (sending at
+        // once), and chunked.
+        let file = dir.path().join("body.bin");
+        std::fs::write(&file, &body).unwrap();
+        let data_arg = format!("@{}", file.display());
+        let ct = format!("Content-Type: {content_type}");
+        let modes: [&[&str]; 3] = [
+            &[],
+            &["-H", "Expect:"],
+            &["-H", "Expect:", "-H", "Transfer-Encoding: chunked"],
+        ];
+        for mode in modes {
+            for _ in 0..3 {
+                let out = curl_post(&url, &ct, &data_arg, mode);
+                assert!(out.status.success(), "curl {mode:?}: {}", text(&out.stderr));
+                let answer = text(&out.stdout);
+                let (body, code) = answer.rsplit_once('\n').unwrap();
+                assert_eq!(code, status.to_string(), "curl {mode:?}: {answer}");
+                let p: Value = serde_json::from_str(body).expect("problem JSON");
+                assert_eq!(p["status"], status, "curl {mode:?}: {p}");
+                assert!(p["detail"].as_str().unwrap().contains(says), "{p}");
             }
         }
-        if chunked {
-            let _ = w.write_all(b"0\r\n\r\n");
-        }
-    });
-    let mut resp = Vec::new();
-    let _ = s.read_to_end(&mut resp);
-    writer.join().unwrap();
-    String::from_utf8_lossy(&resp).into_owned()
+    }
+    // A small body the server refuses is read all the same, so the
+    // connection stays open for the next request.
+    let addr = server.base.trim_start_matches("http://").to_string();
+    let mut s = std::net::TcpStream::connect(&addr).unwrap();
+    s.set_read_timeout(Some(REPLY_TIMEOUT)).unwrap();
+    let small = vec![b'x'; 60_000];
+    write!(
+        s,
+        "POST /api/v1/dems HTTP/1.1\r\nHost: {addr}\r\nContent-Type: image/png\r\n\
+         Content-Length: {}\r\n\r\n",
+        small.len()
+    )
+    .unwrap();
+    s.write_all(&small).unwrap();
+    let r = read_answer(&mut s);
+    assert_problem(&r, 415, "not supported");
+    assert_eq!(r.header("connection"), None);
+    write!(s, "GET /healthz HTTP/1.1\r\nHost: {addr}\r\n\r\n").unwrap();
+    assert_eq!(read_answer(&mut s).status, 200);
+    assert_eq!(get(&server.url("/healthz")).status, 200);
+}
+
+/// POST `body` to `/api/v1/dems` as the simplest client does: the whole
+/// request first, then the answer. How writing went, and the answer.
+fn post_then_read(
+    server: &Server,
+    content_type: &str,
+    body: &[u8],
+) -> (std::io::Result<()>, Reply) {
+    let addr = server.base.trim_start_matches("http://").to_string();
+    let mut s = std::net::TcpStream::connect(&addr).unwrap();
+    s.set_read_timeout(Some(REPLY_TIMEOUT)).unwrap();
+    s.set_write_timeout(Some(REPLY_TIMEOUT)).unwrap();
+    let written = write!(
+        s,
+        "POST /api/v1/dems HTTP/1.1\r\nHost: {addr}\r\nContent-Type: {content_type}\r\n\
+         Content-Length: {}\r\n\r\n",
+        body.len()
+    )
+    .and_then(|()| s.write_all(body));
+    (written, read_answer(&mut s))
+}
+
+/// `curl` POSTing `data_arg` (`@file`) with `extra` arguments; its stdout
+/// is the answer's body, a newline and the status code.
+fn curl_post(
+    url: &str,
+    content_type: &str,
+    data_arg: &str,
+    extra: &[&str],
+) -> std::process::Output {
+    std::process::Command::new("curl")
+        .args(["-sS", "--max-time", "300", "-H", content_type])
+        .args(extra)
+        .args(["--data-binary", data_arg, "-w", "\n%{http_code}", url])
+        .output()
+        .expect("run curl (scripts/setup.sh installs it)")
 }
 
 /// `terraplan dem-info` prints the metadata as JSON; bad input exits 2

@@ -447,7 +447,8 @@ fn openapi_document_and_docs_page() {
 #[test]
 fn graceful_shutdown_finishes_in_flight_requests() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(dir.path(), &[]);
+    // tower-http logs each request as it starts at DEBUG.
+    let server = Server::start_logging(dir.path(), &[], "info,tower_http=debug");
     // ~90 km² at 25 m: about a second of planning (debug build).
     let body = json!({
         "roi": {"type": "Polygon", "coordinates": [[[8.50, 47.0], [8.62, 47.0], [8.62, 47.085], [8.50, 47.085], [8.50, 47.0]]]},
@@ -455,8 +456,13 @@ fn graceful_shutdown_finishes_in_flight_requests() {
     });
     let url = server.url("/api/v1/surveys");
     let client = std::thread::spawn(move || post_json(&url, &body));
-    // The request is sent at once; planning it takes ~0.5 s, so SIGTERM lands mid-plan.
-    std::thread::sleep(std::time::Duration::from_millis(150));
+    // SIGTERM once the server has the request (a request it has not
+    // accepted yet is refused at shutdown, rightly): planning takes ~0.5 s,
+    // so it lands mid-plan.
+    server.wait_for_log(
+        &["started processing request", "uri=/api/v1/surveys"],
+        std::time::Duration::from_secs(120),
+    );
     let data_dir = server.data_dir.clone();
     let status = server.stop();
     let reply = client.join().unwrap();
