@@ -48,13 +48,13 @@ if [ "${1:-}" = "--with-validators" ]; then
     echo "setup: creating .venv with the test validators" >&2
     python3 -m venv .venv
     .venv/bin/pip install --quiet --disable-pip-version-check -r tests/validators/requirements.txt
+    .venv/bin/pip install --quiet --disable-pip-version-check --no-deps \
+      -r tests/validators/requirements-nodeps.txt
     touch "$stamp"
   fi
 fi
 
 if [ "${1:-}" = "--with-validators" ] && [ ! -x /usr/bin/chromium ]; then
-    .venv/bin/pip install --quiet --disable-pip-version-check --no-deps \
-      -r tests/validators/requirements-nodeps.txt
   # The browser tests drive Debian's Chromium through playwright-core
   # (Playwright's own browser download is not used).
   echo "setup: installing chromium with apt-get" >&2

@@ -860,6 +860,42 @@ pub fn pixel_values(path: &Path, band: usize, pixels: &[(usize, usize)]) -> Vec<
     values
 }
 
+/// Checks with `tests/validators/clearance.py` (pymavlink, shapely) that a
+/// survey's mission keeps the clearance its plan reports
+/// (`stats.nfz_clearance_m`) from every NFZ of `no_fly_zones` (the
+/// request's array) and from the `.plan`'s inclusion fence, away from home.
+/// Returns the validator's summary.
+pub fn assert_clearance(
+    survey: &serde_json::Value,
+    waypoints: &Path,
+    plan: &Path,
+    no_fly_zones: &serde_json::Value,
+) -> serde_json::Value {
+    let dir = waypoints.parent().expect("the waypoints' directory");
+    let clearance = survey["stats"]["nfz_clearance_m"]
+        .as_f64()
+        .expect("stats.nfz_clearance_m");
+    let mut args = vec![waypoints.to_path_buf(), plan.to_path_buf()];
+    for (i, zone) in no_fly_zones.as_array().into_iter().flatten().enumerate() {
+        let path = dir.join(format!("clearance-nfz{i}.geojson"));
+        std::fs::write(&path, zone.to_string()).expect("write NFZ");
+        args.push(path);
+    }
+    let out = Command::new(venv_python())
+        .arg(workspace().join("tests/validators/clearance.py"))
+        .arg(clearance.to_string())
+        .args(&args)
+        .output()
+        .expect("run clearance.py");
+    assert!(
+        out.status.success(),
+        "clearance.py: {}{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("clearance.py summary")
+}
+
 #[cfg(test)]
 mod tests {
     use std::io::{Read, Write};

@@ -105,6 +105,18 @@ fn create_get_list_download_delete() {
 
     let plan = get(&server.url(files["plan"].as_str().unwrap()));
     assert_eq!(plan.header("content-type"), Some("application/json"));
+    let plan_path = dir.path().join("m.plan");
+    std::fs::write(&plan_path, &plan.body).unwrap();
+    let clear = terraplan_e2e::assert_clearance(
+        &created,
+        &wp_path,
+        &plan_path,
+        &example_request()["no_fly_zones"],
+    );
+    assert!(
+        clear["min_nfz_distance_m"].as_f64().unwrap() >= 4.99,
+        "{clear}"
+    );
     assert_eq!(plan.json()["fileType"], "Plan");
     assert_eq!(
         plan.json()["geoFence"]["polygons"]

@@ -72,6 +72,11 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
     assert_eq!(wp.status, 200);
     let wp_path = dir.path().join("uav.waypoints");
     std::fs::write(&wp_path, &wp.body).unwrap();
+    let plan = get(&server.url(uav["files"]["plan"].as_str().unwrap()));
+    assert_eq!(plan.status, 200);
+    let plan_path = dir.path().join("uav.plan");
+    std::fs::write(&plan_path, &plan.body).unwrap();
+    terraplan_e2e::assert_clearance(&survey, &wp_path, &plan_path, &body["no_fly_zones"]);
 
     let loaded = validator("load_waypoints.py", &[&wp_path]);
     assert!(
