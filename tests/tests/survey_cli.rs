@@ -269,7 +269,10 @@ fn defaults_with_an_empty_nfz_file_and_an_nfz_on_the_first_vertex() {
     );
     let (plan, summary) = plan_and_validate(&roi, &[&empty], &json!({}), dir.path());
     assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.995);
-    assert_eq!(plan["stats"]["flyable_area_m2"], plan["stats"]["free_area_m2"]);
+    assert_eq!(
+        plan["stats"]["flyable_area_m2"],
+        plan["stats"]["free_area_m2"]
+    );
     let first = [6.062131843297665, 51.51238564279176];
     assert_eq!(plan["uavs"][0]["start"], json!(first));
 
@@ -289,11 +292,11 @@ fn defaults_with_an_empty_nfz_file_and_an_nfz_on_the_first_vertex() {
     assert!(summary["coverage_ratio"].as_f64().unwrap() >= 0.99);
     let start = plan["uavs"][0]["start"].clone();
     assert_ne!(start, json!(first));
-    let warned = plan["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .any(|w| w.as_str().unwrap().contains("takes off at the ROI's vertex"));
+    let warned = plan["warnings"].as_array().unwrap().iter().any(|w| {
+        w.as_str()
+            .unwrap()
+            .contains("takes off at the ROI's vertex")
+    });
     assert!(warned, "{}", plan["warnings"]);
     // The start is a vertex of the ROI, 5 m or more from the NFZ (the
     // validator checked the clearance of the whole flight).
