@@ -192,7 +192,8 @@ proptest! {
         let cell_area: f64 = plan.cells.iter().map(|c| c.area_m2).sum();
         let flyable = plan.stats.flyable_area_m2;
         prop_assert!((cell_area - flyable).abs() <= 1e-6 * flyable, "{cell_area} vs {flyable}");
-        prop_assert!(flyable <= plan.stats.free_area_m2 * (1.0 + 1e-9));
+        // Up to the boolean operations' snapping (about 1e-9 of the extent).
+        prop_assert!(flyable <= plan.stats.free_area_m2 * (1.0 + 1e-6), "{flyable} vs {}", plan.stats.free_area_m2);
         prop_assert!(plan.stats.coverage_ratio > 0.97, "coverage {}", plan.stats.coverage_ratio);
         // Below 99.5 % the plan says how much is left out.
         if plan.stats.coverage_ratio < 0.995 {

@@ -896,6 +896,22 @@ pub fn assert_clearance(
     serde_json::from_slice(&out.stdout).expect("clearance.py summary")
 }
 
+/// `tests/validators/check_missions.py` on a directory of mission files:
+/// each `.plan` and its `.waypoints` agree item by item (pymavlink and
+/// JSON), and MAVSDK and MAVProxy load them with the fence and rally files.
+/// Returns its summary.
+pub fn check_missions(out: &Path) -> serde_json::Value {
+    let v = validator("check_missions.py", &[out]);
+    assert!(
+        v.status.success(),
+        "check_missions.py {}: {}{}",
+        out.display(),
+        text(&v.stdout),
+        text(&v.stderr)
+    );
+    serde_json::from_slice(&v.stdout).expect("check_missions.py summary")
+}
+
 #[cfg(test)]
 mod tests {
     use std::io::{Read, Write};

@@ -122,8 +122,11 @@ fn survey(
     (out, plan)
 }
 
-/// Runs check_survey.py on a CLI output directory; returns its summary.
+/// Runs check_survey.py on a CLI output directory, and check_missions.py
+/// (MAVSDK, MAVProxy, .plan against .waypoints); returns check_survey's
+/// summary.
 fn check_survey(out: &Path, roi: &Path, nfz: &[&Path]) -> Value {
+    terraplan_e2e::check_missions(out);
     let mut args: Vec<&Path> = vec![out, roi];
     args.extend(nfz.iter().copied());
     let v = validator("check_survey.py", &args);

@@ -525,14 +525,7 @@ fn rally_points_downloaded_load_in_mavsdk_and_mavproxy() {
             std::fs::write(out.join(name), &f.body).unwrap();
         }
     }
-    let v = validator("check_missions.py", &[&out]);
-    assert!(
-        v.status.success(),
-        "check_missions.py: {}{}",
-        terraplan_e2e::text(&v.stdout),
-        terraplan_e2e::text(&v.stderr)
-    );
-    let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
+    let summary = terraplan_e2e::check_missions(&out);
     for id in ["uav1", "uav2"] {
         let s = &summary["stems"][id];
         assert_eq!(s["rally_items"], 1, "{summary}");

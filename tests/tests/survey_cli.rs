@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
-use terraplan_e2e::{shared_data, terraplan, text, validator, workspace};
+use terraplan_e2e::{check_missions, shared_data, terraplan, text, validator, workspace};
 
 fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
     let p = dir.join(name);
@@ -48,20 +48,6 @@ fn plan_and_validate(roi: &Path, nfz: &[&Path], params: &Value, dir: &Path) -> (
     let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
     check_missions(&out);
     (plan, summary)
-}
-
-/// check_missions.py on an output directory: each `.plan` and its
-/// `.waypoints` agree item by item, and MAVSDK and MAVProxy load them with
-/// the fence and rally files; returns its summary.
-fn check_missions(out: &Path) -> Value {
-    let v = validator("check_missions.py", &[out]);
-    assert!(
-        v.status.success(),
-        "check_missions.py: {}{}",
-        text(&v.stdout),
-        text(&v.stderr)
-    );
-    serde_json::from_slice(&v.stdout).unwrap()
 }
 
 #[test]
