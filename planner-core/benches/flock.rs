@@ -166,7 +166,12 @@ impl Instance {
         Instance {
             uavs,
             jobs,
-            obstacles: ObstacleMap::new(&nfz_union, params.nfz_clearance_m),
+            // As the survey pipeline does: transits stay outside the NFZs
+            // grown by the clearance.
+            obstacles: ObstacleMap::new(
+                &planner_core::geo::keep_out_area(&nfz_union, params.nfz_clearance_m),
+                0.0,
+            ),
             turn_penalty_s: params.turn_penalty_s,
             altitude_m: plan.stats.altitude_m,
         }
