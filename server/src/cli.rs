@@ -682,7 +682,7 @@ fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
 /// "invalid input: …" with each issue on its own line, its pointer turned
 /// into a place the user knows by `locate`.
 fn list_issues(issues: &[Issue], locate: impl Fn(&str) -> String) -> String {
-    let lines: Vec<String> = issues
+    let lines: Vec<String> = planner_core::geo::cap_issues(issues.to_vec())
         .iter()
         .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
         .collect();

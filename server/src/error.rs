@@ -88,7 +88,8 @@ impl ApiError {
                     [one] => one.to_string(),
                     many => format!("{} problems in the request; see errors", many.len()),
                 };
-                (detail, issues.clone())
+                let issues = planner_core::geo::cap_issues(issues.clone());
+                (detail, issues)
             }
             ApiError::Internal(_) => (
                 "the server failed to handle this request; it has been logged".to_string(),

@@ -557,3 +557,45 @@ fn rally_points_downloaded_load_in_mavsdk_and_mavproxy() {
     let r = get(&server.url(&url));
     assert_problem(&r, 404, "no rally points");
 }
+
+/// Issue 17, part 3: counts are refused before any per-member work, the
+/// list of faults is capped, and the service stays responsive meanwhile.
+#[test]
+fn huge_lists_get_a_short_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    let url = server.url("/api/v1/surveys");
+    let roi = json!({"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.005, 52.0], [5.005, 52.003], [5.0, 52.0]]]});
+    // 20 000 UAVs with one id: one fault, the count.
+    let uavs: Vec<Value> = (0..20_000)
+        .map(|_| json!({"id": "a", "start": [5.0, 52.0]}))
+        .collect();
+    let r = post_json(&url, &json!({"roi": roi, "uavs": uavs}));
+    assert_eq!(r.status, 422, "{}", r.text());
+    let errors = r.json()["errors"].as_array().unwrap().clone();
+    assert_eq!(errors.len(), 1, "{errors:?}");
+    assert!(
+        errors[0]["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("20000 UAVs given")
+    );
+    // 50 000 empty NFZs: at most 100 faults, the last says how many more.
+    let empty = json!({"type": "Polygon", "coordinates": []});
+    let r = post_json(
+        &url,
+        &json!({"roi": roi, "no_fly_zones": vec![empty; 50_000]}),
+    );
+    assert_eq!(r.status, 422);
+    assert!(r.body.len() < 64 * 1024, "{} bytes", r.body.len());
+    let errors = r.json()["errors"].as_array().unwrap().clone();
+    assert_eq!(errors.len(), 100);
+    assert!(
+        errors[99]["message"]
+            .as_str()
+            .unwrap()
+            .contains("more problems")
+    );
+    assert_eq!(get(&server.url("/healthz")).status, 200);
+    assert!(server.stop().success());
+}

@@ -32,6 +32,27 @@ impl Issue {
     }
 }
 
+/// Most faults listed for one request: a request with thousands of bad
+/// members gets the first ones and a count, not a body as large as itself.
+pub const MAX_ISSUES: usize = 100;
+
+/// `issues` cut to [`MAX_ISSUES`]: the first `MAX_ISSUES - 1` and one more
+/// saying how many were left out.
+pub fn cap_issues(mut issues: Vec<Issue>) -> Vec<Issue> {
+    if issues.len() > MAX_ISSUES {
+        let left_out = issues.len() - (MAX_ISSUES - 1);
+        issues.truncate(MAX_ISSUES - 1);
+        issues.push(Issue::new(
+            "",
+            &format!(
+                "and {left_out} more problems (only the first {} are listed)",
+                MAX_ISSUES - 1
+            ),
+        ));
+    }
+    issues
+}
+
 impl std::fmt::Display for Issue {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.pointer.is_empty() {

@@ -14,7 +14,8 @@ use crate::export::{
 };
 use crate::flock::{FlockUav, ObstacleMap, Piece, Policy, count_turns};
 use crate::geo::{
-    GeoError, Issue, Limits, ParsedPolygon, SurveyArea, parse_polygons, prepare_area,
+    GeoError, Issue, Limits, MAX_ISSUES, ParsedPolygon, SurveyArea, cap_issues, parse_polygons,
+    prepare_area,
 };
 use crate::terrain::{Dem, TerrainModel};
 
@@ -372,7 +373,9 @@ impl SurveyParams {
             )),
             _ => {}
         }
-        if self.uavs.len() > MAX_UAVS {
+        // Over the cap, the UAVs are not looked at one by one: that work
+        // (and the list of their faults) would grow with the request.
+        let uavs = if self.uavs.len() > MAX_UAVS {
             issues.push(Issue::new(
                 &p("uavs"),
                 &format!(
@@ -380,9 +383,13 @@ impl SurveyParams {
                     self.uavs.len()
                 ),
             ));
-        }
-        for (i, u) in self.uavs.iter().enumerate() {
-            if self.uavs[..i].iter().any(|o| o.id == u.id) {
+            &[][..]
+        } else {
+            &self.uavs[..]
+        };
+        let mut ids = std::collections::HashSet::with_capacity(uavs.len());
+        for (i, u) in uavs.iter().enumerate() {
+            if !ids.insert(u.id.as_str()) {
                 issues.push(Issue::new(
                     &p(&format!("uavs/{i}/id")),
                     &format!(
@@ -582,12 +589,16 @@ impl SurveyRequest {
             None | Some(Value::Null) => {}
             Some(Value::Array(zones)) => {
                 // An empty collection (a GIS layer with no zones drawn)
-                // means no NFZs, not a fault.
+                // means no NFZs, not a fault. Reading stops once the faults
+                // fill the list a reply can carry.
                 for (i, v) in zones
                     .iter()
                     .enumerate()
                     .filter(|(_, v)| !is_empty_collection(v))
                 {
+                    if issues.len() > MAX_ISSUES {
+                        break;
+                    }
                     match parse_polygons(v, &format!("{NO_FLY_POINTER}/{i}")) {
                         Ok(p) => no_fly.extend(p),
                         Err(e) => issues.extend(e),
@@ -613,7 +624,7 @@ impl SurveyRequest {
                 params,
             })
         } else {
-            Err(PlanError::Invalid(issues))
+            Err(PlanError::Invalid(cap_issues(issues)))
         }
     }
 }
@@ -1875,6 +1886,44 @@ mod tests {
         // And the current layout reads back as written.
         let again: UavPlan = serde_json::from_value(serde_json::to_value(&uav).unwrap()).unwrap();
         assert_eq!(again, uav);
+    }
+
+    #[test]
+    fn huge_lists_are_refused_by_their_count_with_a_capped_fault_list() {
+        // 100 000 UAVs (the same id each): one fault, the count, and no
+        // pairwise id check.
+        let uavs: Vec<Value> = (0..100_000)
+            .map(|_| json!({"id": "a", "start": [5.0, 52.0]}))
+            .collect();
+        let e = SurveyParams::from_json(&json!({"uavs": uavs}), "").unwrap_err();
+        assert_eq!(e.len(), 1, "{:?}", &e[..e.len().min(3)]);
+        assert_eq!(e[0].pointer, "/uavs");
+        assert!(
+            e[0].message.starts_with("100000 UAVs given"),
+            "{}",
+            e[0].message
+        );
+
+        // 400 000 empty NFZs: at most MAX_ISSUES faults, the last a count.
+        let empty = json!({"type": "Polygon", "coordinates": []});
+        let doc = json!({
+            "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.01, 52.0], [5.01, 52.01]]]},
+            "no_fly_zones": vec![empty; 400_000],
+        });
+        let Err(PlanError::Invalid(issues)) = SurveyRequest::from_document(&doc) else {
+            panic!("empty NFZs must be refused");
+        };
+        assert_eq!(issues.len(), MAX_ISSUES);
+        assert_eq!(issues[0].pointer, "/no_fly_zones/0/coordinates");
+        assert!(
+            issues[MAX_ISSUES - 1]
+                .message
+                .contains("more problems (only the first 99"),
+            "{:?}",
+            issues.last()
+        );
+        // A few faults are listed whole.
+        assert_eq!(crate::geo::cap_issues(issues[..3].to_vec()).len(), 3);
     }
 
     #[test]
