@@ -6,7 +6,7 @@
 use geo::{BooleanOps, Closest, ClosestPoint, Distance, Euclidean, Intersects};
 use geo_types::{Coord, Line, MultiLineString, MultiPolygon, Point, Polygon};
 
-use super::PlanError;
+use super::{PlanError, dist};
 use crate::flock::ObstacleMap;
 use crate::geo::{Issue, SurveyArea, UtmProjection, distance_to_zones};
 
@@ -165,10 +165,6 @@ pub(super) fn nothing_flyable(clearance_m: f64) -> PlanError {
              nothing of the region of interest to fly over: lower nfz_clearance_m"
         ),
     )])
-}
-
-fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
-    (b.x - a.x).hypot(b.y - a.y)
 }
 
 #[cfg(test)]
