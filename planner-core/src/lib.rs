@@ -7,6 +7,7 @@
 //! WGS84 lon/lat only appears at the edges (input parsing and export).
 
 pub mod buffer;
+pub mod cancel;
 pub mod costmap;
 pub mod coverage;
 pub mod decompose;
