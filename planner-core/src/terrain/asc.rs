@@ -8,7 +8,8 @@
 //! decimal point, comma or exponent, in which case it is Float32 (each value
 //! rounded to the nearest f32, clamped to ±f32::MAX), or Float64 when the
 //! nodata value does not fit a float. Cells equal to the nodata value are
-//! nodata. The CRS lives in a `.prj` side file, which a single file's bytes
+//! nodata, and so are infinite ones (`inf`, `1e999`: GDAL clamps them to
+//! ±f32::MAX, a height no ground has). The CRS lives in a `.prj` side file, which a single file's bytes
 //! do not have: an ASCII grid needs the caller's CRS.
 
 use super::read::{c_atof, check_limits, resolve_crs};
@@ -352,7 +353,9 @@ pub(super) fn read(
                         }
                     }
                 };
-                let v = if cell_type == CellType::Float32 {
+                let v = if !raw.is_finite() {
+                    f64::NAN
+                } else if cell_type == CellType::Float32 {
                     clamp_to_f32(raw)
                 } else {
                     raw
@@ -444,6 +447,27 @@ mod tests {
         // A nodata value below f32's smallest normal makes GDAL pick Float64.
         let text =
             "ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value 0.0\n0 0.1\n";
+        let dem = read(text, Some(32613)).unwrap();
+        assert_eq!(dem.value(0, 0), None);
+        assert_eq!(dem.value(1, 0), Some(0.1));
+    }
+
+    /// Values beyond f64 (`1e999`) are infinite: nodata, not the
+    /// ±f32::MAX GDAL clamps them to, in Float32 and Float64 grids.
+    #[test]
+    fn infinite_values_are_nodata() {
+        let text = "ncols 3\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\n1e999 -1e999 2.5\n";
+        let dem = read(text, Some(32613)).unwrap();
+        assert_eq!(dem.value(0, 0), None);
+        assert_eq!(dem.value(1, 0), None);
+        assert_eq!(dem.value(2, 0), Some(2.5));
+        // Finite values over f32's range are still clamped, as GDAL does.
+        let text = "ncols 1\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\n1e39\n";
+        let dem = read(text, Some(32613)).unwrap();
+        assert_eq!(dem.value(0, 0), Some(f64::from(f32::MAX)));
+        // A nodata value below f32's smallest normal: a Float64 grid.
+        let text = "ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\ncellsize 1\n\
+                    NODATA_value 0.0\n1e999 0.1\n";
         let dem = read(text, Some(32613)).unwrap();
         assert_eq!(dem.value(0, 0), None);
         assert_eq!(dem.value(1, 0), Some(0.1));

@@ -13,7 +13,10 @@
 //!   (GDAL's default, `GTIFF_POINT_GEO_IGNORE=NO`);
 //! - the nodata text is read like `atof`, then compared in the sample type:
 //!   truncated to an integer for integer samples (and ignored when out of the
-//!   type's range), rounded to f32 for Float32; NaN samples are always nodata;
+//!   type's range), rounded to f32 for Float32; NaN samples are always nodata,
+//!   and so are infinite ones (GDAL reads them as heights; no ground is
+//!   infinitely high, and an infinite height would poison every slope,
+//!   mean and hillshade computed over it);
 //! - sparse chunks (offset and byte count 0) read as nodata (0 if none).
 //!
 //! A DEM has one band; `read_geotiff_band` reads one band of a file with
@@ -1493,12 +1496,12 @@ fn put_chunk(
         }),
         DecodingResult::I32(v) => copy(&v, out, width, area, |x: i32| int(i64::from(x))),
         DecodingResult::F32(v) => copy(&v, out, width, area, |x: f32| match nd {
-            _ if x.is_nan() => f64::NAN,
+            _ if !x.is_finite() => f64::NAN,
             NoDataMatch::F32(n) if n == x => f64::NAN,
             _ => f64::from(x),
         }),
         DecodingResult::F64(v) => copy(&v, out, width, area, |x: f64| match nd {
-            _ if x.is_nan() => f64::NAN,
+            _ if !x.is_finite() => f64::NAN,
             NoDataMatch::F64(n) if n == x => f64::NAN,
             _ => x,
         }),
@@ -1798,6 +1801,34 @@ mod tests {
         assert!(dem.nodata.unwrap().is_nan());
         let t = dem.transform;
         assert_eq!((t.origin_x, t.origin_y), (4.75, 46.125));
+    }
+
+    /// Infinite samples are nodata, in Float32 and Float64 alike; an
+    /// all-infinite raster has no height at all, as an all-nodata one.
+    #[test]
+    fn infinite_samples_are_nodata() {
+        let px: Vec<u8> = [f32::INFINITY, 2.5, f32::NEG_INFINITY, f32::MAX]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let dem = read(&Builder::image(2, 2, 3, 32).strips(2, vec![px]).build()).unwrap();
+        assert!(dem.values[0].is_nan() && dem.values[2].is_nan());
+        assert_eq!(dem.values[1], 2.5);
+        assert_eq!(dem.values[3], f64::from(f32::MAX), "finite, however high");
+        let px: Vec<u8> = [f64::INFINITY, -1.0, f64::NEG_INFINITY, 1e300]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let dem = read(&Builder::image(2, 2, 3, 64).strips(2, vec![px]).build()).unwrap();
+        assert!(dem.values[0].is_nan() && dem.values[2].is_nan());
+        assert_eq!((dem.values[1], dem.values[3]), (-1.0, 1e300));
+        let px: Vec<u8> = [f32::INFINITY; 4]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let dem = read(&Builder::image(2, 2, 3, 32).strips(2, vec![px]).build()).unwrap();
+        let info = dem.info().unwrap();
+        assert_eq!((info.min, info.max, info.nodata_fraction), (None, None, 1.0));
     }
 
     #[test]
