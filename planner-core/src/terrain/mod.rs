@@ -123,7 +123,8 @@ pub struct Dem {
     pub width: usize,
     pub height: usize,
     /// Row-major, row 0 first (the top row of a north-up raster). Nodata
-    /// cells are `NaN`; every other value is the file's value converted
+    /// cells are `NaN`, and so are infinite samples (no ground is
+    /// infinitely high); every other value is the file's value converted
     /// exactly to f64 (all supported sample types fit).
     pub values: Vec<f64>,
     /// The file's nodata value, if it declares one (reported, not used:
