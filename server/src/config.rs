@@ -65,6 +65,29 @@ pub struct ServeConfig {
     /// goes first. 0 keeps none: every replan searches from scratch.
     #[arg(long, env = "TERRAPLAN_ROUTE_CACHE_MB", default_value_t = 512)]
     pub route_cache_mb: u64,
+    /// Longest wait for a request's head (request line and header
+    /// fields), seconds; also how long a kept-alive connection waits for
+    /// its next request. A slower client is disconnected.
+    #[arg(long, env = "TERRAPLAN_HEADER_READ_TIMEOUT_S", default_value_t = 20.0, value_parser = parse_read_timeout)]
+    pub header_read_timeout_s: f64,
+    /// Time a request body may take to arrive, seconds, plus 1 s for
+    /// every `--body-min-bytes-per-s` bytes received; a slower body is
+    /// answered 408 and its connection closed.
+    #[arg(long, env = "TERRAPLAN_BODY_READ_TIMEOUT_S", default_value_t = 30.0, value_parser = parse_read_timeout)]
+    pub body_read_timeout_s: f64,
+    /// The slowest steady rate a request body may keep, bytes/s (see
+    /// `--body-read-timeout-s`); 0: a body must arrive whole within the
+    /// timeout.
+    #[arg(long, env = "TERRAPLAN_BODY_MIN_BYTES_PER_S", default_value_t = 1024)]
+    pub body_min_bytes_per_s: u64,
+    /// Client connections open at once, lingering ones included; when all
+    /// are taken, one without a request in hand, else one whose body is
+    /// slower than `--body-min-bytes-per-s`, is closed to make room (or new
+    /// clients wait in the backlog). Default: the open-file limit
+    /// (`ulimit -n`) less a reserve for the database and files (1/8 of
+    /// it, 64 to 1024), at most 16384.
+    #[arg(long, env = "TERRAPLAN_MAX_CONNECTIONS", value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_connections: Option<u64>,
     /// Allowed CORS origin (repeatable; `*` allows any). None: no CORS headers.
     #[arg(
         long = "cors-origin",
@@ -93,6 +116,20 @@ fn parse_route_timeout(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err(format!("{v} is outside (0, 86400] seconds"))
+    }
+}
+
+/// `--header-read-timeout-s`, `--body-read-timeout-s`: seconds in
+/// (0, 3600].
+fn parse_read_timeout(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v > 0.0 && v <= 3600.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s} is outside (0, 3600] seconds"))
     }
 }
 

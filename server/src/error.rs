@@ -25,6 +25,9 @@ pub enum ApiError {
     /// The resource is not in a state to answer (e.g. a job still running): 409.
     #[error("{0}")]
     Conflict(String),
+    /// The request body arrived too slowly: 408.
+    #[error("{0}")]
+    RequestTimeout(String),
     #[error("{0}")]
     PayloadTooLarge(String),
     #[error("{0}")]
@@ -73,6 +76,7 @@ impl ApiError {
             ApiError::NotFound(_) => StatusCode::NOT_FOUND,
             ApiError::MethodNotAllowed(_) => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::Conflict(_) => StatusCode::CONFLICT,
+            ApiError::RequestTimeout(_) => StatusCode::REQUEST_TIMEOUT,
             ApiError::PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
@@ -105,6 +109,19 @@ impl ApiError {
             errors,
         }
     }
+}
+
+/// The problem document of an answer `status` with `detail`, serialised
+/// (for answers made outside the router, as hyper's parse errors).
+pub fn problem_body(status: StatusCode, detail: String) -> Vec<u8> {
+    let problem = Problem {
+        kind: "about:blank".to_string(),
+        title: status.canonical_reason().unwrap_or("Error").to_string(),
+        status: status.as_u16(),
+        detail,
+        errors: vec![],
+    };
+    serde_json::to_vec(&problem).unwrap_or_default()
 }
 
 impl IntoResponse for ApiError {

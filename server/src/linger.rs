@@ -12,13 +12,14 @@
 //! ends, and so does the connection.
 
 use std::io;
-use std::net::SocketAddr;
 use std::pin::Pin;
 use std::task::{Context, Poll};
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::net::TcpStream;
+
+use crate::conn::Slot;
 
 /// Longest a closing connection is read from in all (nginx's
 /// `lingering_time`).
@@ -26,30 +27,28 @@ const LINGER_TOTAL: Duration = Duration::from_secs(30);
 /// Longest a closing connection may stay silent before it is closed
 /// (nginx's `lingering_timeout`).
 const LINGER_IDLE: Duration = Duration::from_secs(5);
+/// The same for a connection whose client was too slow (a read timed
+/// out): long enough to read a 408 already sent, no longer.
+const TIMED_OUT_LINGER_TOTAL: Duration = Duration::from_secs(2);
+const TIMED_OUT_LINGER_IDLE: Duration = Duration::from_secs(1);
 
-/// A [`TcpListener`] whose connections close with a linger.
-pub struct LingeringListener(pub TcpListener);
-
-impl axum::serve::Listener for LingeringListener {
-    type Io = LingeringStream;
-    type Addr = SocketAddr;
-
-    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
-        let (stream, addr) = axum::serve::Listener::accept(&mut self.0).await;
-        (LingeringStream(Some(stream)), addr)
-    }
-
-    fn local_addr(&self) -> io::Result<Self::Addr> {
-        self.0.local_addr()
-    }
+/// A connection that, when dropped, lingers in a task of its own; its
+/// place under the connection limit is held until the socket closes.
+pub struct LingeringStream {
+    stream: Option<TcpStream>,
+    slot: Option<Slot>,
 }
 
-/// A connection that, when dropped, lingers in a task of its own.
-pub struct LingeringStream(Option<TcpStream>);
-
 impl LingeringStream {
+    pub fn new(stream: TcpStream, slot: Slot) -> LingeringStream {
+        LingeringStream {
+            stream: Some(stream),
+            slot: Some(slot),
+        }
+    }
+
     fn stream(&mut self) -> &mut TcpStream {
-        self.0
+        self.stream
             .as_mut()
             .expect("a stream is only taken when dropped")
     }
@@ -91,16 +90,35 @@ impl AsyncWrite for LingeringStream {
     }
 
     fn is_write_vectored(&self) -> bool {
-        self.0.as_ref().is_some_and(|s| s.is_write_vectored())
+        self.stream.as_ref().is_some_and(|s| s.is_write_vectored())
     }
 }
 
 impl Drop for LingeringStream {
     fn drop(&mut self) {
-        let Some(stream) = self.0.take() else { return };
+        let (Some(stream), Some(slot)) = (self.stream.take(), self.slot.take()) else {
+            return;
+        };
+        let state = slot.state().clone();
+        // Closed to make room: at once.
+        if state.is_evicted() {
+            return;
+        }
+        let (total, idle) = if state.timed_out() {
+            (TIMED_OUT_LINGER_TOTAL, TIMED_OUT_LINGER_IDLE)
+        } else {
+            (LINGER_TOTAL, LINGER_IDLE)
+        };
         // Outside a runtime (never, in the server) the socket just closes.
         if let Ok(runtime) = tokio::runtime::Handle::try_current() {
-            runtime.spawn(linger(stream, LINGER_TOTAL, LINGER_IDLE));
+            runtime.spawn(async move {
+                tokio::select! {
+                    () = linger(stream, total, idle) => {},
+                    // A full server may close a lingering connection early.
+                    () = state.evicted() => {},
+                }
+                drop(slot);
+            });
         }
     }
 }
@@ -125,6 +143,8 @@ pub async fn linger(mut stream: TcpStream, total: Duration, idle: Duration) {
 #[cfg(test)]
 mod tests {
     use std::io::{Read, Write};
+
+    use tokio::net::TcpListener;
 
     use super::*;
 

@@ -5,6 +5,7 @@ mod api;
 mod app;
 mod cli;
 mod config;
+mod conn;
 mod costmap_jobs;
 mod db;
 mod error;

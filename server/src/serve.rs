@@ -1,9 +1,13 @@
 //! `terraplan serve`: start-up, logging, graceful shutdown.
 
 use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::str::FromStr;
 use std::sync::Arc;
+use std::time::Duration;
 
-use tokio::net::TcpListener;
+use sqlx::sqlite::SqliteConnectOptions;
+use tokio::net::{TcpListener, TcpSocket};
 use tokio::sync::Semaphore;
 use tracing_subscriber::EnvFilter;
 
@@ -36,6 +40,8 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
             config.data_dir.display()
         )
     })?;
+    // Held until the process ends.
+    let _lock = lock_sqlite(&config)?;
     let db = Db::connect(config.database_url.as_deref(), &config.data_dir)
         .await
         .map_err(|e| format!("cannot open the database: {e}"))?;
@@ -65,7 +71,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     }
     jobs.start_maintenance(&state);
     let app = router(state, &config.cors_origins, config.max_body_bytes);
-    let listener = TcpListener::bind((config.host.as_str(), config.port))
+    let listener = listen(&config.host, config.port)
         .await
         .map_err(|e| format!("cannot listen on {}:{}: {e}", config.host, config.port))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
@@ -73,24 +79,133 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     // start the service on port 0.
     println!("listening on http://{addr}");
     tracing::info!(%addr, "terraplan serving");
+    let limits = conn_limits(&config);
+    tracing::info!(
+        max_connections = limits.max_connections,
+        header_read_timeout_s = config.header_read_timeout_s,
+        body_read_timeout_s = config.body_read_timeout_s,
+        "accepting connections"
+    );
     let stopping = jobs.clone();
     // Connections close with a linger, so a client still sending a body
     // the server refused reads the answer instead of a reset.
-    let served = axum::serve(crate::linger::LingeringListener(listener), app)
-        .with_graceful_shutdown(async move {
-            shutdown_signal().await;
-            // Cancel the costmap runs and end the event streams, so that
-            // no request keeps the server from stopping.
-            stopping.begin_shutdown();
-        })
-        .await
-        .map_err(|e| format!("server error: {e}"));
+    crate::conn::serve(listener, app, limits, async move {
+        shutdown_signal().await;
+        // Cancel the costmap runs and end the event streams, so that
+        // no request keeps the server from stopping.
+        stopping.begin_shutdown();
+    })
+    .await;
     jobs.begin_shutdown();
     jobs.finish(&db).await;
-    served?;
     db.close().await;
     tracing::info!("shut down cleanly");
     Ok(())
+}
+
+/// Connections the kernel queues until they are accepted. Rust's
+/// default, 128, makes a burst of clients beyond the connection limit
+/// wait for SYN retransmissions (1 s, 3 s, …) instead of their turn.
+const LISTEN_BACKLOG: u32 = 1024;
+
+/// A listener on the first of `host`'s addresses that can be bound.
+async fn listen(host: &str, port: u16) -> std::io::Result<TcpListener> {
+    let mut last = None;
+    for addr in tokio::net::lookup_host((host, port)).await? {
+        let socket = if addr.is_ipv4() {
+            TcpSocket::new_v4()
+        } else {
+            TcpSocket::new_v6()
+        }?;
+        #[cfg(unix)]
+        socket.set_reuseaddr(true)?;
+        match socket
+            .bind(addr)
+            .and_then(|()| socket.listen(LISTEN_BACKLOG))
+        {
+            Ok(listener) => return Ok(listener),
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(last.unwrap_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::NotFound, "the host has no address")
+    }))
+}
+
+/// The connection limits of `config`: `--max-connections`, or room
+/// under the open-file limit.
+fn conn_limits(config: &ServeConfig) -> crate::conn::ConnLimits {
+    let file_limit = crate::conn::file_limit();
+    let room = file_limit.map_or(
+        usize::try_from(crate::conn::MAX_DEFAULT_CONNECTIONS).unwrap_or(usize::MAX),
+        crate::conn::default_max_connections,
+    );
+    let max_connections = match config.max_connections {
+        Some(n) => {
+            let n = usize::try_from(n).unwrap_or(usize::MAX);
+            if n > room {
+                tracing::warn!(
+                    max_connections = n,
+                    file_limit,
+                    "--max-connections leaves little room under the open-file limit: \
+                     raise `ulimit -n`, or files may fail to open under load"
+                );
+            }
+            n
+        }
+        None => room,
+    };
+    crate::conn::ConnLimits {
+        header_read_timeout: Duration::from_secs_f64(config.header_read_timeout_s),
+        body_read_timeout: Duration::from_secs_f64(config.body_read_timeout_s),
+        body_min_bytes_per_s: config.body_min_bytes_per_s,
+        max_connections,
+    }
+}
+
+/// The file whose lock makes an embedded SQLite database this server's
+/// alone: `<database file>.lock`; `None` on PostgreSQL (shared by design:
+/// costmap jobs are leased there) and for an in-memory database.
+fn sqlite_lock_path(config: &ServeConfig) -> Option<PathBuf> {
+    match config.database_url.as_deref() {
+        None => Some(config.data_dir.join("terraplan.sqlite3.lock")),
+        Some(url) if url.starts_with("sqlite:") => {
+            if url.contains(":memory:") || url.contains("mode=memory") {
+                return None;
+            }
+            let opts = SqliteConnectOptions::from_str(url).ok()?;
+            let mut name = opts.get_filename().as_os_str().to_owned();
+            name.push(".lock");
+            Some(PathBuf::from(name))
+        }
+        Some(_) => None,
+    }
+}
+
+/// Lock the SQLite database for this process: a second server on it
+/// would take over the first one's running costmap jobs as if they had
+/// been left by a crash. The lock (`flock`) lasts as long as the returned
+/// file is open, and the kernel drops it when the process ends, crashes
+/// included.
+fn lock_sqlite(config: &ServeConfig) -> Result<Option<std::fs::File>, String> {
+    let Some(path) = sqlite_lock_path(config) else {
+        return Ok(None);
+    };
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| format!("cannot open the lock file {}: {e}", path.display()))?;
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(std::fs::TryLockError::WouldBlock) => Err(format!(
+            "another terraplan server is using this database ({} is locked): stop it first, or \
+             give this one its own --data-dir",
+            path.display()
+        )),
+        Err(std::fs::TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
+    }
 }
 
 /// Ctrl-C or SIGTERM: stop accepting, let in-flight requests finish.

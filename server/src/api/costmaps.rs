@@ -230,6 +230,13 @@ fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
     }
     let name = match obj.get("name") {
         None | Some(Value::Null) => None,
+        Some(Value::String(s))
+            if let Some(issue) =
+                crate::api::names::control_character_issue("/name", "the name", s) =>
+        {
+            issues.push(issue);
+            None
+        }
         Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Some(s.clone()),
         Some(Value::String(_)) => {
             issues.push(Issue::new(
@@ -244,6 +251,13 @@ fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
         }
     };
     let dem_id = match obj.get("dem_id") {
+        Some(Value::String(s))
+            if let Some(issue) =
+                crate::api::names::control_character_issue("/dem_id", "the DEM id", s) =>
+        {
+            issues.push(issue);
+            String::new()
+        }
         Some(Value::String(s)) if !s.is_empty() => s.clone(),
         None | Some(Value::Null) => {
             issues.push(Issue::new(

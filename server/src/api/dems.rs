@@ -387,6 +387,19 @@ pub async fn upload_dem(
         Some(f) => base_name(&f),
         None => upload.file_name,
     };
+    let faults: Vec<Issue> = [
+        name.as_deref()
+            .and_then(|n| crate::api::names::control_character_issue("/name", "the name", n)),
+        file_name.as_deref().and_then(|f| {
+            crate::api::names::control_character_issue("/file_name", "the file name", f)
+        }),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if !faults.is_empty() {
+        return Err(ApiError::Validation(faults));
+    }
     let crs = q
         .crs
         .or(upload.crs)

@@ -5,6 +5,7 @@ pub mod costmaps;
 pub mod dems;
 pub mod health;
 pub mod json_body;
+pub mod names;
 pub mod paging;
 pub mod routes;
 pub mod surveys;

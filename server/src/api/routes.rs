@@ -338,6 +338,13 @@ fn unknown_fields(
 fn parse_name(obj: &Map<String, Value>, issues: &mut Vec<Issue>) -> Option<String> {
     match obj.get("name") {
         None | Some(Value::Null) => None,
+        Some(Value::String(s))
+            if let Some(issue) =
+                crate::api::names::control_character_issue("/name", "the name", s) =>
+        {
+            issues.push(issue);
+            None
+        }
         Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Some(s.clone()),
         Some(Value::String(_)) => {
             issues.push(Issue::new(
@@ -1546,6 +1553,14 @@ pub async fn list_routes(
     let (limit, offset) = page(query)?;
     let Query(filter) =
         filter.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
+    if let Some(issue) = filter.costmap_id.as_deref().and_then(|id| {
+        crate::api::names::control_character_issue("/costmap_id", "the costmap id", id)
+    }) {
+        return Err(ApiError::BadRequest(format!(
+            "bad query string: {}",
+            issue.message
+        )));
+    }
     let (rows, total) = state
         .db
         .list_routes(filter.costmap_id.as_deref(), limit, offset)

@@ -310,6 +310,12 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
     };
     match obj.remove("name") {
         None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s))
+            if let Some(issue) =
+                crate::api::names::control_character_issue("/name", "the name", &s) =>
+        {
+            Err(ApiError::Validation(vec![issue]))
+        }
         Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Ok(Some(s)),
         Some(Value::String(_)) => Err(ApiError::Validation(vec![Issue::new(
             "/name",
