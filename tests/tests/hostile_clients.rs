@@ -235,11 +235,11 @@ fn a_slow_but_steady_body_is_read() {
     assert_eq!(r.status, 201, "{}", r.text());
 }
 
-/// `terraplan serve` under a file limit of `nofile` (prlimit); its
-/// address and the process.
+/// `terraplan serve` under a file limit of `nofile` (prlimit), on the
+/// test database as [`Server::start`]; its address and the process.
 fn serve_with_file_limit(dir: &Path, nofile: u32, args: &[&str]) -> (String, Child) {
-    let mut child = Command::new("prlimit")
-        .arg(format!("--nofile={nofile}:{nofile}"))
+    let mut cmd = Command::new("prlimit");
+    cmd.arg(format!("--nofile={nofile}:{nofile}"))
         .arg(terraplan_bin())
         .args(["serve", "--host", "127.0.0.1", "--port", "0", "--data-dir"])
         .arg(dir)
@@ -248,9 +248,11 @@ fn serve_with_file_limit(dir: &Path, nofile: u32, args: &[&str]) -> (String, Chi
         .env_remove("DATABASE_URL")
         .env("TERRAPLAN_LOG", "info")
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("prlimit (util-linux) runs terraplan");
+        .stderr(Stdio::piped());
+    if let Ok(url) = std::env::var("TERRAPLAN_TEST_DATABASE_URL") {
+        cmd.env("DATABASE_URL", url);
+    }
+    let mut child = cmd.spawn().expect("prlimit (util-linux) runs terraplan");
     let mut line = String::new();
     BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut line)
