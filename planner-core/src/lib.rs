@@ -14,6 +14,7 @@ pub mod decompose;
 pub mod export;
 pub mod flock;
 pub mod geo;
+pub mod num;
 pub mod route;
 pub mod survey;
 pub mod terrain;

@@ -115,7 +115,7 @@ fn parse_route_timeout(s: &str) -> Result<f64, String> {
     if v > 0.0 && v <= 86_400.0 {
         Ok(v)
     } else {
-        Err(format!("{v} is outside (0, 86400] seconds"))
+        Err(format!("{s} is outside (0, 86400] seconds"))
     }
 }
 

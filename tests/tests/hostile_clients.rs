@@ -693,3 +693,111 @@ fn a_second_server_cannot_take_over_a_live_ones_database() {
         "done"
     );
 }
+
+/// Numbers a client sends back in the message that refuses them are
+/// readable: `1e308`, not 309 digits (nor `1e-300` as 300 zeros); an
+/// easting beyond the projection is a 422, not a 500.
+#[test]
+fn refused_numbers_are_printed_readably() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    let surveys = server.url("/api/v1/surveys");
+    let long_digits = |r: &terraplan_e2e::Reply| {
+        let t = r.text();
+        let mut run = 0;
+        for c in t.chars() {
+            run = if c.is_ascii_digit() { run + 1 } else { 0 };
+            assert!(run < 20, "a number printed in full: {t}");
+        }
+    };
+    let with = |field: &str, v: Value| {
+        let mut req = example_survey_request();
+        req["uavs"] = json!([{"id": "u1", "start": [6.0620, 51.5110]}]);
+        req[field] = v;
+        req
+    };
+    for (field, v, pointer, shown) in [
+        ("altitude_m", json!(1e308), "/altitude_m", "1e308"),
+        ("altitude_m", json!(1e-300), "/altitude_m", "1e-300"),
+        ("speed_m_s", json!(-1e308), "/speed_m_s", "-1e308"),
+        (
+            "uavs",
+            json!([{"id": "u1", "start": [1e308, 51.5]}]),
+            "/uavs/0/start/0",
+            "longitude 1e308",
+        ),
+        (
+            "camera",
+            json!({"sensor_width_mm": 1e308, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
+                   "image_width_px": 5472, "image_height_px": 3648}),
+            "/camera/sensor_width_mm",
+            "(got 1e308)",
+        ),
+    ] {
+        let r = post_json(&surveys, &with(field, v));
+        assert_invalid_at(&r, field, pointer, shown);
+        long_digits(&r);
+    }
+
+    let grid = dem_grid(40, 40, |_, _| 100.0);
+    let r = post(
+        &server.url("/api/v1/dems?crs=EPSG:32633"),
+        "text/plain",
+        grid.as_bytes(),
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    let dem = r.json()["id"].as_str().unwrap().to_string();
+    let r = post_json(
+        &server.url(&format!("/api/v1/dems/{dem}/elevation")),
+        &json!({"points": [[1e308, 45.0]]}),
+    );
+    assert_invalid_at(&r, "elevation", "/points/0", "longitude 1e308");
+    long_digits(&r);
+    let r = get(&server.url(&format!("/api/v1/dems/{dem}/elevation?lon=15&lat=-1e308")));
+    assert_problem(&r, 400, "latitude -1e308");
+    long_digits(&r);
+    let costmaps = server.url("/api/v1/costmaps");
+    for (body, pointer, shown) in [
+        (
+            json!({"dem_id": dem, "options": {"pca_radius_m": 1e-300}}),
+            "/options/pca_radius_m",
+            "1e-300 m",
+        ),
+        (
+            json!({"dem_id": dem, "vehicle": {"preset": "u-go", "width_m": 1e308}}),
+            "/vehicle/width_m",
+            "got 1e308",
+        ),
+    ] {
+        let r = post_json(&costmaps, &body);
+        assert_invalid_at(&r, pointer, pointer, shown);
+        long_digits(&r);
+    }
+    let r = post_json(&costmaps, &json!({"dem_id": dem}));
+    assert_eq!(r.status, 202, "{}", r.text());
+    let costmap = r.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(wait_costmap_finished(&server, &costmap)["status"], "done");
+    let routes = server.url(&format!("/api/v1/costmaps/{costmap}/routes"));
+    let goal = json!({"utm": [500030, 5000030]});
+    for (body, pointer, shown) in [
+        (
+            json!({"start": {"utm": [1e308, 1e308]}, "goal": goal}),
+            "/start",
+            "{utm: [1e308, 1e308]}",
+        ),
+        (
+            json!({"start": [1e308, -1e308], "goal": goal}),
+            "/start",
+            "[1e308, -1e308]",
+        ),
+        (
+            json!({"start": {"utm": [500010, 5000010]}, "goal": goal, "speed_m_s": 1e308}),
+            "/speed_m_s",
+            "got 1e308",
+        ),
+    ] {
+        let r = post_json(&routes, &body);
+        assert_invalid_at(&r, pointer, pointer, shown);
+        long_digits(&r);
+    }
+}

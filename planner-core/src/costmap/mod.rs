@@ -306,7 +306,10 @@ impl CostmapOptions {
                 let open = if lo_open { "(" } else { "[" };
                 Issue::new(
                     &format!("{prefix}/{field}"),
-                    &format!("must be in {open}{lo}, {hi}], got {x}"),
+                    &format!(
+                        "must be in {open}{lo}, {hi}], got {}",
+                        crate::num::readable(x)
+                    ),
                 )
             })
         };

@@ -151,9 +151,11 @@ pub fn check_against_dem(
             issues.push(Issue::new(
                 &format!("{prefix}/resolution_m"),
                 &format!(
-                    "{r} m is finer than the DEM's {:.4} × {:.4} m cells; the working \
+                    "{} m is finer than the DEM's {:.4} × {:.4} m cells; the working \
                      resolution can only be coarser (cells are averaged, never invented)",
-                    res[0], res[1]
+                    crate::num::readable(r),
+                    res[0],
+                    res[1]
                 ),
             ));
             return issues;
@@ -186,7 +188,7 @@ pub fn check_against_dem(
             &format!("{prefix}/pca_radius_m"),
             &format!(
                 "{} m spans {:.0} cells of {cell:.3} m; at most {MAX_RADIUS_CELLS} are allowed",
-                p.pca_radius_m,
+                crate::num::readable(p.pca_radius_m),
                 p.pca_radius_m / cell
             ),
         ));
@@ -197,7 +199,7 @@ pub fn check_against_dem(
             &format!(
                 "{} m reaches no neighbour of the {cell:.3} m cells; a plane needs at least \
                  the 4 nearest",
-                p.pca_radius_m
+                crate::num::readable(p.pca_radius_m)
             ),
         ));
     }
@@ -207,9 +209,10 @@ pub fn check_against_dem(
             issues.push(Issue::new(
                 &format!("{prefix}/negative_steps/radius_m"),
                 &format!(
-                    "{r} m spans {:.1} cells of {cell:.3} m; give 1 to \
+                    "{} m spans {:.1} cells of {cell:.3} m; give 1 to \
                      {MAX_NEGATIVE_RADIUS_CELLS} cells",
-                    r / cell
+                    crate::num::readable(r),
+                    crate::num::readable(r / cell)
                 ),
             ));
         }
@@ -222,7 +225,7 @@ pub fn check_against_dem(
             &format!(
                 "{} m spans {:.0} cells of {cell:.3} m; with inflation blur at most \
                  {MAX_RADIUS_CELLS} are allowed (inflation distance has no such limit)",
-                p.inflation_sigma_m,
+                crate::num::readable(p.inflation_sigma_m),
                 p.inflation_sigma_m / cell
             ),
         ));

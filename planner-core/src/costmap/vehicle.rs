@@ -134,7 +134,10 @@ impl VehicleSpec {
                     let open = if lo_open { "(" } else { "[" };
                     issues.push(Issue::new(
                         &format!("{prefix}/{field}"),
-                        &format!("{field} must be in {open}{lo}, {hi}], got {x}"),
+                        &format!(
+                            "{field} must be in {open}{lo}, {hi}], got {}",
+                            crate::num::readable(x)
+                        ),
                     ));
                 }
             };

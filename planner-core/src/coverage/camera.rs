@@ -91,7 +91,10 @@ impl Camera {
             if !v.is_finite() || v <= 0.0 || v > max {
                 errors.push((
                     field.to_string(),
-                    format!("must be a number greater than 0 and at most {max} mm (got {v})"),
+                    format!(
+                        "must be a number greater than 0 and at most {max} mm (got {})",
+                        crate::num::readable(v)
+                    ),
                 ));
             }
         };
@@ -119,8 +122,9 @@ impl Camera {
                 errors.push((
                     "sensor_height_mm".to_string(),
                     format!(
-                        "pixel aspect ratio {ratio:.3} is not plausible: check that sensor and \
-                         image width/height are given in the same order"
+                        "pixel aspect ratio {:.3} is not plausible: check that sensor and \
+                         image width/height are given in the same order",
+                        crate::num::readable(ratio)
                     ),
                 ));
             }

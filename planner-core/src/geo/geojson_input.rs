@@ -256,14 +256,20 @@ fn position(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Option<Coo
     if !(-180.0..=180.0).contains(&lon) {
         issues.push(Issue::new(
             &format!("{pointer}/0"),
-            &format!("longitude {lon} is outside [-180, 180]"),
+            &format!(
+                "longitude {} is outside [-180, 180]",
+                crate::num::readable(lon)
+            ),
         ));
         ok = false;
     }
     if !(-90.0..=90.0).contains(&lat) {
         issues.push(Issue::new(
             &format!("{pointer}/1"),
-            &format!("latitude {lat} is outside [-90, 90]"),
+            &format!(
+                "latitude {} is outside [-90, 90]",
+                crate::num::readable(lat)
+            ),
         ));
         ok = false;
     }

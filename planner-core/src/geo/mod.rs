@@ -67,7 +67,7 @@ impl std::fmt::Display for Issue {
 pub enum GeoError {
     #[error("{}", join_issues(.0))]
     Invalid(Vec<Issue>),
-    #[error("latitude {lat} is outside UTM coverage (80°S to 84°N)")]
+    #[error("latitude {} is outside UTM coverage (80°S to 84°N)", crate::num::readable(*.lat))]
     OutsideUtm { lat: f64 },
     #[error("coordinate transformation failed: {0}")]
     Projection(String),

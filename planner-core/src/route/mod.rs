@@ -392,7 +392,10 @@ impl RouteOptions {
         if !(self.epsilon >= lo && self.epsilon <= hi) {
             issues.push(Issue::new(
                 "/epsilon",
-                &format!("epsilon must be in [{lo}, {hi}], got {}", self.epsilon),
+                &format!(
+                    "epsilon must be in [{lo}, {hi}], got {}",
+                    crate::num::readable(self.epsilon)
+                ),
             ));
         }
         if let ArcCost::Thesis { d_max } = self.arc_cost {
@@ -400,7 +403,10 @@ impl RouteOptions {
             if !(d_max >= lo && d_max <= hi) {
                 issues.push(Issue::new(
                     "/arc_cost/d_max",
-                    &format!("d_max must be in [{lo}, {hi}], got {d_max}"),
+                    &format!(
+                        "d_max must be in [{lo}, {hi}], got {}",
+                        crate::num::readable(d_max)
+                    ),
                 ));
             }
         }

@@ -82,7 +82,7 @@ pub enum MapRouteError {
     #[error(
         "the {end} (lon {:.6}, lat {:.6}) is outside the costmap, which covers lon {:.6} to \
          {:.6}, lat {:.6} to {:.6}",
-        .lonlat[0], .lonlat[1], .extent[0], .extent[2], .extent[1], .extent[3]
+        crate::num::readable(.lonlat[0]), crate::num::readable(.lonlat[1]), .extent[0], .extent[2], .extent[1], .extent[3]
     )]
     Outside {
         end: Endpoint,
@@ -111,9 +111,10 @@ pub enum MapRouteError {
 }
 
 fn show(p: &Position) -> String {
+    use crate::num::readable;
     match p {
-        Position::LonLat([lon, lat]) => format!("[{lon}, {lat}]"),
-        Position::Utm { utm: [e, n] } => format!("{{utm: [{e}, {n}]}}"),
+        Position::LonLat([lon, lat]) => format!("[{}, {}]", readable(*lon), readable(*lat)),
+        Position::Utm { utm: [e, n] } => format!("{{utm: [{}, {}]}}", readable(*e), readable(*n)),
     }
 }
 
@@ -412,7 +413,10 @@ impl RouteMap {
             .ok_or_else(|| invalid("it cannot be transformed into the costmap's CRS"))?;
         let lonlat = match *p {
             Position::LonLat(ll) => ll,
-            Position::Utm { .. } => self.to_lonlat(map_xy)?,
+            // Absurd eastings and northings are beyond the projection.
+            Position::Utm { .. } => self
+                .to_lonlat(map_xy)
+                .map_err(|_| invalid("it cannot be transformed into longitude and latitude"))?,
         };
         let cell = self
             .transform

@@ -17,6 +17,7 @@ use crate::geo::{
     GeoError, Issue, Limits, MAX_ISSUES, ParsedPolygon, SurveyArea, cap_issues, parse_polygons,
     prepare_area,
 };
+use crate::num::readable;
 use crate::terrain::{Dem, TerrainModel};
 
 mod flock_plan;
@@ -244,6 +245,7 @@ pub const DEFAULT_ALTITUDE_M: f64 = 60.0;
 fn check_range(issues: &mut Vec<Issue>, pointer: &str, v: f64, lo: f64, hi: f64, lo_open: bool) {
     let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
     if !ok {
+        let (v, lo, hi) = (readable(v), readable(lo), readable(hi));
         let range = if lo_open {
             format!("({lo}, {hi}]")
         } else {
@@ -316,7 +318,10 @@ impl SurveyParams {
         {
             issues.push(Issue::new(
                 &p("slice_angle_deg"),
-                &format!("{d} is outside the allowed range [0, 180) (or use \"auto\")"),
+                &format!(
+                    "{} is outside the allowed range [0, 180) (or use \"auto\")",
+                    readable(d)
+                ),
             ));
         }
         check_range(
@@ -437,13 +442,13 @@ impl SurveyParams {
             if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
                 issues.push(Issue::new(
                     &p(&format!("uavs/{i}/start/0")),
-                    &format!("longitude {lon} is outside [-180, 180]"),
+                    &format!("longitude {} is outside [-180, 180]", readable(lon)),
                 ));
             }
             if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
                 issues.push(Issue::new(
                     &p(&format!("uavs/{i}/start/1")),
-                    &format!("latitude {lat} is outside [-90, 90]"),
+                    &format!("latitude {} is outside [-90, 90]", readable(lat)),
                 ));
             }
         }
@@ -489,13 +494,13 @@ impl SurveyParams {
             if !(lon.is_finite() && (-180.0..=180.0).contains(&lon)) {
                 issues.push(Issue::new(
                     &p(&format!("rally_points/{i}/0")),
-                    &format!("longitude {lon} is outside [-180, 180]"),
+                    &format!("longitude {} is outside [-180, 180]", readable(lon)),
                 ));
             }
             if !(lat.is_finite() && (-90.0..=90.0).contains(&lat)) {
                 issues.push(Issue::new(
                     &p(&format!("rally_points/{i}/1")),
-                    &format!("latitude {lat} is outside [-90, 90]"),
+                    &format!("latitude {} is outside [-90, 90]", readable(lat)),
                 ));
             }
         }

@@ -589,10 +589,16 @@ pub async fn hillshade(
 
 fn check_lon_lat(lon: f64, lat: f64) -> Result<(), String> {
     if !(-180.0..=180.0).contains(&lon) {
-        return Err(format!("longitude {lon} is outside [-180, 180]"));
+        return Err(format!(
+            "longitude {} is outside [-180, 180]",
+            planner_core::num::readable(lon)
+        ));
     }
     if !(-90.0..=90.0).contains(&lat) {
-        return Err(format!("latitude {lat} is outside [-90, 90]"));
+        return Err(format!(
+            "latitude {} is outside [-90, 90]",
+            planner_core::num::readable(lat)
+        ));
     }
     Ok(())
 }

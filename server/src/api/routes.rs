@@ -402,8 +402,10 @@ fn parse_position(
             Some([lon, lat]) => fault(
                 pointer,
                 &format!(
-                    "[{lon}, {lat}] is not a WGS84 position: lon must be in [-180, 180] and lat \
-                     in [-90, 90] degrees"
+                    "[{}, {}] is not a WGS84 position: lon must be in [-180, 180] and lat in \
+                     [-90, 90] degrees",
+                    planner_core::num::readable(lon),
+                    planner_core::num::readable(lat)
                 ),
             ),
             None => fault(pointer, &format!("must be {POSITION_FORMS}: two numbers")),
@@ -479,7 +481,10 @@ fn parse_create(doc: &Value) -> Result<CreateRequest, ApiError> {
     {
         issues.push(Issue::new(
             "/speed_m_s",
-            &format!("speed_m_s must be in (0, {SPEED_MAX}] m/s, got {v}"),
+            &format!(
+                "speed_m_s must be in (0, {SPEED_MAX}] m/s, got {}",
+                planner_core::num::readable(v)
+            ),
         ));
     }
     let options = SearchOptions {
@@ -609,8 +614,9 @@ fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
                         issues.push(Issue::new(
                             &format!("{pointer}/cost"),
                             &format!(
-                                "the cost must be a number in (0, {COST_MAX}], got {c} (block an \
-                                 area with `blocked`)"
+                                "the cost must be a number in (0, {COST_MAX}], got {} (block \
+                                 an area with `blocked`)",
+                                planner_core::num::readable(c)
                             ),
                         ));
                         None
