@@ -135,6 +135,19 @@ struct Activity {
     evicted: bool,
 }
 
+impl Activity {
+    /// Its request body has been read for `grace` at least, and has come
+    /// slower than `min_rate` bytes/s.
+    fn crawling(&self, min_rate: u64, grace: Duration) -> bool {
+        self.body.is_some_and(|(started, received)| {
+            let t = started.elapsed();
+            min_rate > 0
+                && t >= grace
+                && u128::from(received) * 1000 < u128::from(min_rate) * t.as_millis()
+        })
+    }
+}
+
 impl ConnState {
     fn new() -> ConnState {
         ConnState {
@@ -249,14 +262,7 @@ impl Registry {
     fn evict_one(&self) -> bool {
         let open = lock(&self.open);
         let idle = |a: &Activity| a.in_flight == 0 && a.idle_since.elapsed() >= self.grace;
-        let crawling = |a: &Activity| {
-            a.body.is_some_and(|(started, received)| {
-                let t = started.elapsed();
-                self.min_rate > 0
-                    && t >= self.grace
-                    && u128::from(received) * 1000 < u128::from(self.min_rate) * t.as_millis()
-            })
-        };
+        let crawling = |a: &Activity| a.crawling(self.min_rate, self.grace);
         let pick = |rule: &dyn Fn(&Activity) -> bool| {
             open.values().find(|state| {
                 let a = lock(&state.inner);
@@ -394,6 +400,7 @@ async fn serve_connection(
     builder
         .timer(TokioTimer::new())
         .header_read_timeout(limits.header_read_timeout);
+    let min_rate = limits.body_min_bytes_per_s;
     let service_state = state.clone();
     let service = hyper::service::service_fn(move |req: Request<Incoming>| {
         let app = app.clone();
@@ -420,6 +427,14 @@ async fn serve_connection(
                 break;
             }
             _ = stop.wait_for(|s| *s), if !stopping => {
+                // No request in hand (idle, or its head still coming), or
+                // one whose body crawls in: nothing to finish (hyper would
+                // wait for a head begun, a handler for its body).
+                let a = lock(&state.inner);
+                if a.in_flight == 0 || a.crawling(min_rate, EVICT_GRACE) {
+                    break;
+                }
+                drop(a);
                 stopping = true;
                 conn.as_mut().graceful_shutdown();
             }

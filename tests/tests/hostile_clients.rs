@@ -801,3 +801,21 @@ fn refused_numbers_are_printed_readably() {
         long_digits(&r);
     }
 }
+
+/// A request head still arriving does not hold up a graceful shutdown:
+/// with nothing to finish, the server stops at once instead of waiting
+/// out the header timeout.
+#[test]
+fn a_half_sent_request_does_not_delay_shutdown() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &["--header-read-timeout-s", "60"]);
+    let addr = authority(&server.base);
+    let mut slow: Vec<Slow> = (0..10).map(|i| Slow::open(&addr, i % 2 == 1)).collect();
+    // Held open, so the trickling bodies are being read when it stops.
+    watch(&mut slow, Instant::now() + Duration::from_millis(500));
+    let t = Instant::now();
+    let status = server.stop();
+    let took = t.elapsed();
+    assert!(status.success(), "{status:?}");
+    assert!(took < Duration::from_secs(10), "shutdown took {took:?}");
+}
