@@ -375,13 +375,18 @@ impl CostmapOptions {
             ));
         }
         if let Some(l) = &self.landcover {
-            if l.classes.is_empty() || l.classes.len() > 256 {
+            // Over the cap the classes are not looked at one by one: the
+            // duplicate check is quadratic in their count.
+            let classes = if l.classes.is_empty() || l.classes.len() > 256 {
                 issues.push(Issue::new(
                     &format!("{prefix}/landcover/classes"),
                     &format!("give 1 to 256 classes, got {}", l.classes.len()),
                 ));
-            }
-            for (i, c) in l.classes.iter().enumerate() {
+                &[][..]
+            } else {
+                &l.classes[..]
+            };
+            for (i, c) in classes.iter().enumerate() {
                 issues.extend(range(
                     &format!("landcover/classes/{i}/cost"),
                     Some(c.cost),
@@ -389,7 +394,7 @@ impl CostmapOptions {
                     false,
                     1000.0,
                 ));
-                if l.classes[..i].iter().any(|d| d.code == c.code) {
+                if classes[..i].iter().any(|d| d.code == c.code) {
                     issues.push(Issue::new(
                         &format!("{prefix}/landcover/classes/{i}/code"),
                         &format!("code {} is listed twice", c.code),
@@ -527,5 +532,53 @@ pub enum CostmapError {
 impl CostmapError {
     pub(crate) fn invalid(pointer: &str, message: String) -> CostmapError {
         CostmapError::Invalid(vec![Issue::new(pointer, &message)])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Over 256 land-cover classes is one fault, found without looking
+    /// at the classes (their duplicate check is quadratic): 200 000 take
+    /// no time.
+    #[test]
+    fn too_many_landcover_classes_are_one_fault_found_at_once() {
+        let class = |code| LandcoverClass {
+            code,
+            cost: 1.0,
+            lethal: false,
+            name: None,
+        };
+        let options = CostmapOptions {
+            landcover: Some(LandcoverOptions {
+                source: "dem".into(),
+                classes: (0..200_000).map(class).collect(),
+                unlisted_cost: 0.0,
+                unlisted_lethal: false,
+            }),
+            ..CostmapOptions::default()
+        };
+        let t = std::time::Instant::now();
+        let issues = options.validate("/options");
+        assert!(
+            t.elapsed() < std::time::Duration::from_secs(1),
+            "{:?}",
+            t.elapsed()
+        );
+        assert_eq!(issues.len(), 1, "{issues:?}");
+        assert_eq!(issues[0].pointer, "/options/landcover/classes");
+        assert!(
+            issues[0].message.contains("got 200000"),
+            "{}",
+            issues[0].message
+        );
+        // Within the cap each class is still checked.
+        let mut options = options;
+        let landcover = options.landcover.as_mut().unwrap();
+        landcover.classes = vec![class(3), class(3)];
+        let issues = options.validate("/options");
+        assert_eq!(issues.len(), 1, "{issues:?}");
+        assert_eq!(issues[0].pointer, "/options/landcover/classes/1/code");
     }
 }
