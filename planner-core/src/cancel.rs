@@ -12,6 +12,12 @@
 //! [`check`], set for the duration of a call by [`CancelToken::scope`], so
 //! the token need not be passed through every signature on the way. Work
 //! handed to other threads takes the token along ([`current`]).
+//!
+//! A function that cannot return the error (it returns a plain value or an
+//! `Option`) may stop early with a partial result when a check fails; its
+//! caller checks again right after and throws that result away. The owner
+//! of the token can [`settle`](CancelToken::settle) the outcome, so that
+//! a failure caused by such a partial result reads as the cancellation.
 
 use std::cell::RefCell;
 use std::sync::Arc;
@@ -125,6 +131,16 @@ impl CancelToken {
     /// True once [`check`](Self::check) would fail.
     pub fn is_cancelled(&self) -> bool {
         self.check().is_err()
+    }
+
+    /// `result`, or the cancellation when it failed once this token was
+    /// cancelled: a stage that cannot return [`Cancelled`] stops early with
+    /// what it has, and a later one may then fail in its own words.
+    pub fn settle<T, E: From<Cancelled>>(&self, result: Result<T, E>) -> Result<T, E> {
+        match (result, self.check()) {
+            (Err(_), Err(c)) => Err(c.into()),
+            (result, _) => result,
+        }
     }
 
     /// A guard that cancels this token when dropped: held by a request's
@@ -257,6 +273,29 @@ mod tests {
     }
 
     #[test]
+    fn settle_reports_a_failure_after_cancelling_as_the_cancellation() {
+        #[derive(Debug, PartialEq)]
+        enum E {
+            Other,
+            Cancelled(Cancelled),
+        }
+        impl From<Cancelled> for E {
+            fn from(c: Cancelled) -> E {
+                E::Cancelled(c)
+            }
+        }
+        let token = CancelToken::new();
+        assert_eq!(token.settle(Err::<(), _>(E::Other)), Err(E::Other));
+        token.cancel();
+        assert_eq!(
+            token.settle(Err::<(), _>(E::Other)),
+            Err(E::Cancelled(Cancelled::Stopped))
+        );
+        // A result that made it is kept.
+        assert_eq!(token.settle(Ok::<_, E>(7)), Ok(7));
+    }
+
+    #[test]
     fn dropping_the_guard_cancels() {
         let token = CancelToken::new();
         {
@@ -308,5 +347,116 @@ mod tests {
             let mut every = Pacer::new(0);
             assert_eq!(every.tick(), Err(Cancelled::Stopped));
         });
+    }
+
+    /// A survey request over a round field of `vertices` vertices, with a
+    /// ring of `zones` round no-fly zones inside it and two UAVs.
+    fn round_field(vertices: usize, zones: usize) -> crate::survey::SurveyRequest {
+        let ring = |lon: f64, lat: f64, r_m: f64, n: usize| {
+            let mut pts: Vec<[f64; 2]> = (0..n)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * i as f64 / n as f64;
+                    [
+                        lon + r_m * a.cos() / (111_320.0 * 51.5f64.to_radians().cos()),
+                        lat + r_m * a.sin() / 110_540.0,
+                    ]
+                })
+                .collect();
+            pts.push(pts[0]);
+            serde_json::json!({"type": "Polygon", "coordinates": [pts]})
+        };
+        let (lon, lat) = (6.06, 51.5);
+        let nfz: Vec<_> = (0..zones)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / zones as f64;
+                let (dx, dy) = (300.0 * a.cos(), 300.0 * a.sin());
+                ring(
+                    lon + dx / (111_320.0 * 51.5f64.to_radians().cos()),
+                    lat + dy / 110_540.0,
+                    25.0,
+                    12,
+                )
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "roi": ring(lon, lat, 600.0, vertices),
+            "no_fly_zones": nfz,
+            "altitude_m": 40,
+            "uavs": [{"id": "a", "start": [lon, lat]}, {"id": "b", "start": [lon + 0.001, lat]}],
+        });
+        crate::survey::SurveyRequest::from_document(&doc).expect("a valid request")
+    }
+
+    #[test]
+    fn planning_calls_answer_a_cancelled_token_with_cancelled() {
+        use crate::survey::{PlanError, plan_survey};
+        use crate::terrain::test_support::{dem, north_up};
+        let req = round_field(64, 4);
+        let limits = crate::geo::Limits::default();
+        assert!(plan_survey(&req, &limits).is_ok());
+        let stopped = CancelToken::new();
+        stopped.cancel();
+        assert!(matches!(
+            stopped.scope(|| plan_survey(&req, &limits)),
+            Err(PlanError::Cancelled(Cancelled::Stopped))
+        ));
+        let zero = CancelToken::with_limit(Duration::ZERO);
+        assert!(matches!(
+            zero.scope(|| plan_survey(&req, &limits)),
+            Err(PlanError::Cancelled(Cancelled::TimedOut { limit })) if limit == Duration::ZERO
+        ));
+        let d = dem(
+            300,
+            200,
+            (0..60_000).map(|i| f64::from(i % 97)).collect(),
+            north_up(0.0, 0.0, 10.0, 10.0),
+            false,
+        );
+        assert!(crate::terrain::hillshade_png(&d, 256).is_ok());
+        assert!(crate::terrain::dilate(&d, 50.0).is_ok());
+        stopped.scope(|| {
+            assert_eq!(
+                crate::terrain::hillshade_png(&d, 256),
+                Err(Cancelled::Stopped)
+            );
+            assert_eq!(crate::terrain::dilate(&d, 50.0), Err(Cancelled::Stopped));
+        });
+    }
+
+    /// Cancelled at any point of its run, a survey stops soon: every stage
+    /// checks the token often. The bound is generous (the test may share
+    /// the machine); the service promises a free planner within 1 s.
+    #[test]
+    fn a_survey_cancelled_midway_stops_soon() {
+        use crate::survey::{PlanError, plan_survey};
+        let req = round_field(3000, 12);
+        let limits = crate::geo::Limits::default();
+        let began = Instant::now();
+        plan_survey(&req, &limits).expect("plans");
+        let whole = began.elapsed();
+        for tenth in [1u32, 3, 5, 7, 9] {
+            let token = CancelToken::new();
+            let (req, limits, t) = (req.clone(), limits.clone(), token.clone());
+            let run = std::thread::spawn(move || {
+                let r = t.scope(|| plan_survey(&req, &limits));
+                (r, Instant::now())
+            });
+            std::thread::sleep(whole * tenth / 10);
+            let cancelled_at = Instant::now();
+            token.cancel();
+            let (r, ended) = run.join().unwrap();
+            match r {
+                Err(PlanError::Cancelled(Cancelled::Stopped)) => {
+                    let late = ended.saturating_duration_since(cancelled_at);
+                    assert!(
+                        late < Duration::from_secs(2),
+                        "stopped {late:?} after the cancel at {tenth}/10 of {whole:?}"
+                    );
+                }
+                // Finished first (the machine was slower the first time).
+                Ok(_) => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
     }
 }

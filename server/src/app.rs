@@ -11,6 +11,7 @@ use axum::extract::Request;
 use axum::http::{HeaderName, HeaderValue, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
+use planner_core::cancel::CancelToken;
 use planner_core::geo::Limits;
 use planner_core::route::DStarLite;
 use planner_core::terrain::{Dem, DemLimits, read_dem};
@@ -36,13 +37,74 @@ use crate::error::ApiError;
 /// How long a request waits for a free planner before a 503.
 const PLANNER_QUEUE_TIMEOUT: Duration = Duration::from_secs(120);
 
+/// The kinds of planning work, each with its own `--planner-threads`
+/// slots: a slow survey never holds up a DEM upload, a hillshade or a
+/// route search, and the other way round (at most three times
+/// `--planner-threads` threads plan at once).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Work {
+    /// Survey planning: stopped after `--survey-timeout-s`.
+    Survey,
+    /// Route searches: stopped after `--route-timeout-s`.
+    Route,
+    /// Reading DEMs, hillshades and height sampling: bounded by the DEM
+    /// size limits.
+    Dem,
+}
+
+/// The planner slots of each kind of work, and the survey time limit.
+pub struct Planners {
+    surveys: Arc<Semaphore>,
+    routes: Arc<Semaphore>,
+    dems: Arc<Semaphore>,
+    /// Longest a survey may plan (`--survey-timeout-s`).
+    pub survey_timeout: Duration,
+}
+
+/// `--survey-timeout-s` by default.
+pub const SURVEY_TIMEOUT: Duration = Duration::from_secs(60);
+
+impl Planners {
+    /// `threads` slots for each kind of work.
+    pub fn new(threads: usize, survey_timeout: Duration) -> Planners {
+        let slots = || Arc::new(Semaphore::new(threads.max(1)));
+        Planners {
+            surveys: slots(),
+            routes: slots(),
+            dems: slots(),
+            survey_timeout,
+        }
+    }
+
+    pub fn from_config(config: &ServeConfig) -> Planners {
+        Planners::new(
+            config.planner_threads,
+            Duration::from_secs_f64(config.survey_timeout_s),
+        )
+    }
+
+    fn slots(&self, work: Work) -> &Arc<Semaphore> {
+        match work {
+            Work::Survey => &self.surveys,
+            Work::Route => &self.routes,
+            Work::Dem => &self.dems,
+        }
+    }
+}
+
+impl Default for Planners {
+    fn default() -> Self {
+        Planners::new(1, SURVEY_TIMEOUT)
+    }
+}
+
 #[derive(Clone)]
 pub struct AppState {
     pub db: Db,
     pub limits: Limits,
     /// Bounds the plans computed at once, so a burst of heavy requests
     /// queues instead of exhausting the blocking pool and memory.
-    pub planner: Arc<Semaphore>,
+    pub planner: Arc<Planners>,
     /// DEM limits and the cache of parsed DEMs.
     pub dems: Arc<DemStore>,
     /// The costmap jobs this process holds, and their live progress.
@@ -322,23 +384,58 @@ impl DemCache {
     }
 }
 
+/// Run `job` on a blocking thread, without waiting for a planner slot: for
+/// request checks whose work grows with the request (bounded by the body
+/// limit), which must not hold up the runtime threads.
+pub async fn off_runtime<T: Send + 'static>(
+    job: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, ApiError> {
+    tokio::task::spawn_blocking(job)
+        .await
+        .map_err(|e| ApiError::Internal(format!("request check failed: {e}")))
+}
+
 impl AppState {
     /// Run CPU-heavy planning off the async runtime, at most
-    /// `planner_threads` at a time.
+    /// `planner_threads` jobs of each kind of `work` at a time; a job waits
+    /// up to 2 minutes for its slot (then 503).
+    ///
+    /// The job gets a cancellation token, also set as its thread's
+    /// ([`planner_core::cancel::check`]): it is cancelled when the
+    /// returned future is dropped (the client went away) and runs out
+    /// after the time limit of the kind of work, counted from the job's
+    /// start. A job seeing it cancelled returns early, which frees its slot.
     pub async fn run_planner<T: Send + 'static>(
         &self,
-        job: impl FnOnce() -> T + Send + 'static,
+        work: Work,
+        job: impl FnOnce(&CancelToken) -> T + Send + 'static,
     ) -> Result<T, ApiError> {
-        let permit =
-            tokio::time::timeout(PLANNER_QUEUE_TIMEOUT, self.planner.clone().acquire_owned())
-                .await
-                .map_err(|_| {
-                    ApiError::Unavailable("the planner is busy: retry in a moment".into())
-                })?
-                .map_err(|_| ApiError::Unavailable("the service is shutting down".into()))?;
+        let slots = self.planner.slots(work).clone();
+        let permit = tokio::time::timeout(PLANNER_QUEUE_TIMEOUT, slots.acquire_owned())
+            .await
+            .map_err(|_| ApiError::Unavailable("the planner is busy: retry in a moment".into()))?
+            .map_err(|_| ApiError::Unavailable("the service is shutting down".into()))?;
+        let token = match work {
+            Work::Survey => CancelToken::with_limit(self.planner.survey_timeout),
+            Work::Route => CancelToken::with_limit(self.routes.timeout),
+            Work::Dem => CancelToken::new(),
+        };
+        // Dropped with this future when the client goes away.
+        let _cancel = token.cancel_on_drop();
+        let span = tracing::Span::current();
         tokio::task::spawn_blocking(move || {
             let _permit = permit;
-            job()
+            let _span = span.enter();
+            let began = std::time::Instant::now();
+            let out = token.scope(|| job(&token));
+            if let Err(why) = token.check() {
+                tracing::info!(
+                    work = ?work,
+                    after_ms = began.elapsed().as_millis() as u64,
+                    "planning stopped: {why}"
+                );
+            }
+            out
         })
         .await
         .map_err(|e| ApiError::Internal(format!("planner task failed: {e}")))
@@ -367,7 +464,9 @@ impl AppState {
             max_side: u32::MAX,
         };
         let dem = self
-            .run_planner(move || read_dem(&row.data, row.file_name.as_deref(), crs, &limits))
+            .run_planner(Work::Dem, move |_| {
+                read_dem(&row.data, row.file_name.as_deref(), crs, &limits)
+            })
             .await?
             .map_err(|e| ApiError::Internal(format!("stored DEM {id} does not read again: {e}")))?;
         let dem = Arc::new(dem);

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::{Issue, Limits};
 use planner_core::survey::{
     DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey_over,
@@ -148,6 +149,23 @@ struct SurveyArgs {
     /// Horizontal CRS of the DEM (`EPSG:32633`), when the file does not say.
     #[arg(long, value_name = "EPSG:CODE", requires = "dem")]
     dem_crs: Option<String>,
+    /// Stop planning after this many seconds (fractions allowed) and exit
+    /// 1; no limit by default.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_timeout_s)]
+    timeout_s: Option<f64>,
+}
+
+/// `--timeout-s`: a number of seconds in (0, 86400].
+fn parse_timeout_s(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v > 0.0 && v <= 86_400.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s} is outside (0, 86400] seconds"))
+    }
 }
 
 /// A failure with its exit status.
@@ -280,8 +298,13 @@ fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
     let req = SurveyRequest::from_document(&doc).map_err(|e| plan_failure(e, &describe))?;
-    let plan =
-        plan_survey_over(&req, &limits, dem.as_ref()).map_err(|e| plan_failure(e, &describe))?;
+    let token = match args.timeout_s {
+        Some(s) => CancelToken::with_limit(std::time::Duration::from_secs_f64(s)),
+        None => CancelToken::new(),
+    };
+    let plan = token
+        .settle(token.scope(|| plan_survey_over(&req, &limits, dem.as_ref())))
+        .map_err(|e| plan_failure(e, &describe))?;
 
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
@@ -642,6 +665,12 @@ fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure 
     match e {
         PlanError::Invalid(issues) => Failure::input(describe(&issues)),
         PlanError::Internal(m) => Failure::other(format!("planning failed: {m}")),
+        PlanError::Cancelled(Cancelled::TimedOut { limit }) => Failure::other(format!(
+            "the survey took longer than {} s (--timeout-s) and was stopped: survey a smaller \
+             area, with fewer vertices or no-fly zones or a wider line spacing, or allow more time",
+            limit.as_secs_f64()
+        )),
+        PlanError::Cancelled(c) => Failure::other(format!("planning stopped: {c}")),
     }
 }
 

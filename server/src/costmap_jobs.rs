@@ -843,7 +843,7 @@ mod tests {
             let state = AppState {
                 db,
                 limits: Default::default(),
-                planner: Arc::new(Semaphore::new(1)),
+                planner: Arc::new(crate::app::Planners::default()),
                 dems: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
                 costmaps: Arc::new(CostmapJobs::new(1)),
                 routes: Arc::new(crate::app::RouteStore::default()),

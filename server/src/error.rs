@@ -3,6 +3,7 @@
 
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use planner_core::cancel::Cancelled;
 use planner_core::geo::Issue;
 use planner_core::survey::PlanError;
 use serde::Serialize;
@@ -142,11 +143,23 @@ impl IntoResponse for ApiError {
     }
 }
 
+/// Work stopped by its token: a 503. The client that went away never
+/// reads it; a time limit is named by the caller where it knows the flag.
+impl From<Cancelled> for ApiError {
+    fn from(c: Cancelled) -> Self {
+        ApiError::Unavailable(match c {
+            Cancelled::Stopped => "the request was cancelled".to_string(),
+            Cancelled::TimedOut { .. } => format!("{c}: retry when the service is less busy"),
+        })
+    }
+}
+
 impl From<PlanError> for ApiError {
     fn from(e: PlanError) -> Self {
         match e {
             PlanError::Invalid(issues) => ApiError::Validation(issues),
             PlanError::Internal(m) => ApiError::Internal(m),
+            PlanError::Cancelled(c) => c.into(),
         }
     }
 }

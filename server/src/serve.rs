@@ -8,7 +8,6 @@ use std::time::Duration;
 
 use sqlx::sqlite::SqliteConnectOptions;
 use tokio::net::{TcpListener, TcpSocket};
-use tokio::sync::Semaphore;
 use tracing_subscriber::EnvFilter;
 
 use crate::app::{AppState, router};
@@ -53,7 +52,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     let state = AppState {
         db: db.clone(),
         limits: config.limits(),
-        planner: Arc::new(Semaphore::new(config.planner_threads)),
+        planner: Arc::new(crate::app::Planners::from_config(&config)),
         dems: Arc::new(crate::app::DemStore::from_config(&config)),
         costmaps: jobs.clone(),
         routes: Arc::new(crate::app::RouteStore::from_config(&config)),

@@ -98,6 +98,8 @@ pub fn plan_cell_candidates_in(
     let mut candidates: Vec<(Frame, Vec<RowOffset>)> = candidate_bearings(&ring, slice_angle_deg)
         .into_iter()
         .filter_map(|b| {
+            // Cancelled: no more candidates; checked again below.
+            crate::cancel::check().ok()?;
             let frame = Frame::new(b, &ring);
             let offsets = row_offsets(frame.v, line_spacing_m)?;
             Some((frame, offsets))
@@ -108,6 +110,8 @@ pub fn plan_cell_candidates_in(
     let mut rejected: Vec<Layout> = Vec::new();
     for group in candidates.chunk_by(|a, b| a.1.len() == b.1.len()) {
         for (frame, offsets) in group {
+            // Cancelled: no plan; the caller checks again and reports it.
+            crate::cancel::check().ok()?;
             let layout = Layout::new(*frame, offsets, &cell_region);
             if layout.is_monotone() {
                 finalists.push(layout);
@@ -133,6 +137,7 @@ pub fn plan_cell_candidates_in(
     let plans: Vec<CellPlan> = finalists
         .iter()
         .filter_map(|layout| {
+            crate::cancel::check().ok()?;
             let lanes = layout.lanes(&ring, free_region);
             (!lanes.is_empty()).then(|| CellPlan {
                 cell_index,
@@ -302,6 +307,8 @@ impl Layout {
         let rows = offsets
             .iter()
             .filter_map(|&(v, band)| {
+                // Cancelled: rows left out; the caller checks again.
+                crate::cancel::check().ok()?;
                 let start = frame.point(umin - 1.0, v);
                 let segments: Vec<(f64, f64)> = cell
                     .intervals(start, frame.d, 0.0, umax - umin + 2.0)
@@ -332,6 +339,10 @@ impl Layout {
     fn lanes(&self, ring: &[Coord<f64>], free: &Region) -> Vec<Lane> {
         let mut lanes = Vec::with_capacity(self.rows.len());
         for (k, row) in self.rows.iter().enumerate() {
+            if crate::cancel::check().is_err() {
+                // The caller checks again and drops these lanes.
+                break;
+            }
             let forward = k % 2 == 0;
             let (bu0, bu1) = self.band_extent(ring, row.band);
             let count = row.segments.len();

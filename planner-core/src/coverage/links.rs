@@ -94,7 +94,15 @@ impl<'a> LinkRouter<'a> {
 
     /// `links[i]` for every consecutive pair of `lanes`.
     pub(crate) fn links(&self, lanes: &[Lane]) -> Vec<Vec<Coord<f64>>> {
-        lanes.windows(2).map(|w| self.link(&w[0], &w[1])).collect()
+        // Cancelled: fewer links; the caller checks again and drops them.
+        lanes
+            .windows(2)
+            .map_while(|w| {
+                crate::cancel::check()
+                    .ok()
+                    .map(|()| self.link(&w[0], &w[1]))
+            })
+            .collect()
     }
 
     /// Intermediate points from `from.end` to `to.start`.

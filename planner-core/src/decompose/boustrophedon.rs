@@ -69,7 +69,9 @@ pub fn decompose(
     if rings.is_empty() {
         return Err(DecomposeError::EmptyFreeSpace);
     }
+    crate::cancel::check()?;
     split_at_touches(&mut rings, eps);
+    crate::cancel::check()?;
 
     let cells = sweep(&rings, eps).map_err(|f| {
         DecomposeError::InvalidGeometry(
@@ -80,6 +82,7 @@ pub fn decompose(
             .to_string(),
         )
     })?;
+    crate::cancel::check()?;
 
     let mut polygons = Vec::with_capacity(cells.len());
     let mut total = 0.0;

@@ -37,4 +37,7 @@ pub enum DecomposeError {
     /// cannot resolve.
     #[error("the free space is not a valid polygon set: {0}")]
     InvalidGeometry(String),
+    /// Stopped by its cancellation token (see [`crate::cancel`]).
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }

@@ -131,9 +131,11 @@ pub fn plan_tour(
     let mut search = Search::new(start, &jobs);
     search.nearest_neighbour();
     search.improve(&mut legs);
+    crate::cancel::check()?;
     legs.exact = true;
     legs.budget = QUERY_BUDGET_BASE + QUERY_BUDGET_PER_CELL * jobs.len();
     search.improve(&mut legs);
+    crate::cancel::check()?;
 
     // Indexed once for all re-oriented cells.
     let free = FreeSpace::new(free);
@@ -494,7 +496,11 @@ impl<'a> Search<'a> {
             }
             while let Some(job) = queue.pop_front() {
                 queued[job] = false;
-                if effort == 0 || (legs.exact && legs.budget == 0) {
+                // Cancelled: stop here, the caller checks again.
+                if effort == 0
+                    || (legs.exact && legs.budget == 0)
+                    || crate::cancel::check().is_err()
+                {
                     return;
                 }
                 effort -= 1;

@@ -82,6 +82,9 @@ pub enum TransitError {
         .from.x, .from.y, .to.x, .to.y
     )]
     NoPath { from: Coord<f64>, to: Coord<f64> },
+    /// Stopped by its cancellation token (see [`crate::cancel`]).
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }
 
 /// One obstacle boundary edge, indexed in an R-tree.
@@ -338,6 +341,8 @@ impl ObstacleMap {
         a: Coord<f64>,
         b: Coord<f64>,
     ) -> Result<Vec<Coord<f64>>, TransitError> {
+        // Flocks ask for many transits: each is a point to stop at.
+        crate::cancel::check()?;
         for (endpoint, p) in [(Endpoint::Start, a), (Endpoint::End, b)] {
             if !is_finite(p) {
                 return Err(TransitError::NonFinite { endpoint });
@@ -363,9 +368,12 @@ impl ObstacleMap {
         if self.segment_clear(a, b) {
             return Ok(vec![a, b]);
         }
-        self.find(&self.graph, a, b)
-            .or_else(|| self.find(self.bare.as_ref()?, a, b))
-            .ok_or(TransitError::NoPath { from: a, to: b })
+        let found = self
+            .find(&self.graph, a, b)
+            .or_else(|| self.find(self.bare.as_ref()?, a, b));
+        // A cancelled search gives up as if there were no path.
+        crate::cancel::check()?;
+        found.ok_or(TransitError::NoPath { from: a, to: b })
     }
 
     /// Let transits start or end at `p` although it lies inside an obstacle
@@ -601,9 +609,14 @@ impl<'m> AStar<'m> {
     /// Runs until the goal is closed, the queue runs dry, or (if given)
     /// `max_closed` nodes are closed in all.
     fn run(&mut self, max_closed: Option<usize>) -> Search {
+        let mut pace = crate::cancel::Pacer::new(4096);
         loop {
             if max_closed.is_some_and(|m| self.occluders.len() >= m) {
                 return Search::Capped;
+            }
+            if pace.tick().is_err() {
+                // Cancelled: the caller checks again and reports it.
+                return Search::Exhausted;
             }
             let Some(entry) = self.heap.pop() else {
                 return Search::Exhausted;

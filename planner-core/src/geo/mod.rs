@@ -71,6 +71,9 @@ pub enum GeoError {
     OutsideUtm { lat: f64 },
     #[error("coordinate transformation failed: {0}")]
     Projection(String),
+    /// Stopped by its cancellation token (see [`crate::cancel`]).
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }
 
 pub(crate) fn join_issues(issues: &[Issue]) -> String {
@@ -161,8 +164,10 @@ pub fn prepare_area(
         return Err(GeoError::Invalid(issues));
     }
     for p in roi.iter().chain(no_fly) {
+        crate::cancel::check()?;
         issues.extend(polygon_issues(&p.polygon, &p.pointer));
     }
+    crate::cancel::check()?;
     if !issues.is_empty() {
         return Err(GeoError::Invalid(issues));
     }

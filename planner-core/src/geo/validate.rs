@@ -51,7 +51,12 @@ pub fn polygon_issues(polygon: &Polygon<f64>, pointer: &str) -> Vec<Issue> {
     let ring_len: Vec<usize> = rings.iter().map(|r| r.0.len().saturating_sub(1)).collect();
     let tree = RTree::bulk_load(edges);
     let mut issues = Vec::new();
+    let mut pace = crate::cancel::Pacer::new(1024);
     'outer: for a in tree.iter() {
+        if pace.tick().is_err() {
+            // Cancelled: the caller checks again and reports it.
+            break;
+        }
         for b in tree.locate_in_envelope_intersecting(&a.envelope()) {
             if (b.ring, b.index) <= (a.ring, a.index) {
                 continue;

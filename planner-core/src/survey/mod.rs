@@ -536,6 +536,9 @@ pub enum PlanError {
     /// A stage failed on valid input (a bug, or geometry beyond its reach).
     #[error("planning failed: {0}")]
     Internal(String),
+    /// Stopped by its cancellation token (see [`crate::cancel`]).
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }
 
 impl From<GeoError> for PlanError {
@@ -546,6 +549,7 @@ impl From<GeoError> for PlanError {
                 PlanError::Invalid(vec![Issue::new(ROI_POINTER, &e.to_string())])
             }
             GeoError::Projection(m) => PlanError::Internal(m),
+            GeoError::Cancelled(c) => PlanError::Cancelled(c),
         }
     }
 }
@@ -921,6 +925,7 @@ pub fn plan_survey_over(
     let proj = &area.projection;
 
     let free = roi_minus(&area, &area.no_fly);
+    crate::cancel::check()?;
     let free_area = free.unsigned_area();
     if free_area < MIN_FREE_AREA_M2 {
         return Err(PlanError::Invalid(vec![Issue::new(
@@ -995,6 +1000,7 @@ pub fn plan_survey_over(
     } else {
         free.clone()
     };
+    crate::cancel::check()?;
     if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
         return Err(homes::nothing_flyable(clearance));
     }
@@ -1040,20 +1046,25 @@ pub fn plan_survey_over(
     } else {
         flyable
     };
+    crate::cancel::check()?;
     if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
         return Err(homes::nothing_flyable(clearance));
     }
     let mut obstacles = ObstacleMap::new(&keep_out, 0.0);
     let ids: Vec<String> = uav_specs.iter().map(|u| u.id.clone()).collect();
-    warnings.extend(homes::check_homes(
-        &homes,
-        &ids,
-        &pointer,
-        &area.no_fly,
-        clearance,
-        &mut obstacles,
-        proj,
-    )?);
+    warnings.extend(
+        homes::check_homes(
+            &homes,
+            &ids,
+            &pointer,
+            &area.no_fly,
+            clearance,
+            &mut obstacles,
+            proj,
+        )
+        .map_err(cancelled_or)?,
+    );
+    crate::cancel::check()?;
     let Decomposition {
         slice_angle_deg: slice_angle,
         cells,
@@ -1093,7 +1104,8 @@ pub fn plan_survey_over(
                 free: &free,
                 flyable: &flyable,
             };
-            let t = prepare_terrain(dem, &area, &homes, &geometry, &plans, params, spaces)?;
+            let t = prepare_terrain(dem, &area, &homes, &geometry, &plans, params, spaces)
+                .map_err(cancelled_or)?;
             if t.known_fraction < 1.0 {
                 warnings.push(format!(
                     "the DEM has no heights under {:.1} % of the survey area: flown there at the \
@@ -1106,6 +1118,9 @@ pub fn plan_survey_over(
             plans = plans
                 .into_iter()
                 .map(|p| {
+                    if crate::cancel::check().is_err() {
+                        return p; // checked again below
+                    }
                     let candidates = coverage::plan_cell_candidates_in(
                         p.cell_index,
                         &cells[p.cell_index],
@@ -1124,6 +1139,7 @@ pub fn plan_survey_over(
                         .map_or(p, |(_, c)| c)
                 })
                 .collect();
+            crate::cancel::check()?;
             let homes_amsl: Vec<f64> = (0..homes.len())
                 .map(|i| t.model.terrain(homes[i]).ok_or_else(|| no_home(i)))
                 .collect::<Result<_, Issue>>()
@@ -1157,7 +1173,8 @@ pub fn plan_survey_over(
         altitude_m: altitude,
         terrain: terrain.as_ref().map(|(t, _)| (&t.model, rules)),
     };
-    let outcome = flock_plan::share(&input)?;
+    let outcome = flock_plan::share(&input).map_err(cancelled_or)?;
+    crate::cancel::check()?;
 
     let mut uav_plans = Vec::with_capacity(uav_specs.len());
     let mut all_paths: Vec<Coord<f64>> = Vec::new();
@@ -1166,6 +1183,7 @@ pub fn plan_survey_over(
         let several = flights.len() > 1;
         let mut sorties = Vec::with_capacity(flights.len());
         for (k, flight) in flights.into_iter().enumerate() {
+            crate::cancel::check()?;
             let tour = &flight.tour;
             let (mission, length_3d, uav_terrain) = match &terrain {
                 None => {
@@ -1244,6 +1262,7 @@ pub fn plan_survey_over(
 
     let lanes: Vec<coverage::Lane> = plans.iter().flat_map(|p| p.lanes.iter().copied()).collect();
     let coverage_ratio = coverage::coverage_ratio(&lanes, geometry.footprint_side_m, &free);
+    crate::cancel::check()?;
     if enclosed_m2 > 0.0 {
         warnings.push(format!(
             "{:.0} m² of the free area are enclosed by no-fly zones with gaps narrower than twice \
@@ -1500,6 +1519,15 @@ fn roi_minus(area: &SurveyArea, zones: &[Polygon<f64>]) -> MultiPolygon<f64> {
     }
 }
 
+/// `e`, or the cancellation that made a stage fail in its own words (see
+/// [`crate::cancel`]).
+fn cancelled_or(e: PlanError) -> PlanError {
+    match crate::cancel::check() {
+        Err(c) => PlanError::Cancelled(c),
+        Ok(()) => e,
+    }
+}
+
 /// One pass over all zones: folding pairwise unions is quadratic.
 fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
     geo::unary_union(no_fly.iter())
@@ -1530,11 +1558,13 @@ fn decompose_and_cover(
     // Index the free space once for every cell of every candidate angle.
     let free_space = coverage::FreeSpace::new(free);
     for a in candidates {
+        crate::cancel::check()?;
         let cells = decompose::decompose(free, a).map_err(|e| match e {
             decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
                 NO_FLY_POINTER,
                 "the no-fly zones cover the whole region of interest: nothing is left to survey",
             )]),
+            decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
             other => PlanError::Internal(other.to_string()),
         })?;
         let plans: Vec<CellPlan> = cells
@@ -1542,6 +1572,8 @@ fn decompose_and_cover(
             .enumerate()
             .filter_map(|(i, c)| coverage::plan_cell_in(i, c, &free_space, spacing, a))
             .collect();
+        // The cells stop early when cancelled, with plans to throw away.
+        crate::cancel::check()?;
         let turns: usize = plans.iter().map(CellPlan::turns).sum();
         let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();
         let better = best

@@ -21,6 +21,7 @@
 //! cache), spread over the available cores.
 
 use super::{Dem, GeoTransform};
+use crate::cancel::{CancelToken, Cancelled};
 
 const WGS84_A: f64 = 6_378_137.0;
 const WGS84_F: f64 = 1.0 / 298.257_223_563;
@@ -167,8 +168,9 @@ impl Disk {
 /// Grey-scale dilation: each valid cell takes the highest valid height
 /// within `radius_m` metres (a disk, see the module documentation); nodata
 /// cells stay nodata. A radius that reaches no neighbour (smaller than the
-/// cell size), or that is not a positive number, returns a copy.
-pub fn dilate(dem: &Dem, radius_m: f64) -> Dem {
+/// cell size), or that is not a positive number, returns a copy. Checks the
+/// current thread's cancellation token ([`crate::cancel`]) every tile.
+pub fn dilate(dem: &Dem, radius_m: f64) -> Result<Dem, Cancelled> {
     let threads = std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1)
@@ -187,18 +189,20 @@ fn dilate_with(
     threads: usize,
     tiles: Tiles,
     min_parallel_work: f64,
-) -> Dem {
+) -> Result<Dem, Cancelled> {
     let mut out = dem.clone();
     let (w, h) = (dem.width, dem.height);
     if w == 0 || h == 0 || dem.values.len() != w * h || radius_m.is_nan() || radius_m <= 0.0 {
-        return out;
+        return Ok(out);
     }
     let Some(disk) = Disk::new(dem, radius_m) else {
-        return out;
+        return Ok(out);
     };
     if disk.ry_max == 0 && disk.w_max == 0 {
-        return out;
+        return Ok(out);
     }
+    // Taken along to the band threads, which have no token of their own.
+    let token = crate::cancel::current();
     let work = (w * h) as f64 * (2 * disk.ry_max + 1) as f64;
     let threads = if work < min_parallel_work {
         1
@@ -206,17 +210,26 @@ fn dilate_with(
         threads.clamp(1, h.div_ceil(16))
     };
     if threads == 1 {
-        dilate_band(dem, &disk, 0, &mut out.values, tiles);
+        dilate_band(dem, &disk, 0, &mut out.values, tiles, &token)?;
     } else {
         let rows_per = h.div_ceil(threads);
-        let disk = &disk;
+        let (disk, token) = (&disk, &token);
         std::thread::scope(|sc| {
-            for (i, band) in out.values.chunks_mut(rows_per * w).enumerate() {
-                sc.spawn(move || dilate_band(dem, disk, i * rows_per, band, tiles));
-            }
-        });
+            let bands: Vec<_> = out
+                .values
+                .chunks_mut(rows_per * w)
+                .enumerate()
+                .map(|(i, band)| {
+                    sc.spawn(move || dilate_band(dem, disk, i * rows_per, band, tiles, token))
+                })
+                .collect();
+            bands.into_iter().try_for_each(|b| {
+                b.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+        })?;
     }
-    out
+    Ok(out)
 }
 
 #[inline]
@@ -225,8 +238,16 @@ fn floor_log2(n: usize) -> usize {
     (usize::BITS - 1 - n.leading_zeros()) as usize
 }
 
-/// Dilates output rows `b0 ..` (as many as `out` holds) into `out`.
-fn dilate_band(dem: &Dem, disk: &Disk, b0: usize, out: &mut [f64], tiles: Tiles) {
+/// Dilates output rows `b0 ..` (as many as `out` holds) into `out`,
+/// checking `token` every tile.
+fn dilate_band(
+    dem: &Dem,
+    disk: &Disk,
+    b0: usize,
+    out: &mut [f64],
+    tiles: Tiles,
+    token: &CancelToken,
+) -> Result<(), Cancelled> {
     let (w, h) = (dem.width, dem.height);
     let src = &dem.values[..];
     let b1 = b0 + out.len() / w;
@@ -251,6 +272,7 @@ fn dilate_band(dem: &Dem, disk: &Disk, b0: usize, out: &mut [f64], tiles: Tiles)
         let sc1 = (c1 + disk.w_max).min(w);
         let sw = sc1 - sc0;
         for r0 in (b0..b1).step_by(chunk) {
+            token.check()?;
             let r1 = (r0 + chunk).min(b1);
             hw.clear();
             starts.clear();
@@ -285,6 +307,7 @@ fn dilate_band(dem: &Dem, disk: &Disk, b0: usize, out: &mut [f64], tiles: Tiles)
             }
         }
     }
+    Ok(())
 }
 
 /// Sparse table of one source row (`row`, NaN read as −∞): level j holds at
@@ -441,7 +464,7 @@ mod tests {
             // Default tiling, one and several threads, and tiny tiles so that
             // strips, row chunks and their seams are exercised.
             for (threads, tiles) in [(1, None), (3, None), (1, Some((5, 4))), (2, Some((3, 1)))] {
-                let got = dilate_with(d, radius, threads, tiles, 0.0);
+                let got = dilate_with(d, radius, threads, tiles, 0.0).unwrap();
                 assert!(
                     same(&got.values, &expected),
                     "{}×{} radius {radius} threads {threads} tiles {tiles:?}",
@@ -452,7 +475,10 @@ mod tests {
                 assert_eq!(got.transform, d.transform);
             }
         }
-        assert!(same(&dilate(d, radii[0]).values, &brute(d, radii[0])));
+        assert!(same(
+            &dilate(d, radii[0]).unwrap().values,
+            &brute(d, radii[0])
+        ));
     }
 
     #[test]
@@ -465,7 +491,7 @@ mod tests {
                 check_against_brute(&d, &[0.3, 1.0, 2.0, 2.5, 3.7, 6.0, 11.3, 1e9]);
                 // The comparison is not vacuous: dilation changes the raster.
                 if w * h > 100 {
-                    assert!(!same(&dilate(&d, 6.0).values, &d.values));
+                    assert!(!same(&dilate(&d, 6.0).unwrap().values, &d.values));
                 }
             }
         }
@@ -507,7 +533,7 @@ mod tests {
             (sx - 55.8).abs() < 0.5 && (sy - 111.4).abs() < 0.5,
             "{sx} {sy}"
         );
-        let got = dilate(&d, 120.0);
+        let got = dilate(&d, 120.0).unwrap();
         for r in 0..h {
             for c in 0..w {
                 let (dx, dy) = (c.abs_diff(4) as f64 * sx, r.abs_diff(4) as f64 * sy);
@@ -529,7 +555,7 @@ mod tests {
     fn monotone_and_keeps_nodata() {
         let mut rng = Rng(7);
         let d = random_dem(&mut rng, 64, 48, 0.3, north_up(0.0, 0.0, 1.0, 1.0), false);
-        let got = dilate(&d, 4.5);
+        let got = dilate(&d, 4.5).unwrap();
         for (a, b) in d.values.iter().zip(&got.values) {
             assert_eq!(a.is_nan(), b.is_nan());
             if !a.is_nan() {
@@ -537,7 +563,7 @@ mod tests {
             }
         }
         // A larger radius dilates at least as much.
-        let more = dilate(&d, 9.0);
+        let more = dilate(&d, 9.0).unwrap();
         for (a, b) in got.values.iter().zip(&more.values) {
             assert!(a.is_nan() || b >= a);
         }
@@ -552,12 +578,15 @@ mod tests {
             north_up(0.0, 0.0, 5.0, 5.0),
             false,
         );
-        assert_eq!(dilate(&d, 17.0), d);
+        assert_eq!(dilate(&d, 17.0).unwrap(), d);
         let mut rng = Rng(3);
         let d = random_dem(&mut rng, 12, 10, 0.2, north_up(0.0, 0.0, 5.0, 5.0), false);
         for r in [0.0, 2.4, 4.99, -3.0, f64::NAN] {
-            assert_eq!(dilate(&d, r).values.len(), 120);
-            assert!(same(&dilate(&d, r).values, &d.values), "radius {r}");
+            assert_eq!(dilate(&d, r).unwrap().values.len(), 120);
+            assert!(
+                same(&dilate(&d, r).unwrap().values, &d.values),
+                "radius {r}"
+            );
         }
         // Infinite radius: every valid cell takes the global maximum.
         let max = d
@@ -566,7 +595,7 @@ mod tests {
             .copied()
             .filter(|v| !v.is_nan())
             .fold(f64::MIN, f64::max);
-        let got = dilate(&d, f64::INFINITY);
+        let got = dilate(&d, f64::INFINITY).unwrap();
         for (a, b) in d.values.iter().zip(&got.values) {
             assert!(if a.is_nan() { b.is_nan() } else { *b == max });
         }
@@ -581,14 +610,14 @@ mod tests {
             north_up(0.0, 0.0, 1.0, 1.0),
             false,
         );
-        assert!(dilate(&d, 3.0).values.iter().all(|v| v.is_nan()));
+        assert!(dilate(&d, 3.0).unwrap().values.iter().all(|v| v.is_nan()));
         let d = dem(0, 0, vec![], north_up(0.0, 0.0, 1.0, 1.0), false);
-        assert_eq!(dilate(&d, 3.0), d);
+        assert_eq!(dilate(&d, 3.0).unwrap(), d);
         // Singular or non-finite geotransform: copy.
         let mut t = north_up(0.0, 0.0, 1.0, 1.0);
         t.pixel_width = f64::NAN;
         let d = dem(3, 3, vec![1.0; 9], t, false);
-        assert!(same(&dilate(&d, 3.0).values, &d.values));
+        assert!(same(&dilate(&d, 3.0).unwrap().values, &d.values));
     }
 
     #[test]
@@ -618,7 +647,7 @@ mod tests {
         let d = random_dem(&mut rng, n, n, 0.01, north_up(0.0, 0.0, 1.0, 1.0), false);
         for (radius, threads) in [(30.0, 1), (30.0, 2), (100.0, 2)] {
             let t0 = std::time::Instant::now();
-            let got = dilate_with(&d, radius, threads, None, 0.0);
+            let got = dilate_with(&d, radius, threads, None, 0.0).unwrap();
             eprintln!(
                 "dilate {n}×{n}, radius {radius} cells, {threads} thread(s): {:?}",
                 t0.elapsed()

@@ -162,7 +162,7 @@ impl TerrainModel {
         // block's cells (one more g); and paths are checked every `step`,
         // so a point between two samples is within step/2 of one (one more
         // step, conservatively).
-        let dilated = dilate(&maxima, radius + step_m + 3.0 * g);
+        let dilated = dilate(&maxima, radius + step_m + 3.0 * g)?;
         let fallback_m = dilated
             .values
             .iter()

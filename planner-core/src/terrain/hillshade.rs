@@ -27,6 +27,7 @@
 
 use super::dilate::metres_per_degree;
 use super::{Dem, GeoTransform};
+use crate::cancel::Cancelled;
 
 /// Largest `max_side` honoured (PNG previews beyond this are not useful).
 const MAX_SIDE_LIMIT: usize = 16_384;
@@ -36,11 +37,12 @@ const ALTITUDE_DEG: f64 = 45.0;
 
 /// Hillshade of `dem` as a PNG (8-bit grey + alpha), at most `max_side`
 /// pixels on its longer side (`max_side` is clamped to 1 ..= 16384). An
-/// empty DEM gives a 1×1 transparent image.
-pub fn hillshade_png(dem: &Dem, max_side: usize) -> Vec<u8> {
-    let (grid, gw, gh, t) = downsample(dem, max_side.clamp(1, MAX_SIDE_LIMIT));
-    let pixels = shade(&grid, gw, gh, &t, dem.crs.geographic);
-    encode_png(gw, gh, &pixels).unwrap_or_default()
+/// empty DEM gives a 1×1 transparent image. Checks the current thread's
+/// cancellation token every row ([`crate::cancel`]).
+pub fn hillshade_png(dem: &Dem, max_side: usize) -> Result<Vec<u8>, Cancelled> {
+    let (grid, gw, gh, t) = downsample(dem, max_side.clamp(1, MAX_SIDE_LIMIT))?;
+    let pixels = shade(&grid, gw, gh, &t, dem.crs.geographic)?;
+    Ok(encode_png(gw, gh, &pixels).unwrap_or_default())
 }
 
 /// Grey + alpha pixels of the hillshade of `dem` at full resolution
@@ -57,24 +59,29 @@ fn hillshade_pixels(dem: &Dem) -> Vec<u8> {
         &dem.transform,
         dem.crs.geographic,
     )
+    .expect("no cancellation token in tests")
 }
+
+/// A grid of heights: (values, width, height, geotransform).
+type Grid = (Vec<f64>, usize, usize, GeoTransform);
 
 /// The DEM reduced by block averaging so that its longer side is at most
 /// `max_side`: (values, width, height, geotransform). Never empty.
-fn downsample(dem: &Dem, max_side: usize) -> (Vec<f64>, usize, usize, GeoTransform) {
+fn downsample(dem: &Dem, max_side: usize) -> Result<Grid, Cancelled> {
     let (w, h) = (dem.width, dem.height);
     if w == 0 || h == 0 || dem.values.len() != w * h {
-        return (vec![f64::NAN], 1, 1, dem.transform);
+        return Ok((vec![f64::NAN], 1, 1, dem.transform));
     }
     let f = w.max(h).div_ceil(max_side).max(1);
     if f == 1 {
-        return (dem.values.clone(), w, h, dem.transform);
+        return Ok((dem.values.clone(), w, h, dem.transform));
     }
     let (gw, gh) = (w.div_ceil(f), h.div_ceil(f));
     let mut sum = vec![0.0f64; gw];
     let mut count = vec![0u32; gw];
     let mut out = Vec::with_capacity(gw * gh);
     for by in 0..gh {
+        crate::cancel::check()?;
         sum.fill(0.0);
         count.fill(0);
         let rows = by * f..((by + 1) * f).min(h);
@@ -107,11 +114,17 @@ fn downsample(dem: &Dem, max_side: usize) -> (Vec<f64>, usize, usize, GeoTransfo
         col_rotation: t.col_rotation * k,
         pixel_height: t.pixel_height * k,
     };
-    (out, gw, gh, t)
+    Ok((out, gw, gh, t))
 }
 
 /// Hillshade of a `w`×`h` grid (w, h ≥ 1) as grey + alpha bytes.
-fn shade(g: &[f64], w: usize, h: usize, t: &GeoTransform, geographic: bool) -> Vec<u8> {
+fn shade(
+    g: &[f64],
+    w: usize,
+    h: usize,
+    t: &GeoTransform,
+    geographic: bool,
+) -> Result<Vec<u8>, Cancelled> {
     let az = AZIMUTH_DEG.to_radians();
     let alt = ALTITUDE_DEG.to_radians();
     let (sin_alt, cos_alt) = alt.sin_cos();
@@ -158,6 +171,7 @@ fn shade(g: &[f64], w: usize, h: usize, t: &GeoTransform, geographic: bool) -> V
     };
 
     for r in 0..h {
+        crate::cancel::check()?;
         // Jacobian of (col, row) → (east, north) metres at this row:
         // [[a, b], [cc, d]] with a = ∂E/∂col, b = ∂E/∂row, cc = ∂N/∂col,
         // d = ∂N/∂row.
@@ -210,7 +224,7 @@ fn shade(g: &[f64], w: usize, h: usize, t: &GeoTransform, geographic: bool) -> V
             px.extend_from_slice(&[v as u8, 255]);
         }
     }
-    px
+    Ok(px)
 }
 
 /// 8-bit grey + alpha PNG.
@@ -273,7 +287,7 @@ mod tests {
     #[test]
     fn flat_is_181_everywhere_including_edges() {
         let d = plane(7, 5, |_, _| 250.0);
-        let (w, h, px) = decode(&hillshade_png(&d, 100));
+        let (w, h, px) = decode(&hillshade_png(&d, 100).unwrap());
         assert_eq!((w, h), (7, 5));
         assert_eq!(expected(0.0, 0.0), 181);
         assert!(px.chunks(2).all(|p| p == [181, 255]), "{px:?}");
@@ -285,8 +299,8 @@ mod tests {
         // 1 m/m on each axis, and the opposite.
         let nw = plane(6, 6, |x, y| x - y);
         let se = plane(6, 6, |x, y| y - x);
-        let (_, _, a) = decode(&hillshade_png(&nw, 64));
-        let (_, _, b) = decode(&hillshade_png(&se, 64));
+        let (_, _, a) = decode(&hillshade_png(&nw, 64).unwrap());
+        let (_, _, b) = decode(&hillshade_png(&se, 64).unwrap());
         assert_eq!(expected(1.0, -1.0), 251);
         assert_eq!(expected(-1.0, 1.0), 1);
         // Planes shade uniformly, edges included (linear extrapolation).
@@ -294,7 +308,7 @@ mod tests {
         assert!(b.chunks(2).all(|p| p == [1, 255]), "{b:?}");
         // A gentler slope towards the east: ∂z/∂E = −0.2.
         let east = plane(5, 4, |x, _| -0.2 * x);
-        let (_, _, c) = decode(&hillshade_png(&east, 64));
+        let (_, _, c) = decode(&hillshade_png(&east, 64).unwrap());
         assert!(c.chunks(2).all(|p| p == [expected(-0.2, 0.0), 255]));
         assert!(expected(-0.2, 0.0) < 181);
     }
@@ -304,7 +318,7 @@ mod tests {
         let mut d = plane(5, 5, |x, y| 0.5 * x + 0.1 * y);
         d.values[2 * 5 + 2] = f64::NAN;
         d.values[0] = f64::NAN;
-        let (_, _, px) = decode(&hillshade_png(&d, 5));
+        let (_, _, px) = decode(&hillshade_png(&d, 5).unwrap());
         for (i, p) in px.chunks(2).enumerate() {
             if i == 12 || i == 0 {
                 assert_eq!(p, [0, 0], "cell {i}");
@@ -333,7 +347,7 @@ mod tests {
                 d.values[r * 300 + c] = f64::NAN;
             }
         }
-        let (w, h, px) = decode(&hillshade_png(&d, 100));
+        let (w, h, px) = decode(&hillshade_png(&d, 100).unwrap());
         assert_eq!((w, h), (100, 67));
         let alpha = |c: usize, r: usize| px[2 * (r * 100 + c) + 1];
         assert_eq!(alpha(0, 0), 0);
@@ -342,12 +356,12 @@ mod tests {
         assert_eq!(alpha(2, 2), 255);
         assert_eq!(alpha(99, 66), 255);
         // Larger than the DEM: full size; silly values clamped.
-        let (w, h, _) = decode(&hillshade_png(&d, 10_000));
+        let (w, h, _) = decode(&hillshade_png(&d, 10_000).unwrap());
         assert_eq!((w, h), (300, 200));
-        let (w, h, px) = decode(&hillshade_png(&d, 0));
+        let (w, h, px) = decode(&hillshade_png(&d, 0).unwrap());
         assert_eq!((w, h), (1, 1));
         assert_eq!(px[1], 255);
-        let (w, h, _) = decode(&hillshade_png(&d, 7));
+        let (w, h, _) = decode(&hillshade_png(&d, 7).unwrap());
         assert_eq!((w, h), (7, 5));
     }
 
@@ -355,7 +369,7 @@ mod tests {
     fn downsampled_plane_keeps_its_shade() {
         // Block averages of a plane are the plane on the coarser grid.
         let d = plane(90, 60, |x, y| 0.3 * x - 0.2 * y);
-        let (w, h, px) = decode(&hillshade_png(&d, 30));
+        let (w, h, px) = decode(&hillshade_png(&d, 30).unwrap());
         assert_eq!((w, h), (30, 20));
         let e = expected(0.3, -0.2);
         assert!(px.chunks(2).all(|p| p == [e, 255]), "{e} {px:?}");
@@ -416,10 +430,10 @@ mod tests {
     #[test]
     fn degenerate_inputs_do_not_panic() {
         let empty = dem(0, 0, vec![], north_up(0.0, 0.0, 1.0, 1.0), false);
-        let (w, h, px) = decode(&hillshade_png(&empty, 256));
+        let (w, h, px) = decode(&hillshade_png(&empty, 256).unwrap());
         assert_eq!((w, h, px), (1, 1, vec![0, 0]));
         let one = dem(1, 1, vec![3.0], north_up(0.0, 0.0, 1.0, 1.0), false);
-        let (_, _, px) = decode(&hillshade_png(&one, 256));
+        let (_, _, px) = decode(&hillshade_png(&one, 256).unwrap());
         assert_eq!(px, vec![181, 255]);
         let line = dem(
             4,
@@ -428,10 +442,10 @@ mod tests {
             north_up(0.0, 0.0, 1.0, 1.0),
             false,
         );
-        let (w, h, _) = decode(&hillshade_png(&line, 256));
+        let (w, h, _) = decode(&hillshade_png(&line, 256).unwrap());
         assert_eq!((w, h), (4, 1));
         let nodata = dem(3, 2, vec![f64::NAN; 6], north_up(0.0, 0.0, 1.0, 1.0), false);
-        let (_, _, px) = decode(&hillshade_png(&nodata, 256));
+        let (_, _, px) = decode(&hillshade_png(&nodata, 256).unwrap());
         assert!(px.iter().all(|&b| b == 0));
         let singular = dem(
             2,
@@ -440,7 +454,7 @@ mod tests {
             north_up(0.0, 0.0, 0.0, 0.0),
             false,
         );
-        let (_, _, px) = decode(&hillshade_png(&singular, 256));
+        let (_, _, px) = decode(&hillshade_png(&singular, 256).unwrap());
         assert!(px.chunks(2).all(|p| p == [181, 255]));
     }
 }

@@ -186,6 +186,9 @@ pub enum TerrainError {
     /// transformation failed.
     #[error("{0}")]
     Crs(String),
+    /// Stopped by its cancellation token (see [`crate::cancel`]).
+    #[error(transparent)]
+    Cancelled(#[from] crate::cancel::Cancelled),
 }
 
 impl Dem {

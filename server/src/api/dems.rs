@@ -200,6 +200,7 @@ pub fn terrain_error(e: TerrainError) -> ApiError {
             "the DEM uses a feature terraplan does not read: {m}"
         )),
         TerrainError::Crs(m) => invalid(format!("coordinate reference system: {m}")),
+        TerrainError::Cancelled(c) => c.into(),
     }
 }
 
@@ -417,7 +418,7 @@ pub async fn upload_dem(
     let parse_name = file_name.clone();
     let parse_data = data.clone();
     let (dem, info) = state
-        .run_planner(move || {
+        .run_planner(crate::app::Work::Dem, move |_| {
             let dem = read_dem(&parse_data, parse_name.as_deref(), crs, &limits)?;
             let info = dem.info()?;
             Ok::<_, TerrainError>((dem, info))
@@ -578,8 +579,10 @@ pub async fn hillshade(
         return Ok(res);
     }
     let png = state
-        .run_planner(move || hillshade_png(&dem, max_side as usize))
-        .await?;
+        .run_planner(crate::app::Work::Dem, move |_| {
+            hillshade_png(&dem, max_side as usize)
+        })
+        .await??;
     let mut res = png.into_response();
     res.headers_mut()
         .insert(header::CONTENT_TYPE, HeaderValue::from_static("image/png"));
@@ -610,7 +613,7 @@ async fn heights(
     points: Vec<(f64, f64)>,
 ) -> Result<Vec<Option<f64>>, ApiError> {
     state
-        .run_planner(move || {
+        .run_planner(crate::app::Work::Dem, move |_| {
             let sampler = TerrainSampler::new(&dem, 4326)?;
             Ok::<_, TerrainError>(
                 points

@@ -25,8 +25,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use axum::Json;
 use axum::extract::{Path, Query, State, rejection::QueryRejection};
@@ -34,9 +33,10 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use geo::{CoordsIter, Orient, orient::Direction};
 use geo_types::{LineString, Polygon};
+use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::export::ground_route::{route_csv, route_feature, route_geojson, rover_mission};
 use planner_core::export::write_waypoints;
-use planner_core::geo::{Issue, parse_polygons, polygon_issues};
+use planner_core::geo::{Issue, Limits, MAX_ISSUES, parse_polygons, polygon_issues};
 use planner_core::route::{
     ArcCost, Cell, CostGrid, DStarLite, Endpoint, MapRoute, MapRouteError, Position, RouteError,
     RouteMap, RouteOptions, astar,
@@ -50,7 +50,7 @@ use super::costmaps::{costmap_url, deserialize_at};
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, page};
 use super::{rfc3339, short_id};
-use crate::app::AppState;
+use crate::app::{AppState, Work, off_runtime};
 use crate::costmap_jobs::{COSTMAP_TIF, JobStatus, now_millis};
 use crate::db::{CostmapRow, RouteRow};
 use crate::error::{ApiError, Problem};
@@ -512,12 +512,24 @@ struct Area {
 }
 
 /// The polygons of one GeoJSON area member, checked (shape, ranges,
-/// self-intersection).
-fn parse_area(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Vec<Area> {
+/// self-intersection). Their vertices are added to `vertices`; once that
+/// is over `max_vertices` they are no longer checked (the caller refuses
+/// the request for the count).
+fn parse_area(
+    value: &Value,
+    pointer: &str,
+    issues: &mut Vec<Issue>,
+    vertices: &mut usize,
+    max_vertices: usize,
+) -> Vec<Area> {
     match parse_polygons(value, pointer) {
         Ok(parsed) => {
             let mut out = Vec::new();
             for p in parsed {
+                *vertices = vertices.saturating_add(p.polygon.coords_count());
+                if *vertices > max_vertices {
+                    continue;
+                }
                 let faults = polygon_issues(&p.polygon, &p.pointer);
                 if faults.is_empty() {
                     out.push(Area {
@@ -546,7 +558,16 @@ struct ReplanRequest {
     cost_changes: Vec<(Area, f64)>,
 }
 
-fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
+/// The areas and vertices of the changes a chain of replans made so far.
+#[derive(Clone, Copy, Default)]
+struct Earlier {
+    areas: usize,
+    vertices: usize,
+}
+
+/// A replan body, its areas counted against `limits` (with the chain's
+/// `earlier` changes) before any of them is checked.
+fn parse_replan(doc: &Value, limits: &Limits, earlier: Earlier) -> Result<ReplanRequest, ApiError> {
     let Some(obj) = doc.as_object() else {
         return Err(ApiError::Validation(vec![Issue::new(
             "",
@@ -563,12 +584,43 @@ fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
     );
     let name = parse_name(obj, &mut issues);
     let position = parse_position(obj.get("position"), "/position", &mut issues);
+    // The limits on geometry hold for the changes of a whole chain, and
+    // apply before any area is read.
+    let count = |key: &str| obj.get(key).and_then(Value::as_array).map_or(0, Vec::len);
+    let (new_blocked, new_changes) = (count("blocked"), count("cost_changes"));
+    let pointer = if new_blocked == 0 {
+        "/cost_changes"
+    } else {
+        "/blocked"
+    };
+    let areas = earlier.areas + new_blocked + new_changes;
+    if areas > limits.max_no_fly_zones {
+        return Err(ApiError::Validation(vec![Issue::new(
+            pointer,
+            &format!(
+                "{areas} areas (blocked and cost changes, with those of the earlier replans) \
+                 exceed the limit of {}",
+                limits.max_no_fly_zones
+            ),
+        )]));
+    }
+    let mut vertices = earlier.vertices;
+    let max_vertices = limits.max_vertices;
     let mut blocked = Vec::new();
     match obj.get("blocked") {
         None | Some(Value::Null) => {}
         Some(Value::Array(areas)) => {
             for (i, v) in areas.iter().enumerate() {
-                blocked.extend(parse_area(v, &format!("/blocked/{i}"), &mut issues));
+                if issues.len() > MAX_ISSUES {
+                    break;
+                }
+                blocked.extend(parse_area(
+                    v,
+                    &format!("/blocked/{i}"),
+                    &mut issues,
+                    &mut vertices,
+                    max_vertices,
+                ));
             }
         }
         Some(_) => issues.push(Issue::new(
@@ -581,6 +633,9 @@ fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
         None | Some(Value::Null) => {}
         Some(Value::Array(changes)) => {
             for (i, v) in changes.iter().enumerate() {
+                if issues.len() > MAX_ISSUES {
+                    break;
+                }
                 let pointer = format!("/cost_changes/{i}");
                 let Some(change) = v.as_object() else {
                     issues.push(Issue::new(
@@ -606,7 +661,13 @@ fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
                         ));
                         Vec::new()
                     }
-                    Some(a) => parse_area(a, &format!("{pointer}/area"), &mut issues),
+                    Some(a) => parse_area(
+                        a,
+                        &format!("{pointer}/area"),
+                        &mut issues,
+                        &mut vertices,
+                        max_vertices,
+                    ),
                 };
                 let cost = match change.get("cost").and_then(Value::as_f64) {
                     Some(c) if c > 0.0 && c <= COST_MAX => Some(c),
@@ -638,6 +699,15 @@ fn parse_replan(doc: &Value) -> Result<ReplanRequest, ApiError> {
             "/cost_changes",
             "must be an array of {\"area\": GeoJSON Polygon, \"cost\": number}",
         )),
+    }
+    if vertices > max_vertices {
+        return Err(ApiError::Validation(vec![Issue::new(
+            pointer,
+            &format!(
+                "{vertices} vertices in the areas (with those of the earlier replans) exceed the \
+                 limit of {max_vertices}"
+            ),
+        )]));
     }
     match position {
         Some(position) if issues.is_empty() => Ok(ReplanRequest {
@@ -726,41 +796,6 @@ fn build_map(src: &MapSource) -> Result<RouteMap, ApiError> {
     })
 }
 
-/// Sets the flag when dropped: dropped with the request's future when the
-/// client goes away, it stops the search.
-struct CancelOnDrop(Arc<AtomicBool>);
-
-impl Drop for CancelOnDrop {
-    fn drop(&mut self) {
-        self.0.store(true, Ordering::Relaxed);
-    }
-}
-
-/// When a search must stop: the client went away, or the time is up.
-struct Stop {
-    gone: Arc<AtomicBool>,
-    deadline: Option<Instant>,
-    limit: Duration,
-}
-
-impl Stop {
-    fn new(gone: Arc<AtomicBool>, limit: Duration) -> Stop {
-        Stop {
-            gone,
-            deadline: Instant::now().checked_add(limit),
-            limit,
-        }
-    }
-
-    fn timed_out(&self) -> bool {
-        self.deadline.is_some_and(|d| Instant::now() >= d)
-    }
-
-    fn now(&self) -> bool {
-        self.gone.load(Ordering::Relaxed) || self.timed_out()
-    }
-}
-
 /// Which request the search serves, for naming the members at fault.
 #[derive(Clone, Copy)]
 enum Ends {
@@ -808,7 +843,7 @@ fn from_search(e: RouteError) -> MapRouteError {
 }
 
 /// The answer to a failed search.
-fn search_fault(e: MapRouteError, ends: Ends, stop: &Stop) -> ApiError {
+fn search_fault(e: MapRouteError, ends: Ends, stop: &CancelToken) -> ApiError {
     if let Some(issue) = endpoint_issue(&e, ends) {
         return ApiError::Validation(vec![issue]);
     }
@@ -823,18 +858,18 @@ fn search_fault(e: MapRouteError, ends: Ends, stop: &Stop) -> ApiError {
                  separate them (they are in different traversable regions of the changed costmap)",
             ),
         },
-        MapRouteError::Search(RouteError::Cancelled) if stop.timed_out() => {
-            ApiError::Unavailable(format!(
+        MapRouteError::Search(RouteError::Cancelled) => match stop.check() {
+            Err(Cancelled::TimedOut { limit }) => ApiError::Unavailable(format!(
                 "the route search took too long: it was stopped after the limit of {} s \
                  (--route-timeout-s)",
-                stop.limit.as_secs_f64()
-            ))
-        }
-        MapRouteError::Search(RouteError::Cancelled) => {
-            // Nobody reads this answer.
-            tracing::info!("route search cancelled: the client went away");
-            ApiError::Unavailable("the route search was cancelled: the client went away".into())
-        }
+                limit.as_secs_f64()
+            )),
+            _ => {
+                // Nobody reads this answer.
+                tracing::info!("route search cancelled: the client went away");
+                ApiError::Unavailable("the route search was cancelled: the client went away".into())
+            }
+        },
         MapRouteError::Search(RouteError::InvalidOptions(issues)) => ApiError::Validation(issues),
         MapRouteError::Search(
             RouteError::StartBlocked { .. } | RouteError::StartOutside { .. },
@@ -883,7 +918,7 @@ fn plan_route(
     start: &Position,
     goal: &Position,
     options: &SearchOptions,
-    stop: &Stop,
+    stop: &CancelToken,
 ) -> Result<Planned, ApiError> {
     let map = build_map(src)?;
     let ends = Ends::Create;
@@ -895,7 +930,7 @@ fn plan_route(
     };
     let opts = options.route_options(map.grid().cell_count());
     let fault = |e: RouteError| search_fault(from_search(e), ends, stop);
-    let check = || stop.now();
+    let check = || stop.is_cancelled();
     // A* answers at once; D* Lite's first search runs backwards from the
     // goal and costs several times as much (about 10× on a 4000² terrain
     // costmap), so it is built afterwards, in the background.
@@ -920,13 +955,15 @@ fn warm_search(
     src: &MapSource,
     (start, goal): (Cell, Cell),
     options: &SearchOptions,
-    stop: &Stop,
+    stop: &CancelToken,
 ) -> Result<DStarLite, String> {
     let map = build_map(src).map_err(|e| e.to_string())?;
     let opts = options.route_options(map.grid().cell_count());
     let mut search =
         DStarLite::new(map.grid().clone(), start, goal, opts).map_err(|e| e.to_string())?;
-    search.plan(&|| stop.now()).map_err(|e| e.to_string())?;
+    search
+        .plan(&|| stop.is_cancelled())
+        .map_err(|e| e.to_string())?;
     Ok(search)
 }
 
@@ -1046,7 +1083,11 @@ fn failed(error: ApiError, kept: Option<DStarLite>) -> Failure {
 /// A replan, on a planner thread, from the parent's search `cached` when
 /// it is held (else rebuilt). On failure, the parent's search when there
 /// is one to keep.
-fn replan(input: &ReplanInput, cached: Option<DStarLite>, stop: &Stop) -> Result<Planned, Failure> {
+fn replan(
+    input: &ReplanInput,
+    cached: Option<DStarLite>,
+    stop: &CancelToken,
+) -> Result<Planned, Failure> {
     let map = match build_map(&input.src) {
         Ok(map) => map,
         Err(e) => return Err(failed(e, cached)),
@@ -1126,7 +1167,7 @@ fn replan(input: &ReplanInput, cached: Option<DStarLite>, stop: &Stop) -> Result
         }
         Ok(())
     };
-    let check = || stop.now();
+    let check = || stop.is_cancelled();
     let fault = |e: RouteError| search_fault(from_search(e), ends, stop);
     let describe = |route, began: Instant| {
         map.describe(&route, began.elapsed().as_secs_f64() * 1e3)
@@ -1331,13 +1372,13 @@ pub async fn create_route(
     ready(&state, &costmap)?;
     let req = parse_create(&doc)?;
     let src = Arc::new(map_source(&state, &costmap).await?);
-    let gone = Arc::new(AtomicBool::new(false));
-    let _cancel = CancelOnDrop(gone.clone());
-    let limit = state.routes.timeout;
     let (start, goal, options) = (req.start, req.goal, req.options.clone());
     let source = src.clone();
+    // Stopped when the client goes away or after --route-timeout-s.
     let planned = state
-        .run_planner(move || plan_route(&source, &start, &goal, &options, &Stop::new(gone, limit)))
+        .run_planner(Work::Route, move |stop| {
+            plan_route(&source, &start, &goal, &options, stop)
+        })
         .await??;
     let stored_request = StoredRequest {
         start: req.start,
@@ -1365,9 +1406,11 @@ pub async fn create_route(
         let (held, id, options) = (state.clone(), row.id.clone(), req.options.clone());
         tokio::spawn(async move {
             let _warming = warming;
-            let stop = Stop::new(Arc::new(AtomicBool::new(false)), limit);
+            // Not the client's: stopped only by --route-timeout-s.
             let built = held
-                .run_planner(move || warm_search(&src, ends, &options, &stop))
+                .run_planner(Work::Route, move |stop| {
+                    warm_search(&src, ends, &options, stop)
+                })
                 .await;
             match built {
                 Ok(Ok(search)) => held.routes.searches.put(&id, search),
@@ -1413,53 +1456,22 @@ pub async fn replan_route(
         .get_route(&id)
         .await?
         .ok_or_else(|| not_found(&id))?;
-    let req = parse_replan(&doc)?;
     let request: StoredRequest = stored(&id, "request", &parent.request)?;
     let previous: Changes = stored(&id, "changes", &parent.changes)?;
-
-    // The limits on geometry hold for the changes of a whole chain.
-    let new_areas = req.blocked.len() + req.cost_changes.len();
-    let areas = previous.blocked.len() + previous.cost_changes.len() + new_areas;
-    let limits = &state.limits;
-    let stored_vertices = |v: &Value| stored_polygon(v).map(|p| p.coords_count());
-    let mut vertices: usize = req
-        .blocked
-        .iter()
-        .chain(req.cost_changes.iter().map(|(a, _)| a))
-        .map(|a| a.polygon.coords_count())
-        .sum();
+    let mut earlier = Earlier {
+        areas: previous.blocked.len() + previous.cost_changes.len(),
+        vertices: 0,
+    };
     for v in previous
         .blocked
         .iter()
         .chain(previous.cost_changes.iter().map(|c| &c.area))
     {
-        vertices += stored_vertices(v)?;
+        earlier.vertices += stored_polygon(v)?.coords_count();
     }
-    let pointer = if req.blocked.is_empty() {
-        "/cost_changes"
-    } else {
-        "/blocked"
-    };
-    if areas > limits.max_no_fly_zones {
-        return Err(ApiError::Validation(vec![Issue::new(
-            pointer,
-            &format!(
-                "{areas} areas (blocked and cost changes, with those of the earlier replans) \
-                 exceed the limit of {}",
-                limits.max_no_fly_zones
-            ),
-        )]));
-    }
-    if vertices > limits.max_vertices {
-        return Err(ApiError::Validation(vec![Issue::new(
-            pointer,
-            &format!(
-                "{vertices} vertices in the areas (with those of the earlier replans) exceed the \
-                 limit of {}",
-                limits.max_vertices
-            ),
-        )]));
-    }
+    // Checking the areas' polygons is work: off the runtime threads.
+    let limits = state.limits.clone();
+    let req = off_runtime(move || parse_replan(&doc, &limits, earlier)).await??;
 
     let costmap = state
         .db
@@ -1478,9 +1490,6 @@ pub async fn replan_route(
         .blocked
         .extend(req.blocked.iter().map(|a| polygon_geojson(&a.polygon)));
 
-    let gone = Arc::new(AtomicBool::new(false));
-    let _cancel = CancelOnDrop(gone.clone());
-    let limit = state.routes.timeout;
     let input = ReplanInput {
         src,
         position: req.position,
@@ -1495,15 +1504,14 @@ pub async fn replan_route(
     let held = state.clone();
     let parent_id = id.clone();
     let planned = state
-        .run_planner(move || {
-            let stop = Stop::new(gone, limit);
+        .run_planner(Work::Route, move |stop| {
             let searches = &held.routes.searches;
             let cached = match input.options.planner() {
                 Planner::DstarLite => searches.take(&parent_id),
                 Planner::Astar => None,
             };
             tracing::debug!(route = %parent_id, held = cached.is_some(), "replanning");
-            replan(&input, cached, &stop).map_err(|failure| {
+            replan(&input, cached, stop).map_err(|failure| {
                 if let Some(search) = failure.kept {
                     searches.put(&parent_id, *search);
                 }
@@ -1827,9 +1835,63 @@ mod tests {
         json!({"type": "Polygon", "coordinates": [[[x, y], [x + d, y], [x + d, y + d], [x, y + d], [x, y]]]})
     }
 
+    fn replan_of(doc: &Value) -> Result<ReplanRequest, ApiError> {
+        parse_replan(doc, &Limits::default(), Earlier::default())
+    }
+
+    #[test]
+    fn replan_limits_apply_before_any_area_is_checked() {
+        let limits = Limits {
+            max_no_fly_zones: 3,
+            max_vertices: 12,
+            ..Limits::default()
+        };
+        let bowtie =
+            json!({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0], [0, 1], [0, 0]]]});
+        let detail = |r: Result<ReplanRequest, ApiError>| match r {
+            Err(ApiError::Validation(issues)) => issues
+                .iter()
+                .map(|i| format!("{}: {}", i.pointer, i.message))
+                .collect::<Vec<_>>(),
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("accepted"),
+        };
+        // Four areas, one of them with the earlier replans: one fault, the
+        // count, and the bow tie is not looked at.
+        let four = json!({"position": [0, 0], "blocked": [bowtie, square(0.0, 0.0, 1.0)], "cost_changes": [{"area": square(2.0, 0.0, 1.0), "cost": 2}]});
+        let one = Earlier {
+            areas: 1,
+            vertices: 0,
+        };
+        assert_eq!(
+            detail(parse_replan(&four, &limits, one)),
+            [
+                "/blocked: 4 areas (blocked and cost changes, with those of the earlier replans) exceed the limit of 3"
+            ]
+        );
+        assert!(parse_replan(&four, &limits, Earlier::default()).is_err());
+        // Vertices: 5 + 5 + 5 over 12 (3 earlier ones make it 18).
+        let three = json!({"position": [0, 0], "blocked": [square(0.0, 0.0, 1.0), bowtie, square(2.0, 0.0, 1.0)]});
+        let earlier = Earlier {
+            areas: 0,
+            vertices: 3,
+        };
+        assert_eq!(
+            detail(parse_replan(&three, &limits, earlier)),
+            [
+                "/blocked: 18 vertices in the areas (with those of the earlier replans) exceed the limit of 12"
+            ]
+        );
+        // Under both: the bow tie's fault, by pointer.
+        let two = json!({"position": [0, 0], "cost_changes": [{"area": bowtie, "cost": 2}]});
+        let faults = detail(parse_replan(&two, &limits, earlier));
+        assert_eq!(faults.len(), 1, "{faults:?}");
+        assert!(faults[0].starts_with("/cost_changes/0/area"), "{faults:?}");
+    }
+
     #[test]
     fn replan_requests_and_faults() {
-        let r = parse_replan(&json!({
+        let r = replan_of(&json!({
             "position": [0, 0],
             "blocked": [square(0.0, 0.0, 1.0), {"type": "Feature", "properties": {}, "geometry": square(2.0, 0.0, 1.0)}],
             "cost_changes": [{"area": square(5.0, 5.0, 1.0), "cost": 7}],
@@ -1841,7 +1903,7 @@ mod tests {
         assert_eq!(r.cost_changes[0].1, 7.0);
         let bowtie =
             json!({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0], [0, 1], [0, 0]]]});
-        let p = pointers(parse_replan(&json!({
+        let p = pointers(replan_of(&json!({
             "blocked": [square(0.0, 0.0, 1.0), bowtie],
             "cost_changes": [{"area": square(0.0, 0.0, 1.0), "cost": 0}, {"cost": 2}, {"area": {"type": "Point", "coordinates": [0, 0]}, "cost": f64::MAX, "x": 1}],
             "extra": true,
@@ -1869,7 +1931,7 @@ mod tests {
         // Given clockwise, stored counter-clockwise and closed.
         let cw = json!({"type": "Polygon", "coordinates": [[[0, 0], [0, 1], [1, 1], [1, 0]]]});
         let mut issues = Vec::new();
-        let areas = parse_area(&cw, "/blocked/0", &mut issues);
+        let areas = parse_area(&cw, "/blocked/0", &mut issues, &mut 0, usize::MAX);
         assert!(issues.is_empty());
         let v = polygon_geojson(&areas[0].polygon);
         assert_eq!(

@@ -5,12 +5,13 @@ use axum::Json;
 use axum::extract::{Path, Query, State, rejection::QueryRejection};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use planner_core::cancel::Cancelled;
 use planner_core::export::{AltitudeFrame, FencePolygon};
 use planner_core::flock::Piece;
 use planner_core::geo::Issue;
 use planner_core::survey::{
-    DEM_POINTER, SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats, UavTerrain,
-    plan_survey_over,
+    DEM_POINTER, PlanError, SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats,
+    UavTerrain, plan_survey_over,
 };
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -19,7 +20,7 @@ use utoipa::ToSchema;
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, page};
 use super::{rfc3339, short_id};
-use crate::app::AppState;
+use crate::app::{AppState, Work, off_runtime};
 use crate::costmap_jobs::now_millis;
 use crate::db::{SurveyRow, SurveySummaryRow};
 use crate::error::{ApiError, Problem};
@@ -328,6 +329,20 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
     }
 }
 
+/// How a survey that could not be planned is answered; one that ran out
+/// of `--survey-timeout-s` is a 503 saying so.
+fn survey_fault(e: PlanError) -> ApiError {
+    match e {
+        PlanError::Cancelled(Cancelled::TimedOut { limit }) => ApiError::Unavailable(format!(
+            "the survey took longer than {} s (the service's --survey-timeout-s) and was \
+             stopped: survey a smaller area, with fewer vertices or no-fly zones or a wider line \
+             spacing, or retry when the service is less busy",
+            limit.as_secs_f64()
+        )),
+        other => other.into(),
+    }
+}
+
 /// Plan a survey and store it.
 #[utoipa::path(
     post,
@@ -341,7 +356,7 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner is busy, or the survey took longer than `--survey-timeout-s`", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn create_survey(
@@ -349,7 +364,9 @@ pub async fn create_survey(
     JsonBody(mut doc): JsonBody,
 ) -> Result<Response, ApiError> {
     let name = take_name(&mut doc)?;
-    let req = SurveyRequest::from_document(&doc)?;
+    // Reading the request checks every member: off the runtime threads.
+    let (req, doc) =
+        off_runtime(move || SurveyRequest::from_document(&doc).map(|r| (r, doc))).await??;
     let dem = match &req.params.dem_id {
         None => None,
         Some(id) => Some(state.load_dem(id).await.map_err(|e| match e {
@@ -363,20 +380,23 @@ pub async fn create_survey(
     };
     let limits = state.limits.clone();
     let started = std::time::Instant::now();
-    let plan = state
-        .run_planner(move || {
+    let planned = state
+        .run_planner(Work::Survey, move |token| {
             let t = std::time::Instant::now();
-            plan_survey_over(&req, &limits, dem.as_deref()).map(|p| (p, t.elapsed()))
+            let plan = token.settle(plan_survey_over(&req, &limits, dem.as_deref()))?;
+            let stored =
+                serde_json::to_string(&plan).map_err(|e| PlanError::Internal(e.to_string()));
+            Ok::<_, PlanError>((plan, stored?, doc.to_string(), t.elapsed()))
         })
         .await?;
-    let (plan, planning) = plan?;
+    let (plan, stored_plan, request, planning) = planned.map_err(survey_fault)?;
     let waited = started.elapsed().saturating_sub(planning);
     let row = SurveyRow {
         id: uuid::Uuid::now_v7().to_string(),
         name,
         created_at: now_millis(),
-        request: doc.to_string(),
-        plan: serde_json::to_string(&plan).map_err(|e| ApiError::Internal(e.to_string()))?,
+        request,
+        plan: stored_plan,
     };
     state.db.insert_survey(&row).await?;
     let body = response(&row, plan);
