@@ -113,6 +113,10 @@ pub struct AppState {
     pub routes: Arc<RouteStore>,
     /// The browser front end, served outside `/api`.
     pub web: Arc<crate::web_ui::WebUi>,
+    /// Memory for heavy work (`--memory-budget-mb`): DEM reads,
+    /// hillshades, costmap builds and route searches reserve their
+    /// estimated peak here first, and wait while it is taken.
+    pub memory: Arc<crate::memory::MemoryBudget>,
 }
 
 /// DEM upload limits and the parsed DEMs kept ready for sampling.
@@ -122,6 +126,8 @@ pub struct DemStore {
     /// Largest DEM file accepted, bytes.
     pub max_upload_bytes: usize,
     pub cache: DemCache,
+    /// Where uploads are written as they arrive, before they are read.
+    pub spool_dir: std::path::PathBuf,
 }
 
 impl DemStore {
@@ -130,16 +136,20 @@ impl DemStore {
             limits,
             max_upload_bytes,
             cache: DemCache::new(DEM_CACHE_ENTRIES, cache_bytes),
+            spool_dir: std::env::temp_dir(),
         }
     }
 
     pub fn from_config(config: &ServeConfig) -> DemStore {
         let cache_bytes = config.dem_cache_mb.saturating_mul(1024 * 1024);
-        DemStore::new(
-            config.dem_limits(),
-            config.max_dem_bytes(),
-            usize::try_from(cache_bytes).unwrap_or(usize::MAX),
-        )
+        DemStore {
+            spool_dir: crate::api::dems::spool_dir(&config.data_dir),
+            ..DemStore::new(
+                config.dem_limits(),
+                config.max_dem_bytes(),
+                usize::try_from(cache_bytes).unwrap_or(usize::MAX),
+            )
+        }
     }
 }
 
@@ -444,10 +454,73 @@ impl AppState {
     /// A stored DEM, parsed (from the cache when it is there); 404 when
     /// there is no DEM `id`.
     pub async fn load_dem(&self, id: &str) -> Result<Arc<Dem>, ApiError> {
+        Ok(self.load_dem_for(id, "", |_, _| 0).await?.0)
+    }
+
+    /// [`AppState::load_dem`], holding room in the memory budget for
+    /// `work` bytes of work on the DEM (given its width and height) as
+    /// well, and, when the DEM is not in the cache, for reading it; the
+    /// room is held until the returned reservation is dropped. `what`
+    /// names the work in a refusal (a 422 when it alone needs more than
+    /// the budget).
+    pub async fn load_dem_for(
+        &self,
+        id: &str,
+        what: &str,
+        work: impl FnOnce(u64, u64) -> u64,
+    ) -> Result<(Arc<Dem>, crate::memory::Reservation), ApiError> {
+        self.load_dem_within(id, what, work, Some(crate::memory::QUEUE_TIMEOUT))
+            .await
+    }
+
+    /// [`AppState::load_dem_for`] waiting for room in the budget at most
+    /// `timeout` (`None`: as long as it takes, for background jobs).
+    pub async fn load_dem_within(
+        &self,
+        id: &str,
+        what: &str,
+        work: impl FnOnce(u64, u64) -> u64,
+        timeout: Option<Duration>,
+    ) -> Result<(Arc<Dem>, crate::memory::Reservation), ApiError> {
+        let doing = |w: u64, h: u64| {
+            let on = format!("DEM {id} ({w} × {h} pixels)");
+            if what.is_empty() {
+                format!("reading {on}")
+            } else {
+                format!("{what} on {on}")
+            }
+        };
         if let Some(dem) = self.dems.cache.get(id) {
-            return Ok(dem);
+            let (w, h) = (dem.width as u64, dem.height as u64);
+            let room = self
+                .memory
+                .reserve_within(work(w, h), &doing(w, h), timeout)
+                .await?;
+            return Ok((dem, room));
         }
         let epoch = self.dems.cache.epoch();
+        let meta = self
+            .db
+            .get_dem_meta(id)
+            .await?
+            .ok_or_else(|| dems::not_found(id))?;
+        let (w, h) = dems::stored_size(&meta)?;
+        let size = u64::try_from(meta.size_bytes).unwrap_or(0);
+        let read = match meta.read_bytes.and_then(|b| u64::try_from(b).ok()) {
+            Some(b) => b,
+            // Stored before the estimate was kept: the whole image as one
+            // Float64 chunk at worst.
+            None => {
+                let pixels = w.saturating_mul(h);
+                crate::memory::dem_read_bytes(pixels, pixels.saturating_mul(8), size)
+            }
+        };
+        let work_bytes = work(w, h);
+        let need = read.saturating_add(work_bytes);
+        let room = self
+            .memory
+            .reserve_within(need, &doing(w, h), timeout)
+            .await?;
         let row = self
             .db
             .get_dem_data(id)
@@ -471,7 +544,18 @@ impl AppState {
             .map_err(|e| ApiError::Internal(format!("stored DEM {id} does not read again: {e}")))?;
         let dem = Arc::new(dem);
         self.dems.cache.insert(id, dem.clone(), Some(epoch));
-        Ok(dem)
+        let mut room = room;
+        if self
+            .dems
+            .cache
+            .get(id)
+            .is_some_and(|d| Arc::ptr_eq(&d, &dem))
+        {
+            // Kept in the cache, whose memory is its own: only the work's
+            // room is still needed.
+            room.shrink_to(work_bytes);
+        }
+        Ok((dem, room))
     }
 }
 

@@ -227,6 +227,7 @@ fn experiment_flock(out: Option<&Path>) -> Result<(), Failure> {
 }
 
 fn serve(config: ServeConfig) -> Result<(), Failure> {
+    crate::memory::tune_allocator();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

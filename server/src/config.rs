@@ -69,6 +69,15 @@ pub struct ServeConfig {
     /// goes first. 0 keeps none: every replan searches from scratch.
     #[arg(long, env = "TERRAPLAN_ROUTE_CACHE_MB", default_value_t = 512)]
     pub route_cache_mb: u64,
+    /// Memory for heavy work at once, MiB: reading DEMs, hillshades,
+    /// costmap builds and route searches each reserve their estimated peak
+    /// (from the raster's declared size) before they start; work that does
+    /// not fit beside the running work waits, work that alone needs more is
+    /// refused (413 for an upload, 422 otherwise). Apart from it: the
+    /// caches (`--dem-cache-mb`, `--route-cache-mb`). Default: half the
+    /// machine's (or cgroup's) memory, at least 256.
+    #[arg(long, env = "TERRAPLAN_MEMORY_BUDGET_MB", default_value_t = crate::memory::default_budget_mb(), value_parser = clap::value_parser!(u64).range(16..=4_194_303))]
+    pub memory_budget_mb: u64,
     /// Longest wait for a request's head (request line and header
     /// fields), seconds; also how long a kept-alive connection waits for
     /// its next request. A slower client is disconnected.

@@ -36,6 +36,7 @@ use utoipa::ToSchema;
 use crate::app::AppState;
 use crate::db::{CostmapFileRow, CostmapRow, Db};
 use crate::error::ApiError;
+use crate::memory::costmap_build_bytes;
 
 /// How long a claim on a job lasts unless renewed, ms.
 pub const LEASE_MS: i64 = 15_000;
@@ -426,6 +427,9 @@ enum Outcome {
 struct Built {
     result: String,
     files: Vec<CostmapFileRow>,
+    /// The build's room in the memory budget, held until the files are
+    /// stored.
+    room: Option<crate::memory::Reservation>,
 }
 
 /// A job's request for a slot, made when it was enqueued.
@@ -592,14 +596,31 @@ async fn give_back(state: &AppState, id: &str) {
 
 /// The DEM a job needs, or why the job cannot run.
 async fn job_dem(state: &AppState, id: &str, what: &str) -> Result<Arc<Dem>, String> {
-    state.load_dem(id).await.map_err(|e| match e {
+    state
+        .load_dem(id)
+        .await
+        .map_err(|e| dem_load_error(e, id, what))
+}
+
+/// Why the job cannot run when its DEM (`what`, DEM `id`) cannot be had.
+fn dem_load_error(e: ApiError, id: &str, what: &str) -> String {
+    match e {
         ApiError::NotFound(_) => format!(
             "the {what} (DEM {id:?}) was deleted before the costmap was built: upload it again \
              and ask for a new costmap"
         ),
         ApiError::Internal(m) => format!("the {what} (DEM {id:?}) cannot be read: {m}"),
+        // Over the memory budget.
+        ApiError::Validation(issues) => format!(
+            "the costmap cannot be built on this server: {}",
+            issues
+                .iter()
+                .map(|i| i.message.clone())
+                .collect::<Vec<_>>()
+                .join("; ")
+        ),
         other => format!("the {what} (DEM {id:?}) cannot be loaded: {other}"),
-    })
+    }
 }
 
 async fn build(state: &AppState, row: &CostmapRow, handle: &Arc<JobHandle>) -> Outcome {
@@ -612,16 +633,33 @@ async fn build(state: &AppState, row: &CostmapRow, handle: &Arc<JobHandle>) -> O
         Err(e) => return Outcome::Failed(format!("the stored vehicle is unreadable: {e}")),
     };
     let options = request.options;
-    let dem = match job_dem(state, &row.dem_id, "DEM").await {
-        Ok(d) => d,
-        Err(m) => return Outcome::Failed(m),
-    };
     let landcover = match &options.landcover {
         None => None,
         Some(l) => match job_dem(state, &l.source, "land-cover raster").await {
             Ok(d) => Some(d),
             Err(m) => return Outcome::Failed(m),
         },
+    };
+    if handle.is_cancelled() {
+        return Outcome::Cancelled;
+    }
+    // The DEM with room in the memory budget for the build (and for
+    // reading the DEM, when it is not cached), held until the files are
+    // stored; a job waits for room as long as it takes.
+    let layers = options.layers.len() as u64 + u64::from(landcover.is_some());
+    let loading = state.load_dem_within(
+        &row.dem_id,
+        "a costmap build",
+        |w, h| costmap_build_bytes(w.saturating_mul(h), layers),
+        None,
+    );
+    let (dem, room) = tokio::select! {
+        loaded = loading => match loaded {
+            Ok(l) => l,
+            Err(e) => return Outcome::Failed(dem_load_error(e, &row.dem_id, "DEM")),
+        },
+        () = handle.cancelled.notified() => return Outcome::Cancelled,
+        () = state.costmaps.shutdown_signal() => return Outcome::Cancelled,
     };
     if handle.is_cancelled() {
         return Outcome::Cancelled;
@@ -700,6 +738,10 @@ async fn build(state: &AppState, row: &CostmapRow, handle: &Arc<JobHandle>) -> O
         }
     });
     let outcome = match task.await {
+        Ok(Ok(Outcome::Built(mut built))) => {
+            built.room = Some(room);
+            Outcome::Built(built)
+        }
         Ok(Ok(outcome)) => outcome,
         Ok(Err(e)) => Outcome::Failed(format!("the costmap files could not be written: {e}")),
         Err(e) if e.is_panic() => {
@@ -772,7 +814,11 @@ fn encode(costmap: &Costmap) -> std::io::Result<Built> {
         layers,
     };
     let result = serde_json::to_string(&result).map_err(std::io::Error::other)?;
-    Ok(Built { result, files })
+    Ok(Built {
+        result,
+        files,
+        room: None,
+    })
 }
 
 #[cfg(test)]
@@ -848,6 +894,7 @@ mod tests {
                 costmaps: Arc::new(CostmapJobs::new(1)),
                 routes: Arc::new(crate::app::RouteStore::default()),
                 web: Arc::new(crate::web_ui::WebUi::new(&dir)),
+                memory: Arc::new(crate::memory::MemoryBudget::new(1024)),
             };
             TestServer { state, dir }
         }
@@ -887,8 +934,10 @@ mod tests {
                 created_at: now_millis(),
                 file_name: Some("ramp.asc".into()),
                 crs_override: Some(32633),
-                info: "{}".into(),
+                // What loading it needs of the info: its size.
+                info: r#"{"width": 40, "height": 40}"#.into(),
                 size_bytes: asc.len() as i64,
+                read_bytes: None,
             };
             self.state
                 .db

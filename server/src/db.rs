@@ -6,12 +6,18 @@ use std::path::Path;
 use std::str::FromStr;
 use std::time::Duration;
 
+use futures_util::Stream;
+
 use sqlx::postgres::{PgPool, PgPoolOptions};
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
 
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
+
+/// Files are stored as rows of at most this many bytes (see the
+/// migration `file_chunks`), written and read one at a time.
+pub const CHUNK_BYTES: usize = 1024 * 1024;
 
 #[derive(Clone, Debug)]
 pub enum Db {
@@ -59,10 +65,13 @@ pub struct DemMetaRow {
     /// `DemInfo` as JSON.
     pub info: String,
     pub size_bytes: i64,
+    /// Memory reading the file again takes, estimated from its header at
+    /// upload; `None` for DEMs stored before it was kept.
+    pub read_bytes: Option<i64>,
 }
 
 /// What is needed to parse a stored DEM again.
-#[derive(Debug, Clone, sqlx::FromRow)]
+#[derive(Debug, Clone)]
 pub struct DemDataRow {
     pub file_name: Option<String>,
     pub crs_override: Option<i64>,
@@ -94,11 +103,27 @@ pub struct CostmapRow {
 }
 
 /// One file of a finished costmap.
-#[derive(Debug, Clone, sqlx::FromRow)]
+#[derive(Debug, Clone)]
 pub struct CostmapFileRow {
     pub name: String,
     pub content_type: String,
     pub data: Vec<u8>,
+}
+
+/// A stored file of a costmap, without its bytes (see [`Db::file_chunks`]).
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct CostmapFileMeta {
+    pub content_type: String,
+    pub size_bytes: i64,
+}
+
+/// A stored file, read a chunk at a time.
+#[derive(Debug, Clone)]
+pub enum StoredFile {
+    /// A DEM's file as uploaded.
+    Dem(String),
+    /// A costmap's file: costmap id and file name.
+    Costmap(String, String),
 }
 
 /// A stored route.
@@ -210,32 +235,122 @@ impl Db {
         on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|r| r.rows_affected() > 0))
     }
 
+    /// Store a DEM and its file (`meta.size_bytes` must be its length),
+    /// a chunk at a time, in one transaction.
     pub async fn insert_dem(&self, meta: &DemMetaRow, data: &[u8]) -> Result<(), sqlx::Error> {
-        const SQL: &str = "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, size_bytes, data) \
-                           VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
-        on_pool!(self, pool => sqlx::query(SQL)
-            .bind(&meta.id)
-            .bind(&meta.name)
-            .bind(meta.created_at)
-            .bind(&meta.file_name)
-            .bind(meta.crs_override)
-            .bind(&meta.info)
-            .bind(meta.size_bytes)
-            .bind(data)
-            .execute(pool)
-            .await
-            .map(|_| ()))
+        const SQL: &str = "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, \
+                           size_bytes, read_bytes) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
+        const CHUNK: &str = "INSERT INTO dem_chunks (dem_id, seq, data) VALUES ($1, $2, $3)";
+        on_pool!(self, pool => {
+            let mut tx = pool.begin().await?;
+            sqlx::query(SQL)
+                .bind(&meta.id)
+                .bind(&meta.name)
+                .bind(meta.created_at)
+                .bind(&meta.file_name)
+                .bind(meta.crs_override)
+                .bind(&meta.info)
+                .bind(meta.size_bytes)
+                .bind(meta.read_bytes)
+                .execute(&mut *tx)
+                .await?;
+            for (seq, chunk) in data.chunks(CHUNK_BYTES).enumerate() {
+                sqlx::query(CHUNK)
+                    .bind(&meta.id)
+                    .bind(seq as i64)
+                    .bind(chunk)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
     }
 
     pub async fn get_dem_meta(&self, id: &str) -> Result<Option<DemMetaRow>, sqlx::Error> {
-        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes \
-                           FROM dems WHERE id = $1";
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
+                           read_bytes FROM dems WHERE id = $1";
         on_pool!(self, pool => sqlx::query_as::<_, DemMetaRow>(SQL).bind(id).fetch_optional(pool).await)
     }
 
+    /// A stored DEM's file, read whole (a chunk at a time into one buffer).
     pub async fn get_dem_data(&self, id: &str) -> Result<Option<DemDataRow>, sqlx::Error> {
-        const SQL: &str = "SELECT file_name, crs_override, data FROM dems WHERE id = $1";
-        on_pool!(self, pool => sqlx::query_as::<_, DemDataRow>(SQL).bind(id).fetch_optional(pool).await)
+        const SQL: &str = "SELECT file_name, crs_override, size_bytes FROM dems WHERE id = $1";
+        let row: Option<(Option<String>, Option<i64>, i64)> = on_pool!(self, pool =>
+            sqlx::query_as(SQL).bind(id).fetch_optional(pool).await)?;
+        let Some((file_name, crs_override, size)) = row else {
+            return Ok(None);
+        };
+        let data = self
+            .read_file(&StoredFile::Dem(id.to_string()), size)
+            .await?;
+        Ok(Some(DemDataRow {
+            file_name,
+            crs_override,
+            data,
+        }))
+    }
+
+    /// Chunk `seq` of a stored file; `None` past its end.
+    pub async fn file_chunk(
+        &self,
+        file: &StoredFile,
+        seq: i64,
+    ) -> Result<Option<Vec<u8>>, sqlx::Error> {
+        const DEM: &str = "SELECT data FROM dem_chunks WHERE dem_id = $1 AND seq = $2";
+        const COSTMAP: &str = "SELECT data FROM costmap_file_chunks \
+                               WHERE costmap_id = $1 AND name = $2 AND seq = $3";
+        let row: Option<(Vec<u8>,)> = match file {
+            StoredFile::Dem(id) => on_pool!(self, pool => sqlx::query_as(DEM)
+                .bind(id)
+                .bind(seq)
+                .fetch_optional(pool)
+                .await)?,
+            StoredFile::Costmap(id, name) => on_pool!(self, pool => sqlx::query_as(COSTMAP)
+                .bind(id)
+                .bind(name)
+                .bind(seq)
+                .fetch_optional(pool)
+                .await)?,
+        };
+        Ok(row.map(|(data,)| data))
+    }
+
+    /// The `size` bytes of a stored file, a chunk at a time: one query per
+    /// chunk, so no connection is held between chunks (a slow reader holds
+    /// none). Ends with an error if the file turns out shorter (deleted
+    /// meanwhile).
+    pub fn file_chunks(
+        &self,
+        file: StoredFile,
+        size: i64,
+    ) -> impl Stream<Item = Result<Vec<u8>, sqlx::Error>> + Send + 'static {
+        let size = u64::try_from(size).unwrap_or(0);
+        futures_util::stream::try_unfold(
+            (self.clone(), file, 0i64, 0u64),
+            move |(db, file, seq, done)| async move {
+                if done >= size {
+                    return Ok(None);
+                }
+                match db.file_chunk(&file, seq).await? {
+                    Some(chunk) if !chunk.is_empty() => {
+                        let done = done + chunk.len() as u64;
+                        Ok(Some((chunk, (db, file, seq + 1, done))))
+                    }
+                    _ => Err(sqlx::Error::RowNotFound),
+                }
+            },
+        )
+    }
+
+    /// A stored file of `size` bytes, read whole into one buffer.
+    pub async fn read_file(&self, file: &StoredFile, size: i64) -> Result<Vec<u8>, sqlx::Error> {
+        use futures_util::TryStreamExt;
+        let mut data = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
+        let mut chunks = std::pin::pin!(self.file_chunks(file.clone(), size));
+        while let Some(chunk) = chunks.try_next().await? {
+            data.extend_from_slice(&chunk);
+        }
+        Ok(data)
     }
 
     /// Newest first, without the files.
@@ -244,8 +359,8 @@ impl Db {
         limit: i64,
         offset: i64,
     ) -> Result<(Vec<DemMetaRow>, i64), sqlx::Error> {
-        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes \
-                           FROM dems ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
+                           read_bytes FROM dems ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
         const COUNT: &str = "SELECT COUNT(*) FROM dems";
         on_pool!(self, pool => {
             let rows = sqlx::query_as::<_, DemMetaRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
@@ -385,7 +500,7 @@ impl Db {
     }
 
     /// Finish a job `owner` runs: status done with `result`, and its
-    /// files, in one transaction. False (and nothing written) when the job
+    /// files (a chunk at a time), in one transaction. False (and nothing written) when the job
     /// is no longer `owner`'s to finish.
     pub async fn finish_costmap(
         &self,
@@ -399,7 +514,10 @@ impl Db {
                            result = $3, error = NULL, updated_at = $4, owner = NULL, lease_until = 0 \
                            WHERE id = $1 AND owner = $2 AND status = 'running'";
         const CLEAR: &str = "DELETE FROM costmap_files WHERE costmap_id = $1";
-        const FILE: &str = "INSERT INTO costmap_files (costmap_id, name, content_type, data) VALUES ($1, $2, $3, $4)";
+        const FILE: &str = "INSERT INTO costmap_files (costmap_id, name, content_type, size_bytes) \
+                            VALUES ($1, $2, $3, $4)";
+        const CHUNK: &str = "INSERT INTO costmap_file_chunks (costmap_id, name, seq, data) \
+                             VALUES ($1, $2, $3, $4)";
         on_pool!(self, pool => {
             let mut tx = pool.begin().await?;
             let updated = sqlx::query(SQL)
@@ -420,9 +538,18 @@ impl Db {
                     .bind(id)
                     .bind(&f.name)
                     .bind(&f.content_type)
-                    .bind(&f.data)
+                    .bind(f.data.len() as i64)
                     .execute(&mut *tx)
                     .await?;
+                for (seq, chunk) in f.data.chunks(CHUNK_BYTES).enumerate() {
+                    sqlx::query(CHUNK)
+                        .bind(id)
+                        .bind(&f.name)
+                        .bind(seq as i64)
+                        .bind(chunk)
+                        .execute(&mut *tx)
+                        .await?;
+                }
             }
             tx.commit().await?;
             Ok(true)
@@ -584,18 +711,38 @@ impl Db {
         })
     }
 
+    /// A stored file of a costmap without its bytes (stream them with
+    /// [`Db::file_chunks`]).
+    pub async fn costmap_file_meta(
+        &self,
+        id: &str,
+        name: &str,
+    ) -> Result<Option<CostmapFileMeta>, sqlx::Error> {
+        const SQL: &str = "SELECT content_type, size_bytes FROM costmap_files \
+                           WHERE costmap_id = $1 AND name = $2";
+        on_pool!(self, pool => sqlx::query_as::<_, CostmapFileMeta>(SQL)
+            .bind(id)
+            .bind(name)
+            .fetch_optional(pool)
+            .await)
+    }
+
+    /// A stored file of a costmap, read whole.
     pub async fn get_costmap_file(
         &self,
         id: &str,
         name: &str,
     ) -> Result<Option<CostmapFileRow>, sqlx::Error> {
-        const SQL: &str = "SELECT name, content_type, data FROM costmap_files \
-                           WHERE costmap_id = $1 AND name = $2";
-        on_pool!(self, pool => sqlx::query_as::<_, CostmapFileRow>(SQL)
-            .bind(id)
-            .bind(name)
-            .fetch_optional(pool)
-            .await)
+        let Some(meta) = self.costmap_file_meta(id, name).await? else {
+            return Ok(None);
+        };
+        let file = StoredFile::Costmap(id.to_string(), name.to_string());
+        let data = self.read_file(&file, meta.size_bytes).await?;
+        Ok(Some(CostmapFileRow {
+            name: name.to_string(),
+            content_type: meta.content_type,
+            data,
+        }))
     }
 
     pub async fn insert_route(&self, row: &RouteRow) -> Result<(), sqlx::Error> {
@@ -672,4 +819,166 @@ async fn sqlite_pool(opts: SqliteConnectOptions) -> Result<SqlitePool, sqlx::Err
         .max_connections(8)
         .connect_with(opts)
         .await
+}
+
+#[cfg(test)]
+mod tests {
+    use futures_util::TryStreamExt;
+
+    use super::*;
+
+    /// `n` bytes that differ from chunk to chunk.
+    fn pattern(n: usize) -> Vec<u8> {
+        (0..n)
+            .map(|i| (i % 251) as u8 ^ (i / CHUNK_BYTES) as u8)
+            .collect()
+    }
+
+    async fn temp_db() -> (Db, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("terraplan-db-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        (Db::connect(None, &dir).await.unwrap(), dir)
+    }
+
+    fn dem_row(id: &str, size: usize) -> DemMetaRow {
+        DemMetaRow {
+            id: id.into(),
+            name: None,
+            created_at: 1,
+            file_name: Some("x.tif".into()),
+            crs_override: None,
+            info: "{}".into(),
+            size_bytes: size as i64,
+            read_bytes: Some(7),
+        }
+    }
+
+    /// Files go in as chunks of 1 MiB and come out whole, streamed or
+    /// read at once; deleting their owner deletes the chunks.
+    #[tokio::test]
+    async fn files_are_stored_and_read_in_chunks() {
+        let (db, dir) = temp_db().await;
+        let data = pattern(2 * CHUNK_BYTES + 5);
+        db.insert_dem(&dem_row("d", data.len()), &data)
+            .await
+            .unwrap();
+        assert_eq!(db.get_dem_data("d").await.unwrap().unwrap().data, data);
+        assert_eq!(
+            db.get_dem_meta("d").await.unwrap().unwrap().read_bytes,
+            Some(7)
+        );
+        let file = StoredFile::Dem("d".into());
+        let chunks: Vec<Vec<u8>> = db
+            .file_chunks(file.clone(), data.len() as i64)
+            .try_collect()
+            .await
+            .unwrap();
+        let sizes: Vec<usize> = chunks.iter().map(Vec::len).collect();
+        assert_eq!(sizes, [CHUNK_BYTES, CHUNK_BYTES, 5]);
+        // A file shorter than its owner says ends in an error, not short.
+        let long: Result<Vec<Vec<u8>>, _> = db
+            .file_chunks(file, data.len() as i64 + 1)
+            .try_collect()
+            .await;
+        assert!(long.is_err());
+        assert!(db.delete_dem("d").await.unwrap());
+        let Db::Sqlite(pool) = &db else {
+            unreachable!()
+        };
+        let (left,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM dem_chunks")
+            .fetch_one(pool)
+            .await
+            .unwrap();
+        assert_eq!(left, 0);
+        db.close().await;
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// A database of the migrations before chunks, with files stored
+    /// whole, is migrated: every file reads back the same, in chunks.
+    #[tokio::test]
+    async fn stored_files_migrate_to_chunks() {
+        let dir = std::env::temp_dir().join(format!("terraplan-db-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let opts = SqliteConnectOptions::new().filename(dir.join("terraplan.sqlite3"));
+        let pool = sqlite_pool(opts).await.unwrap();
+        // The migrations before `file_chunks`, as sqlx applies them.
+        let old_dir = dir.join("migrations");
+        std::fs::create_dir_all(&old_dir).unwrap();
+        let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../migrations");
+        let mut copied = 0;
+        for entry in std::fs::read_dir(source).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_str().unwrap().to_string();
+            if name.as_str() < "20261201000001" {
+                std::fs::copy(&path, old_dir.join(name)).unwrap();
+                copied += 1;
+            }
+        }
+        assert_eq!(copied, 4);
+        let before = sqlx::migrate::Migrator::new(old_dir.as_path())
+            .await
+            .unwrap();
+        before.run(&pool).await.unwrap();
+        let dem = pattern(3 * CHUNK_BYTES);
+        let tif = pattern(CHUNK_BYTES + 1);
+        sqlx::query(
+            "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, size_bytes, \
+             data) VALUES ('d', NULL, 1, 'x.tif', NULL, '{}', $1, $2)",
+        )
+        .bind(dem.len() as i64)
+        .bind(&dem)
+        .execute(&pool)
+        .await
+        .unwrap();
+        sqlx::query(
+            "INSERT INTO costmaps (id, dem_id, created_at, updated_at, request, vehicle, status) \
+             VALUES ('c', 'd', 1, 1, '{}', '{}', 'done')",
+        )
+        .execute(&pool)
+        .await
+        .unwrap();
+        for (name, data) in [("costmap.tif", &tif), ("legend.svg", &b"<svg/>".to_vec())] {
+            sqlx::query(
+                "INSERT INTO costmap_files (costmap_id, name, content_type, data) \
+                 VALUES ('c', $1, 'x', $2)",
+            )
+            .bind(name)
+            .bind(data)
+            .execute(&pool)
+            .await
+            .unwrap();
+        }
+        MIGRATOR.run(&pool).await.unwrap();
+        let db = Db::Sqlite(pool.clone());
+        let meta = db.get_dem_meta("d").await.unwrap().unwrap();
+        assert_eq!((meta.size_bytes, meta.read_bytes), (dem.len() as i64, None));
+        assert_eq!(db.get_dem_data("d").await.unwrap().unwrap().data, dem);
+        let file = db
+            .get_costmap_file("c", "costmap.tif")
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(file.data, tif);
+        let meta = db
+            .costmap_file_meta("c", "legend.svg")
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(meta.size_bytes, 6);
+        let (chunks,): (i64,) =
+            sqlx::query_as("SELECT COUNT(*) FROM dem_chunks WHERE dem_id = 'd'")
+                .fetch_one(&pool)
+                .await
+                .unwrap();
+        assert_eq!(chunks, 3);
+        assert!(db.delete_costmap("c").await.unwrap());
+        let (left,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM costmap_file_chunks")
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        assert_eq!(left, 0);
+        db.close().await;
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }

@@ -11,6 +11,7 @@ mod db;
 mod error;
 mod experiment;
 mod linger;
+mod memory;
 mod serve;
 mod web_ui;
 

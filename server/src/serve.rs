@@ -57,6 +57,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         costmaps: jobs.clone(),
         routes: Arc::new(crate::app::RouteStore::from_config(&config)),
         web: Arc::new(crate::web_ui::WebUi::new(&config.web_dir)),
+        memory: Arc::new(crate::memory::MemoryBudget::new(config.memory_budget_mb)),
     };
     if state.web.is_built() {
         tracing::info!(dir = %config.web_dir.display(), "serving the web page at /");

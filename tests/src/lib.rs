@@ -165,6 +165,11 @@ impl Server {
         format!("{}{}", self.base, path)
     }
 
+    /// The server's process id (for `/proc/<pid>/status`).
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().expect("server running").id()
+    }
+
     /// Send SIGTERM and wait for a clean exit; returns the exit status.
     pub fn stop(mut self) -> std::process::ExitStatus {
         self.terminate().expect("server was running")

@@ -37,8 +37,9 @@ use crate::costmap_jobs::{
     COSTMAP_TIF, CostmapResult, JobStatus, LEASE_MS, LEGEND_SVG, Live, PREVIEW_PNG, StoredRequest,
     layer_file, now_millis, parse_stage,
 };
-use crate::db::CostmapRow;
+use crate::db::{CostmapRow, StoredFile};
 use crate::error::{ApiError, Problem};
+use crate::memory::costmap_build_bytes;
 
 const NAME_MAX_CHARS: usize = 200;
 /// Fields of `POST /api/v1/costmaps`.
@@ -480,7 +481,7 @@ async fn landcover_crs_fault(
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid request (unknown DEM, vehicle or options out of range, options that do not fit the DEM): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request (unknown DEM, vehicle or options out of range, options that do not fit the DEM, a build needing more than the memory budget): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The DEM (or land-cover raster) had to be read again from storage and no planner thread became free in time, or the service is shutting down; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -518,6 +519,16 @@ pub async fn create_costmap(
         &req.options,
         "/options",
     ));
+    // A build that alone needs more than the memory budget never runs.
+    let layers = req.options.layers.len() as u64 + u64::from(req.options.landcover.is_some());
+    let (w, h) = (dem.width as u64, dem.height as u64);
+    let what = format!("a costmap of DEM {} ({w} × {h} pixels)", req.dem_id);
+    if let Err(e) = state
+        .memory
+        .check(costmap_build_bytes(w.saturating_mul(h), layers), &what)
+    {
+        issues.push(Issue::new("/dem_id", &e.to_string()));
+    }
     if !issues.is_empty() {
         return Err(ApiError::Validation(issues));
     }
@@ -820,16 +831,25 @@ async fn download(
     }
     let stored = state
         .db
-        .get_costmap_file(&row.id, file)
+        .costmap_file_meta(&row.id, file)
         .await?
         .ok_or_else(|| {
             // Deleted since the row was read, or a bug.
             ApiError::NotFound(format!("costmap {} has no file {file}", row.id))
         })?;
-    let mut res = stored.data.into_response();
+    // Streamed a stored chunk at a time: a download holds one chunk, not
+    // the file (should the file go meanwhile, the body ends short of its
+    // Content-Length and the client sees the transfer fail).
+    let chunks = state.db.file_chunks(
+        StoredFile::Costmap(row.id.clone(), file.to_string()),
+        stored.size_bytes,
+    );
+    let mut res = axum::body::Body::from_stream(chunks).into_response();
     if let Ok(v) = HeaderValue::from_str(&stored.content_type) {
         res.headers_mut().insert(header::CONTENT_TYPE, v);
     }
+    res.headers_mut()
+        .insert(header::CONTENT_LENGTH, HeaderValue::from(stored.size_bytes));
     if let Some(name) = attachment
         && let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{name}\""))
     {

@@ -5,11 +5,21 @@
 //! The uploaded file is stored as it came (with the CRS the uploader gave,
 //! if any) and parsed again on demand; parsed rasters are kept in the
 //! state's small cache ([`AppState::load_dem`]).
+//!
+//! An upload is written to a spool file in the data directory as it
+//! arrives (a slow or large upload holds no more than a buffer of
+//! memory), its header is read for the raster's declared size, and only
+//! then, with room for it in the memory budget, is it read; a raster
+//! whose reading alone needs more than the budget (a small compressed
+//! file declaring huge pixel counts) is refused before anything of that
+//! size is allocated. It is stored a chunk at a time.
 
+use std::io::Write;
+use std::path::{Path as FsPath, PathBuf};
 use std::sync::Arc;
+use std::time::Duration;
 
 use axum::Json;
-use axum::body::Bytes;
 use axum::extract::multipart::MultipartError;
 use axum::extract::{
     FromRequest, Multipart, Path, Query, Request, State, rejection::QueryRejection,
@@ -23,13 +33,15 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
+use super::dem_header;
 use super::json_body::{JsonBody, media_type};
 use super::paging::{ListQuery, page};
 use super::rfc3339;
 use crate::app::AppState;
 use crate::costmap_jobs::now_millis;
-use crate::db::DemMetaRow;
+use crate::db::{CHUNK_BYTES, DemMetaRow};
 use crate::error::{ApiError, Problem};
+use crate::memory::{dem_read_bytes, hillshade_bytes, mib};
 
 const NAME_MAX_CHARS: usize = 200;
 const FILE_NAME_MAX_CHARS: usize = 255;
@@ -204,6 +216,19 @@ pub fn terrain_error(e: TerrainError) -> ApiError {
     }
 }
 
+/// A stored DEM's width and height, from its stored info.
+pub fn stored_size(row: &DemMetaRow) -> Result<(u64, u64), ApiError> {
+    #[derive(Deserialize)]
+    struct Size {
+        width: u64,
+        height: u64,
+    }
+    let size: Size = serde_json::from_str(&row.info).map_err(|e| {
+        ApiError::Internal(format!("stored DEM info of {} unreadable: {e}", row.id))
+    })?;
+    Ok((size.width, size.height))
+}
+
 fn stored_info(row: &DemMetaRow) -> Result<DemInfo, ApiError> {
     let mut info: DemInfo = serde_json::from_str(&row.info).map_err(|e| {
         ApiError::Internal(format!("stored DEM info of {} unreadable: {e}", row.id))
@@ -242,9 +267,125 @@ fn multipart_error(e: MultipartError, limit: usize) -> ApiError {
     }
 }
 
+/// Spool files untouched for this long belong to no upload in progress
+/// (the server stopped during it): removed at start-up.
+const STALE_SPOOL: Duration = Duration::from_secs(3600);
+
+/// Where uploads are spooled under `data_dir`, with the files left behind
+/// by a server that stopped during an upload removed.
+pub fn spool_dir(data_dir: &FsPath) -> PathBuf {
+    let dir = data_dir.join("uploads");
+    if let Ok(entries) = std::fs::read_dir(&dir) {
+        for entry in entries.flatten() {
+            let stale = entry
+                .metadata()
+                .and_then(|m| m.modified())
+                .is_ok_and(|t| t.elapsed().is_ok_and(|age| age > STALE_SPOOL));
+            if stale && entry.path().extension().is_some_and(|e| e == "part") {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+    dir
+}
+
+/// An upload spooled to a file, removed when dropped.
+struct Spool {
+    path: PathBuf,
+    len: u64,
+}
+
+impl Drop for Spool {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Writes an upload to its spool file as it arrives, a buffer at a time.
+struct SpoolWriter {
+    spool: Spool,
+    file: Option<std::fs::File>,
+    buf: Vec<u8>,
+    limit: usize,
+}
+
+fn spool_error(e: impl std::fmt::Display) -> ApiError {
+    ApiError::Internal(format!("cannot spool the upload: {e}"))
+}
+
+impl SpoolWriter {
+    async fn create(dir: &FsPath, limit: usize) -> Result<SpoolWriter, ApiError> {
+        let dir = dir.to_path_buf();
+        let path = dir.join(format!("{}.part", uuid::Uuid::new_v4()));
+        let spool = Spool { path, len: 0 };
+        let at = spool.path.clone();
+        let file = tokio::task::spawn_blocking(move || {
+            std::fs::create_dir_all(&dir)?;
+            std::fs::File::create(&at)
+        })
+        .await
+        .map_err(spool_error)?
+        .map_err(spool_error)?;
+        Ok(SpoolWriter {
+            spool,
+            file: Some(file),
+            buf: Vec::new(),
+            limit,
+        })
+    }
+
+    /// Append `bytes`; 413 once more than the limit has arrived.
+    async fn push(&mut self, bytes: &[u8]) -> Result<(), ApiError> {
+        self.spool.len += bytes.len() as u64;
+        if self.spool.len > self.limit as u64 {
+            return Err(too_large(self.limit));
+        }
+        self.buf.extend_from_slice(bytes);
+        if self.buf.len() >= CHUNK_BYTES {
+            self.flush().await?;
+        }
+        Ok(())
+    }
+
+    async fn flush(&mut self) -> Result<(), ApiError> {
+        let (Some(mut file), buf) = (self.file.take(), std::mem::take(&mut self.buf)) else {
+            return Err(spool_error("the spool file is closed"));
+        };
+        let (file, mut buf, written) = tokio::task::spawn_blocking(move || {
+            let written = file.write_all(&buf);
+            (file, buf, written)
+        })
+        .await
+        .map_err(spool_error)?;
+        written.map_err(spool_error)?;
+        buf.clear();
+        self.file = Some(file);
+        self.buf = buf;
+        Ok(())
+    }
+
+    async fn finish(mut self) -> Result<Spool, ApiError> {
+        self.flush().await?;
+        Ok(self.spool)
+    }
+}
+
+/// A raw request body, spooled.
+async fn spool_body(req: Request, dir: &FsPath, limit: usize) -> Result<Spool, ApiError> {
+    use futures_util::StreamExt;
+    let mut writer = SpoolWriter::create(dir, limit).await?;
+    let mut body = req.into_body().into_data_stream();
+    while let Some(bytes) = body.next().await {
+        let bytes = bytes
+            .map_err(|e| ApiError::BadRequest(format!("cannot read the request body: {e}")))?;
+        writer.push(&bytes).await?;
+    }
+    writer.finish().await
+}
+
 /// The uploaded file and what the form may add to the query.
 struct Upload {
-    data: Bytes,
+    file: Option<Spool>,
     file_name: Option<String>,
     name: Option<String>,
     crs: Option<String>,
@@ -255,13 +396,13 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
         ApiError::BadRequest(format!("malformed multipart body: {}", e.body_text()))
     })?;
     let mut upload = Upload {
-        data: Bytes::new(),
+        file: None,
         file_name: None,
         name: None,
         crs: None,
     };
     let mut have_file = false;
-    while let Some(field) = form
+    while let Some(mut field) = form
         .next_field()
         .await
         .map_err(|e| multipart_error(e, limit))?
@@ -277,7 +418,13 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
                 }
                 have_file = true;
                 upload.file_name = field.file_name().and_then(base_name);
-                upload.data = field.bytes().await.map_err(|e| multipart_error(e, limit))?;
+                let mut writer = SpoolWriter::create(&state.dems.spool_dir, limit).await?;
+                while let Some(bytes) =
+                    field.chunk().await.map_err(|e| multipart_error(e, limit))?
+                {
+                    writer.push(&bytes).await?;
+                }
+                upload.file = Some(writer.finish().await?);
             }
             "name" | "crs" => {
                 let text = field.text().await.map_err(|e| multipart_error(e, limit))?;
@@ -330,7 +477,7 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
         (status = 201, description = "Read and stored", body = DemResponse,
             headers(("Location" = String, description = "URL of the new DEM"))),
         (status = 400, description = "Empty body, malformed form or query", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "File over the size limit or raster over the pixel limit", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "File over the size limit, raster over the pixel limit, or a raster whose declared size needs more than the memory budget to read", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported Content-Type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Not a readable DEM, or its CRS is unknown (give `crs`)", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
@@ -348,15 +495,8 @@ pub async fn upload_dem(
     let upload = if essence == "multipart/form-data" {
         read_multipart(req, &state, limit).await?
     } else if RAW_TYPES.contains(&essence.as_str()) {
-        let data = Bytes::from_request(req, &state).await.map_err(|e| {
-            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                too_large(limit)
-            } else {
-                ApiError::BadRequest(format!("cannot read the request body: {}", e.body_text()))
-            }
-        })?;
         Upload {
-            data,
+            file: Some(spool_body(req, &state.dems.spool_dir, limit).await?),
             file_name: None,
             name: None,
             crs: None,
@@ -407,14 +547,70 @@ pub async fn upload_dem(
         .map(|c| parse_epsg(&c))
         .transpose()
         .map_err(ApiError::BadRequest)?;
-    if upload.data.is_empty() {
+    let Some(spool) = upload.file.filter(|f| f.len > 0) else {
         return Err(ApiError::BadRequest(
             "the DEM file is empty: send a GeoTIFF, ESRI ASCII grid or SRTM .hgt file".into(),
         ));
-    }
+    };
 
-    let data = upload.data;
+    // The raster's declared size, from its header, before it is read.
+    let (at, len, probe_name) = (spool.path.clone(), spool.len, file_name.clone());
+    let declared = tokio::task::spawn_blocking(move || {
+        let mut f = std::fs::File::open(at).ok()?;
+        dem_header::declared(&mut f, len, probe_name.as_deref())
+    })
+    .await
+    .map_err(spool_error)?;
     let limits = state.dems.limits.clone();
+    let need = match &declared {
+        Some(d) => {
+            let over_side = d.width.max(d.height) > u64::from(limits.max_side);
+            if over_side || d.pixels() > limits.max_pixels {
+                // The same refusal the full read gives, before it.
+                return Err(terrain_error(TerrainError::TooLarge {
+                    width: d.width,
+                    height: d.height,
+                    limit: if over_side {
+                        format!("{} pixels per side", limits.max_side)
+                    } else {
+                        format!("{} pixels", limits.max_pixels)
+                    },
+                }));
+            }
+            dem_read_bytes(d.pixels(), d.chunk_bytes, len)
+        }
+        // Not a raster whose header says its size: the full read refuses
+        // it without allocating much.
+        None => dem_read_bytes(0, 0, len),
+    };
+    let budget = state.memory.total();
+    if need > budget {
+        let what = match &declared {
+            Some(d) => format!(
+                "it declares {} × {} {} pixels ({} in all)",
+                d.width,
+                d.height,
+                d.sample,
+                d.pixels()
+            ),
+            None => format!("the file is {len} bytes"),
+        };
+        return Err(ApiError::PayloadTooLarge(format!(
+            "the DEM is too large for this server's memory: {what}, and reading it needs \
+             about {}, more than the memory budget of {} (--memory-budget-mb)",
+            mib(need),
+            mib(budget)
+        )));
+    }
+    let _room = state
+        .memory
+        .reserve(need, "reading the uploaded DEM")
+        .await?;
+    let path = spool.path.clone();
+    let data = tokio::fs::read(&path).await.map_err(spool_error)?;
+    let data = Arc::new(data);
+    drop(spool);
+
     let parse_name = file_name.clone();
     let parse_data = data.clone();
     let (dem, info) = state
@@ -434,6 +630,7 @@ pub async fn upload_dem(
         crs_override: crs.map(i64::from),
         info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
         size_bytes: data.len() as i64,
+        read_bytes: i64::try_from(need).ok(),
     };
     state.db.insert_dem(&row, &data).await?;
     state.dems.cache.insert(&row.id, Arc::new(dem), None);
@@ -538,7 +735,8 @@ pub async fn delete_dem(
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 400, description = "max_side out of range", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such DEM", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Reading the DEM and shading it need more than the server's memory budget", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner or the memory budget is busy; retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn hillshade(
@@ -566,7 +764,12 @@ pub async fn hillshade(
             HeaderValue::from_static("public, max-age=31536000, immutable"),
         );
     };
-    let dem = state.load_dem(&id).await?;
+    // 404 or 304 without reading the DEM.
+    state
+        .db
+        .get_dem_meta(&id)
+        .await?
+        .ok_or_else(|| not_found(&id))?;
     let matches = request_headers
         .get_all(header::IF_NONE_MATCH)
         .iter()
@@ -578,11 +781,16 @@ pub async fn hillshade(
         cache_headers(&mut res);
         return Ok(res);
     }
+    let side = max_side as u64;
+    let (dem, room) = state
+        .load_dem_for(&id, "a hillshade", |w, h| hillshade_bytes(w, h, side))
+        .await?;
     let png = state
         .run_planner(crate::app::Work::Dem, move |_| {
             hillshade_png(&dem, max_side as usize)
         })
         .await??;
+    drop(room);
     let mut res = png.into_response();
     res.headers_mut()
         .insert(header::CONTENT_TYPE, HeaderValue::from_static("image/png"));
@@ -637,7 +845,8 @@ async fn heights(
         (status = 200, description = "The height, or null outside the DEM or on nodata", body = Elevation),
         (status = 400, description = "lon/lat missing or out of range", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such DEM", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Reading the DEM needs more than the server's memory budget", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner or the memory budget is busy; retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn elevation(
@@ -648,7 +857,7 @@ pub async fn elevation(
     let Query(q) =
         query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
     check_lon_lat(q.lon, q.lat).map_err(ApiError::BadRequest)?;
-    let dem = state.load_dem(&id).await?;
+    let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
     let h = heights(&state, dem, vec![(q.lon, q.lat)]).await?;
     Ok(Json(Elevation {
         elevation: h.first().copied().flatten(),
@@ -737,7 +946,7 @@ fn parse_points(doc: &Value) -> Result<Vec<(f64, f64)>, ApiError> {
         (status = 404, description = "No such DEM", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid points: `errors` names each by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid points: `errors` names each by JSON pointer; or reading the DEM needs more than the server's memory budget", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -747,7 +956,7 @@ pub async fn elevations(
     JsonBody(doc): JsonBody,
 ) -> Result<Json<Elevations>, ApiError> {
     let points = parse_points(&doc)?;
-    let dem = state.load_dem(&id).await?;
+    let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
     let elevations = heights(&state, dem, points).await?;
     Ok(Json(Elevations { elevations }))
 }
@@ -784,6 +993,7 @@ mod tests {
                 "min":1.0,"max":2.0,"nodata_value":null,"nodata_fraction":0.0}"#
                 .into(),
             size_bytes: 1,
+            read_bytes: None,
         };
         let info = stored_info(&row).unwrap();
         assert!(

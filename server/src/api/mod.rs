@@ -2,6 +2,7 @@
 
 pub mod cameras;
 pub mod costmaps;
+mod dem_header;
 pub mod dems;
 pub mod health;
 pub mod json_body;

@@ -747,25 +747,56 @@ struct MapSource {
     costmap_id: String,
     tif: Vec<u8>,
     dem: Option<Arc<Dem>>,
+    /// Room in the memory budget for the search (and a D* Lite search
+    /// built after it), held as long as the source.
+    _room: crate::memory::Reservation,
 }
 
 /// The costmap's GeoTIFF and its DEM (for heights; `None` when the DEM
-/// has been deleted).
+/// has been deleted), once there is room in the memory budget for a
+/// search on it (a 422 when it alone needs more than the budget).
 async fn map_source(state: &AppState, costmap: &CostmapRow) -> Result<MapSource, ApiError> {
+    #[derive(Deserialize)]
+    struct Size {
+        width: u64,
+        height: u64,
+    }
+    let meta = state
+        .db
+        .costmap_file_meta(&costmap.id, COSTMAP_TIF)
+        .await?
+        .ok_or_else(|| costmap_not_found(&costmap.id))?;
+    let size: Size = stored(
+        &costmap.id,
+        "result",
+        costmap.result.as_deref().unwrap_or(""),
+    )?;
+    let need = crate::memory::route_search_bytes(
+        size.width.saturating_mul(size.height),
+        u64::try_from(meta.size_bytes).unwrap_or(0),
+    );
+    let what = format!(
+        "a route search (costmap {}, {} × {} cells)",
+        costmap.id, size.width, size.height
+    );
+    let (dem, room) = match state
+        .load_dem_for(&costmap.dem_id, &what, |_, _| need)
+        .await
+    {
+        Ok((dem, room)) => (Some(dem), room),
+        Err(ApiError::NotFound(_)) => (None, state.memory.reserve(need, &what).await?),
+        Err(e) => return Err(e),
+    };
     let file = state
         .db
         .get_costmap_file(&costmap.id, COSTMAP_TIF)
         .await?
         .ok_or_else(|| costmap_not_found(&costmap.id))?;
-    let dem = match state.load_dem(&costmap.dem_id).await {
-        Ok(dem) => Some(dem),
-        Err(ApiError::NotFound(_)) => None,
-        Err(e) => return Err(e),
-    };
     Ok(MapSource {
         costmap_id: costmap.id.clone(),
         tif: file.data,
         dem,
+        _room: room,
     })
 }
 
@@ -1355,7 +1386,7 @@ fn created(row: &RouteRow) -> Result<Response, ApiError> {
         (status = 409, description = "The costmap is not done (queued, running or failed)", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer (`/start` or `/goal` outside the costmap or on an obstacle, `/goal` unreachable from the start, options out of range)", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer (`/start` or `/goal` outside the costmap or on an obstacle, `/goal` unreachable from the start, options out of range; or, with the pointer \"\", a search needing more than the server's memory budget)", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "No planner thread became free in time, or the search took longer than the server's limit; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
 )]
@@ -1442,7 +1473,7 @@ pub async fn create_route(
         (status = 404, description = "No such route", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer (`/position` outside the costmap or blocked, `/blocked/N` or `/cost_changes/N/area` not a valid polygon or covering the goal, `/cost_changes/N/cost` out of range, the goal cut off)", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer (`/position` outside the costmap or blocked, `/blocked/N` or `/cost_changes/N/area` not a valid polygon or covering the goal, `/cost_changes/N/cost` out of range, the goal cut off; or, with the pointer \"\", a search needing more than the server's memory budget)", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "No planner thread became free in time, or the search took longer than the server's limit; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
 )]
