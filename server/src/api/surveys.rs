@@ -523,9 +523,10 @@ async fn download(
         .get_survey(id)
         .await?
         .ok_or_else(|| not_found(id))?;
-    let plan = parse_plan(&row.plan)?;
-    let file = plan
-        .file(file_name)
+    // Rendering a big mission is work: off the runtime threads.
+    let name = file_name.to_string();
+    let file = off_runtime(move || parse_plan(&row.plan).map(|plan| plan.file(&name)))
+        .await??
         .ok_or_else(|| ApiError::NotFound(missing()))?;
     let disposition = format!("attachment; filename=\"{download_name}\"");
     let mut res = file.content.into_response();
