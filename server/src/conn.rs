@@ -304,6 +304,11 @@ impl Registry {
 /// client sends its request as soon as it is connected, so it has
 /// normally arrived by then; a server that is full closes the slowest.
 const EVICT_GRACE: Duration = Duration::from_millis(100);
+/// At shutdown, a request body is judged against the minimum rate after
+/// this long (a full server judges it after the eviction grace): a body
+/// that lags a little behind its head (a loaded client, the network) is
+/// not crawling, and its request is finished.
+const CRAWL_GRACE: Duration = Duration::from_secs(1);
 /// How often a full server looks again for an idle connection to close.
 const EVICT_RETRY: Duration = Duration::from_millis(25);
 /// Pause after an accept failed for want of descriptors or memory.
@@ -328,6 +333,7 @@ pub async fn serve(
     tokio::pin!(shutdown);
     loop {
         let accepted = tokio::select! {
+            biased;
             () = &mut shutdown => break,
             r = listener.accept() => r,
         };
@@ -358,6 +364,7 @@ pub async fn serve(
         };
         let _ = stream.set_nodelay(true);
         let slot = tokio::select! {
+            biased;
             () = &mut shutdown => break,
             slot = registry.slot() => slot,
         };
@@ -431,7 +438,7 @@ async fn serve_connection(
                 // one whose body crawls in: nothing to finish (hyper would
                 // wait for a head begun, a handler for its body).
                 let a = lock(&state.inner);
-                if a.in_flight == 0 || a.crawling(min_rate, EVICT_GRACE) {
+                if a.in_flight == 0 || a.crawling(min_rate, CRAWL_GRACE) {
                     break;
                 }
                 drop(a);

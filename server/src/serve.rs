@@ -75,6 +75,9 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot listen on {}:{}: {e}", config.host, config.port))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    // Listening for the signals before the address is announced: a
+    // SIGTERM from then on is a graceful stop, never the default kill.
+    let signalled = shutdown_signal();
     // The first line on stdout is the address, for scripts and tests that
     // start the service on port 0.
     println!("listening on http://{addr}");
@@ -90,7 +93,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     // Connections close with a linger, so a client still sending a body
     // the server refused reads the answer instead of a reset.
     crate::conn::serve(listener, app, limits, async move {
-        shutdown_signal().await;
+        signalled.await;
         // Cancel the costmap runs and end the event streams, so that
         // no request keeps the server from stopping.
         stopping.begin_shutdown();
@@ -209,24 +212,37 @@ fn lock_sqlite(config: &ServeConfig) -> Result<Option<std::fs::File>, String> {
 }
 
 /// Ctrl-C or SIGTERM: stop accepting, let in-flight requests finish.
-async fn shutdown_signal() {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
+/// The handlers are installed when this is called, not when the future
+/// is first polled.
+fn shutdown_signal() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
-            }
-            Err(_) => std::future::pending::<()>().await,
-        }
+    let (interrupt, terminate) = {
+        use tokio::signal::unix::{SignalKind, signal};
+        (
+            signal(SignalKind::interrupt()).ok(),
+            signal(SignalKind::terminate()).ok(),
+        )
     };
-    #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        () = ctrl_c => {},
-        () = term => {},
+    async move {
+        #[cfg(unix)]
+        {
+            let wait = |s: Option<tokio::signal::unix::Signal>| async move {
+                match s {
+                    Some(mut s) => {
+                        s.recv().await;
+                    }
+                    None => std::future::pending::<()>().await,
+                }
+            };
+            tokio::select! {
+                () = wait(interrupt) => {},
+                () = wait(terminate) => {},
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+        tracing::info!("shutdown requested: finishing in-flight requests");
     }
-    tracing::info!("shutdown requested: finishing in-flight requests");
 }

@@ -811,11 +811,23 @@ fn a_half_sent_request_does_not_delay_shutdown() {
     let server = Server::start(dir.path(), &["--header-read-timeout-s", "60"]);
     let addr = authority(&server.base);
     let mut slow: Vec<Slow> = (0..10).map(|i| Slow::open(&addr, i % 2 == 1)).collect();
-    // Held open, so the trickling bodies are being read when it stops.
-    watch(&mut slow, Instant::now() + Duration::from_millis(500));
+    // Held open, so the trickling bodies are being read, and judged
+    // (after a second) slower than the minimum rate, when it stops.
+    watch(&mut slow, Instant::now() + Duration::from_millis(1500));
     let t = Instant::now();
     let status = server.stop();
     let took = t.elapsed();
     assert!(status.success(), "{status:?}");
     assert!(took < Duration::from_secs(10), "shutdown took {took:?}");
+}
+
+/// A SIGTERM as soon as the address is announced is already a graceful
+/// stop (the handlers are installed before), not the default kill.
+#[test]
+fn a_sigterm_right_after_start_is_a_clean_stop() {
+    for _ in 0..5 {
+        let dir = tempfile::tempdir().unwrap();
+        let status = Server::start(dir.path(), &[]).stop();
+        assert!(status.success(), "{status:?}");
+    }
 }
