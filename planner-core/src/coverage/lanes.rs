@@ -183,6 +183,9 @@ fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
     };
     push(slice_angle_deg);
     for k in 0..ring.len() {
+        if crate::cancel::check().is_err() {
+            break; // the caller checks again and drops the cell
+        }
         let e = ring[(k + 1) % ring.len()] - ring[k];
         if e.x == 0.0 && e.y == 0.0 {
             continue;

@@ -18,6 +18,7 @@ pub(crate) fn split_at_touches(rings: &mut [Vec<Coord<f64>>], eps: f64) {
     let points: Vec<[f64; 2]> = rings.iter().flatten().map(|c| [c.x, c.y]).collect();
     let tree = RTree::bulk_load(points);
     let mut on_edge: Vec<(f64, Coord<f64>)> = Vec::new();
+    let mut pace = crate::cancel::Pacer::new(256);
     for ring in rings.iter_mut() {
         let n = ring.len();
         if n < 2 {
@@ -25,6 +26,10 @@ pub(crate) fn split_at_touches(rings: &mut [Vec<Coord<f64>>], eps: f64) {
         }
         let mut out = Vec::with_capacity(n);
         for k in 0..n {
+            if pace.tick().is_err() {
+                // Cancelled: the caller checks again and drops the rings.
+                return;
+            }
             let (a, b) = (ring[k], ring[(k + 1) % n]);
             out.push(a);
             let d = b - a;
