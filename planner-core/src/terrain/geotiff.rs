@@ -1828,7 +1828,10 @@ mod tests {
             .collect();
         let dem = read(&Builder::image(2, 2, 3, 32).strips(2, vec![px]).build()).unwrap();
         let info = dem.info().unwrap();
-        assert_eq!((info.min, info.max, info.nodata_fraction), (None, None, 1.0));
+        assert_eq!(
+            (info.min, info.max, info.nodata_fraction),
+            (None, None, 1.0)
+        );
     }
 
     #[test]
