@@ -88,7 +88,8 @@ pub fn plan_cell_candidates_in(
     {
         return None;
     }
-    let cell_region = Region::from_polygon(cell);
+    // Indexed: every lane line of every candidate is clipped against it.
+    let cell_region = Region::from_polygon(cell).indexed();
     // Rank cheaply before building lanes: the lane count of a direction only
     // needs the cell's extent across it. Directions are tried by increasing
     // lane count (turns are 2 per lane change) and the first count with a
@@ -161,27 +162,26 @@ fn clean_ring(cell: &Polygon<f64>) -> Vec<Coord<f64>> {
     ring
 }
 
+/// Most candidate lane directions tried per cell. A cell with more distinct
+/// edge bearings (a curved or densely digitised outline) keeps those of its
+/// longest edges: each candidate costs a pass over the ring, so trying all
+/// of them would be quadratic in the vertex count.
+const MAX_BEARINGS: usize = 48;
+
 /// Lane bearings in [0, 180): the slice direction first, then parallel and
-/// perpendicular to each edge, without duplicates.
+/// perpendicular to each edge, without duplicates, in order of first
+/// appearance. Beyond [`MAX_BEARINGS`], the bearings with the most edge
+/// length along or across them are kept (the slice direction always).
 fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
-    let mut out: Vec<f64> = Vec::with_capacity(2 * ring.len() + 1);
-    let mut push = |b: f64| {
-        if !b.is_finite() {
-            return;
-        }
-        let mut b = b.rem_euclid(180.0);
-        if b >= 180.0 - 1e-9 {
-            b = 0.0;
-        }
-        let same = |a: f64| {
-            let d = (a - b).abs();
-            d.min(180.0 - d) < 1e-9
-        };
-        if !out.iter().any(|a| same(*a)) {
-            out.push(b);
-        }
+    let normal = |b: f64| {
+        let b = b.rem_euclid(180.0);
+        if b >= 180.0 - 1e-9 { 0.0 } else { b }
     };
-    push(slice_angle_deg);
+    // (bearing, weight, first appearance)
+    let mut all: Vec<(f64, f64, usize)> = Vec::with_capacity(2 * ring.len() + 1);
+    if slice_angle_deg.is_finite() {
+        all.push((normal(slice_angle_deg), f64::INFINITY, 0));
+    }
     for k in 0..ring.len() {
         if crate::cancel::check().is_err() {
             break; // the caller checks again and drops the cell
@@ -191,10 +191,41 @@ fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
             continue;
         }
         let bearing = e.x.atan2(e.y).to_degrees();
-        push(bearing);
-        push(bearing + 90.0);
+        let length = e.x.hypot(e.y);
+        if bearing.is_finite() && length.is_finite() {
+            all.push((normal(bearing), length, all.len()));
+            all.push((normal(bearing + 90.0), length, all.len()));
+        }
     }
-    out
+    // Merge equal bearings (1e-9°) in one sorted pass, also across 0/180.
+    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut merged: Vec<(f64, f64, usize)> = Vec::with_capacity(all.len());
+    for (b, w, first) in all {
+        match merged.last_mut() {
+            Some(m) if b - m.0 < 1e-9 => {
+                m.1 += w;
+                if first < m.2 {
+                    m.2 = first;
+                    m.0 = b;
+                }
+            }
+            _ => merged.push((b, w, first)),
+        }
+    }
+    if merged.len() > 1 {
+        let (head, last) = (merged[0], merged[merged.len() - 1]);
+        if head.0 + 180.0 - last.0 < 1e-9 {
+            let keep = if last.2 < head.2 { last } else { head };
+            merged[0] = (keep.0, head.1 + last.1, keep.2);
+            merged.pop();
+        }
+    }
+    if merged.len() > MAX_BEARINGS {
+        merged.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.2.cmp(&b.2)));
+        merged.truncate(MAX_BEARINGS);
+    }
+    merged.sort_by_key(|m| m.2);
+    merged.into_iter().map(|m| m.0).collect()
 }
 
 /// The frame of one candidate direction: lanes run along `u` and are
@@ -341,13 +372,14 @@ impl Layout {
     /// The lanes in flight order, alternating direction row by row.
     fn lanes(&self, ring: &[Coord<f64>], free: &Region) -> Vec<Lane> {
         let mut lanes = Vec::with_capacity(self.rows.len());
+        let extents = self.band_extents(ring);
         for (k, row) in self.rows.iter().enumerate() {
             if crate::cancel::check().is_err() {
                 // The caller checks again and drops these lanes.
                 break;
             }
             let forward = k % 2 == 0;
-            let (bu0, bu1) = self.band_extent(ring, row.band);
+            let (bu0, bu1) = extents[k];
             let count = row.segments.len();
             let mut row_lanes: Vec<Lane> = row
                 .segments
@@ -375,13 +407,12 @@ impl Layout {
         lanes
     }
 
-    /// `u` range of the part of the cell within `band` (along `n`).
-    fn band_extent(&self, ring: &[Coord<f64>], (lo, hi): (f64, f64)) -> (f64, f64) {
-        let (mut umin, mut umax) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut take = |u: f64| {
-            umin = umin.min(u);
-            umax = umax.max(u);
-        };
+    /// For every row, the `u` range of the part of the cell within its band
+    /// (along `n`). One pass over the ring: each edge only visits the rows
+    /// whose bands its `v` range meets (rows are in increasing `v`), so the
+    /// cost is the ring plus the rows, not their product.
+    fn band_extents(&self, ring: &[Coord<f64>]) -> Vec<(f64, f64)> {
+        let mut out = vec![(f64::INFINITY, f64::NEG_INFINITY); self.rows.len()];
         let m = ring.len();
         for k in 0..m {
             let (p, q) = (
@@ -394,25 +425,37 @@ impl Layout {
                 dot(q, self.frame.d),
                 dot(q, self.frame.n),
             );
-            if (v2 - v1).abs() <= f64::EPSILON * (v1.abs() + v2.abs()) {
-                if v1 >= lo - EPS && v1 <= hi + EPS {
-                    take(u1);
-                    take(u2);
+            let (vlo, vhi) = (v1.min(v2), v1.max(v2));
+            let first = self.rows.partition_point(|r| r.band.1 + EPS < vlo);
+            for (row, extent) in self.rows[first..].iter().zip(&mut out[first..]) {
+                let (lo, hi) = row.band;
+                if lo - EPS > vhi {
+                    break;
                 }
-                continue;
+                let mut take = |u: f64| {
+                    extent.0 = extent.0.min(u);
+                    extent.1 = extent.1.max(u);
+                };
+                if (v2 - v1).abs() <= f64::EPSILON * (v1.abs() + v2.abs()) {
+                    if v1 >= lo - EPS && v1 <= hi + EPS {
+                        take(u1);
+                        take(u2);
+                    }
+                    continue;
+                }
+                // Part of the edge whose v lies in the band.
+                let ta = ((lo - v1) / (v2 - v1)).clamp(0.0, 1.0);
+                let tb = ((hi - v1) / (v2 - v1)).clamp(0.0, 1.0);
+                let (t0, t1) = (ta.min(tb), ta.max(tb));
+                let v_at = |t: f64| v1 + (v2 - v1) * t;
+                if v_at(t0) < lo - EPS || v_at(t0) > hi + EPS {
+                    continue; // the edge misses the band
+                }
+                take(u1 + (u2 - u1) * t0);
+                take(u1 + (u2 - u1) * t1);
             }
-            // Part of the edge whose v lies in the band.
-            let ta = ((lo - v1) / (v2 - v1)).clamp(0.0, 1.0);
-            let tb = ((hi - v1) / (v2 - v1)).clamp(0.0, 1.0);
-            let (t0, t1) = (ta.min(tb), ta.max(tb));
-            let v_at = |t: f64| v1 + (v2 - v1) * t;
-            if v_at(t0) < lo - EPS || v_at(t0) > hi + EPS {
-                continue; // the edge misses the band
-            }
-            take(u1 + (u2 - u1) * t0);
-            take(u1 + (u2 - u1) * t1);
         }
-        (umin, umax)
+        out
     }
 
     /// Clips the wanted lane `(lo, hi)` to the stretch of its line that lies
@@ -875,6 +918,36 @@ mod tests {
         assert_eq!(b.len(), 5);
         assert_abs_diff_eq!(b[0], 150.0, epsilon = 1e-9);
         assert!(b.iter().all(|x| (0.0..180.0).contains(x)));
+    }
+
+    #[test]
+    fn many_edge_bearings_keep_the_longest_edges() {
+        // A half disc of 2 000 short edges closed by one long diameter at
+        // 30°: the slice direction, the diameter and its normal are kept,
+        // and no more than MAX_BEARINGS in all.
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let ring: Vec<Coord<f64>> = (0..=2000)
+            .map(|k| {
+                let a = std::f64::consts::PI * f64::from(k) / 2000.0;
+                let (x, y) = (500.0 * a.cos(), 500.0 * a.sin());
+                coord! { x: x * s - y * c, y: x * c + y * s }
+            })
+            .collect();
+        let b = candidate_bearings(&ring, 7.0);
+        assert_eq!(b.len(), MAX_BEARINGS);
+        assert_abs_diff_eq!(b[0], 7.0, epsilon = 1e-9);
+        for want in [30.0, 120.0] {
+            assert!(b.iter().any(|x| (x - want).abs() < 1e-6), "{want} in {b:?}");
+        }
+        let plan = plan_cell(
+            0,
+            &Polygon::new(LineString(ring.clone()), vec![]),
+            &MultiPolygon(vec![Polygon::new(LineString(ring), vec![])]),
+            25.0,
+            7.0,
+        )
+        .expect("a plan");
+        assert!(!plan.lanes.is_empty());
     }
 
     #[test]

@@ -7,7 +7,7 @@
 
 use geo::algorithm::bool_ops::FillRule;
 use geo::orient::Direction;
-use geo::{BooleanOps, BoundingRect, CoordsIter, MapCoords, Orient};
+use geo::{BoundingRect, CoordsIter, MapCoords, Orient};
 use geo_types::{Coord, LineString, MultiPolygon, Polygon, Rect};
 
 use super::DecomposeError;
@@ -116,15 +116,14 @@ pub fn decompose(
 /// vertices together on its integer grid (about 10⁻⁹ of the extent) and
 /// resolves overlaps and crossings.
 fn local_rings(free: &MultiPolygon<f64>, frame: &SliceFrame) -> (Vec<Vec<Coord<f64>>>, f64) {
-    let local = MultiPolygon::new(
-        free.iter()
-            .map(|p| {
-                p.map_coords(|c| frame.to_local(c))
-                    .orient(Direction::Default)
-            })
-            .collect(),
-    );
-    let local = local.union_with_fill_rule(&MultiPolygon::new(vec![]), FillRule::NonZero);
+    let local: Vec<Polygon<f64>> = free
+        .iter()
+        .map(|p| {
+            p.map_coords(|c| frame.to_local(c))
+                .orient(Direction::Default)
+        })
+        .collect();
+    let local = crate::geo::overlay::union_with_fill_rule(&local, FillRule::NonZero);
     let mut rings = Vec::new();
     let mut area = 0.0;
     for poly in &local {

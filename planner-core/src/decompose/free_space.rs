@@ -1,8 +1,10 @@
 //! Free space: the region of interest minus the union of the no-fly zones.
 
 use geo::algorithm::bool_ops::FillRule;
+
+use crate::geo::overlay;
 use geo::orient::Direction;
-use geo::{Area, BooleanOps, BoundingRect, CoordsIter, Intersects, Orient};
+use geo::{Area, BoundingRect, CoordsIter, Intersects, Orient};
 use geo_types::{MultiPolygon, Polygon};
 
 use super::ring::signed_area;
@@ -36,9 +38,12 @@ pub fn free_space(roi: &Polygon<f64>, nfzs: &[Polygon<f64>]) -> MultiPolygon<f64
         .filter(|z| z.bounding_rect().is_some_and(|b| b.intersects(&bbox)));
     // Non-zero union of consistently oriented zones: overlaps count once,
     // and a self-crossing zone still blocks all of its lobes.
-    let zones = MultiPolygon::new(relevant.map(|z| z.orient(Direction::Default)).collect());
-    let blocked = zones.union_with_fill_rule(&MultiPolygon::new(vec![]), FillRule::NonZero);
-    let free = roi.orient(Direction::Default).difference(&blocked);
+    let zones: Vec<Polygon<f64>> = relevant.map(|z| z.orient(Direction::Default)).collect();
+    let blocked = overlay::union_with_fill_rule(&zones, FillRule::NonZero);
+    let free = overlay::difference(
+        &MultiPolygon(vec![roi.orient(Direction::Default)]),
+        &blocked,
+    );
 
     free.into_iter()
         .filter(|p| p.unsigned_area() > min_area)

@@ -24,6 +24,11 @@ use super::transit::{TransitError, polyline_length};
 /// Pairs of (UAV, job) up to which the round-trip bound uses exact
 /// NFZ-avoiding transits.
 const EXACT_PAIRS: usize = 4096;
+/// Pairs times visibility-graph nodes up to which it does: each exact
+/// transit is a search over the nodes, and the bound is only a report, not
+/// worth more time than the plan (thousands of NFZs and cells would need
+/// millions of node visits); beyond it, straight lines still give a bound.
+const EXACT_WORK: usize = EXACT_PAIRS * 64;
 /// Jobs up to which the approach term compares every pair of corners.
 const APPROACH_JOBS: usize = 1000;
 
@@ -34,7 +39,8 @@ pub fn makespan_lower_bound(flock: &mut Flock, any_corner: bool) -> Result<f64, 
     if m == 0 || n == 0 {
         return Ok(0.0);
     }
-    let exact = m * n <= EXACT_PAIRS;
+    let nodes = flock.obstacle_nodes().max(64);
+    let exact = m * n <= EXACT_PAIRS && m * n * nodes <= EXACT_WORK;
     let line = |a: Coord<f64>, b: Coord<f64>| polyline_length(&[a, b]);
     let climb = 2.0 * flock.flat_altitude_m();
     let mut round_trip: f64 = 0.0;

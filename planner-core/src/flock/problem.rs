@@ -303,6 +303,12 @@ impl<'a> Flock<'a> {
         }
     }
 
+    /// Nodes of the obstacle map's visibility graph: what one exact
+    /// transit search may have to visit.
+    pub(crate) fn obstacle_nodes(&self) -> usize {
+        self.obstacles.node_count()
+    }
+
     /// UAV `u`'s time for `leg(a, b)`.
     pub fn leg_time_of(&mut self, u: usize, a: Stop, b: Stop) -> Result<f64, TransitError> {
         let leg = self.leg(a, b)?;

@@ -85,6 +85,11 @@ const EFFORT_PER_JOB: usize = 40;
 /// Real-length queries allowed in the second phase: `BASE + PER_CELL · n`.
 const QUERY_BUDGET_BASE: usize = 500;
 const QUERY_BUDGET_PER_CELL: usize = 4;
+/// Search effort (closed nodes plus obstacle edges tested) the second
+/// phase's queries may spend in all: among thousands of NFZs one long query
+/// can cost a second, and the query count alone would let the phase take
+/// minutes. About 0.3 s on the reference machine (release build).
+const SEARCH_WORK_BUDGET: usize = 20_000_000;
 /// Moves must gain at least this much (metres) to count, against rounding.
 const MIN_GAIN: f64 = 1e-6;
 /// Cost of a leg that has no NFZ-free path: huge but finite, so gains stay
@@ -297,12 +302,23 @@ struct Leg {
     path: Result<Vec<Coord<f64>>, TransitError>,
 }
 
+impl Leg {
+    fn new(a: Coord<f64>, b: Coord<f64>, path: Result<Vec<Coord<f64>>, TransitError>) -> Leg {
+        let length = path
+            .as_ref()
+            .map_or(dist(a, b) + NO_PATH_PENALTY, |path| polyline_length(path));
+        Leg { length, path }
+    }
+}
+
 /// Leg costs: Euclidean, or (when `exact`) the NFZ-avoiding length, with
-/// memoised shortest paths and a query budget.
+/// memoised shortest paths and query and effort budgets.
 struct Legs<'a> {
     map: &'a ObstacleMap,
     exact: bool,
     budget: usize,
+    /// Nodes the budgeted queries' searches may still close.
+    work_budget: usize,
     priced: HashMap<LegKey, Leg, BuildHasherDefault<LegHasher>>,
 }
 
@@ -312,6 +328,7 @@ impl<'a> Legs<'a> {
             map,
             exact: false,
             budget: 0,
+            work_budget: SEARCH_WORK_BUDGET,
             priced: HashMap::default(),
         }
     }
@@ -332,27 +349,41 @@ impl<'a> Legs<'a> {
         let map = self.map;
         self.priced.entry(key).or_insert_with(|| {
             let (a, b) = if reversed { (q, p) } else { (p, q) };
-            let path = map.shortest_path(a, b);
-            let length = path
-                .as_ref()
-                .map_or(dist(a, b) + NO_PATH_PENALTY, |path| polyline_length(path));
-            Leg { length, path }
+            Leg::new(a, b, map.shortest_path(a, b))
         })
     }
 
-    /// The leg cost; `None` when it would need a query beyond the budget.
+    /// The leg cost; `None` when it would need a query beyond the budgets
+    /// (query count, and search effort: one long transit through thousands
+    /// of NFZs can cost as much as thousands of short ones).
     fn cost(&mut self, p: Coord<f64>, q: Coord<f64>) -> Option<f64> {
         if !self.exact {
             return Some(dist(p, q));
         }
-        if let Some(leg) = self.priced.get(&leg_key(p, q).0) {
+        let (key, reversed) = leg_key(p, q);
+        if let Some(leg) = self.priced.get(&key) {
             return Some(leg.length);
         }
-        if self.budget == 0 {
+        if self.budget == 0 || self.work_budget == 0 {
             return None;
         }
         self.budget -= 1;
-        Some(self.price(p, q).length)
+        let (a, b) = if reversed { (q, p) } else { (p, q) };
+        let mut work = 0;
+        let path = self
+            .map
+            .shortest_path_counted(a, b, &mut work, self.work_budget);
+        self.work_budget = self.work_budget.saturating_sub(work);
+        if matches!(path, Err(TransitError::OverBudget)) {
+            self.work_budget = 0;
+            return None;
+        }
+        Some(
+            self.priced
+                .entry(key)
+                .or_insert(Leg::new(a, b, path))
+                .length,
+        )
     }
 
     /// The leg's polyline from `p` to `q` (queried without budget: final

@@ -85,6 +85,9 @@ pub enum TransitError {
     /// Stopped by its cancellation token (see [`crate::cancel`]).
     #[error(transparent)]
     Cancelled(#[from] crate::cancel::Cancelled),
+    /// A budgeted search ([`ObstacleMap::shortest_path_counted`]) gave up.
+    #[error("the transit search exceeded its effort budget")]
+    OverBudget,
 }
 
 /// One obstacle boundary edge, indexed in an R-tree.
@@ -341,6 +344,20 @@ impl ObstacleMap {
         a: Coord<f64>,
         b: Coord<f64>,
     ) -> Result<Vec<Coord<f64>>, TransitError> {
+        self.shortest_path_counted(a, b, &mut 0, usize::MAX)
+    }
+
+    /// [`ObstacleMap::shortest_path`], adding its searches' effort (closed
+    /// nodes and obstacle edges tested) to `work`, and giving up with
+    /// [`TransitError::OverBudget`] once `work` would pass `cap`: callers
+    /// that only look for improvements bound their time with it.
+    pub(crate) fn shortest_path_counted(
+        &self,
+        a: Coord<f64>,
+        b: Coord<f64>,
+        work: &mut usize,
+        cap: usize,
+    ) -> Result<Vec<Coord<f64>>, TransitError> {
         // Flocks ask for many transits: each is a point to stop at.
         crate::cancel::check()?;
         for (endpoint, p) in [(Endpoint::Start, a), (Endpoint::End, b)] {
@@ -355,7 +372,7 @@ impl ObstacleMap {
             // the exits, straight in again.
             let (ea, eb) = (exit_a.unwrap_or(a), exit_b.unwrap_or(b));
             let mut path = vec![a];
-            path.extend(self.shortest_path(ea, eb)?);
+            path.extend(self.shortest_path_counted(ea, eb, work, cap)?);
             path.push(b);
             path.dedup();
             return Ok(path);
@@ -368,9 +385,13 @@ impl ObstacleMap {
         if self.segment_clear(a, b) {
             return Ok(vec![a, b]);
         }
-        let found = self
-            .find(&self.graph, a, b)
-            .or_else(|| self.find(self.bare.as_ref()?, a, b));
+        let found = match self.find(&self.graph, a, b, work, cap)? {
+            Some(path) => Some(path),
+            None => match &self.bare {
+                Some(bare) => self.find(bare, a, b, work, cap)?,
+                None => None,
+            },
+        };
         // A cancelled search gives up as if there were no path.
         crate::cancel::check()?;
         found.ok_or(TransitError::NoPath { from: a, to: b })
@@ -469,6 +490,16 @@ impl ObstacleMap {
     /// [`ObstacleMap::segment_clear`], reporting on failure the edge that
     /// was crossed cleanly, if that is what blocked the segment.
     fn segment_check(&self, a: Coord<f64>, b: Coord<f64>) -> Result<(), Option<Edge>> {
+        self.segment_check_counted(a, b, &mut 0)
+    }
+
+    /// [`ObstacleMap::segment_check`], adding the edges it tested to `work`.
+    fn segment_check_counted(
+        &self,
+        a: Coord<f64>,
+        b: Coord<f64>,
+        work: &mut usize,
+    ) -> Result<(), Option<Edge>> {
         let d = b - a;
         let len = (d.x * d.x + d.y * d.y).sqrt();
         if len <= EPS {
@@ -479,13 +510,29 @@ impl ObstacleMap {
             };
         }
         let mut cuts: Vec<f64> = Vec::new();
-        let select = SegmentSelect { a, b };
-        for edge in self.edge_tree.locate_with_selection_function(select) {
-            match contact(a, b, len, edge.p, edge.q) {
-                Contact::None => {}
-                Contact::Crossing => return Err(Some(*edge)),
-                Contact::Touch(ts) => cuts.extend(ts.into_iter().flatten()),
+        // The R-tree is walked piece by piece from `a`: a long segment
+        // through a dense field is usually blocked near its start, and a
+        // walk of the whole segment's box would visit most of the field
+        // first. Every edge that meets the segment meets one of the pieces
+        // (they share their ends exactly), so the answer is the same.
+        let pieces = ((len / CHECK_PIECE_M).ceil() as usize).clamp(1, MAX_CHECK_PIECES);
+        let mut from = a;
+        for k in 1..=pieces {
+            let to = if k == pieces {
+                b
+            } else {
+                a + d * (k as f64 / pieces as f64)
+            };
+            let select = SegmentSelect { a: from, b: to };
+            for edge in self.edge_tree.locate_with_selection_function(select) {
+                *work += 1;
+                match contact(a, b, len, edge.p, edge.q) {
+                    Contact::None => {}
+                    Contact::Crossing => return Err(Some(*edge)),
+                    Contact::Touch(ts) => cuts.extend(ts.into_iter().flatten()),
+                }
             }
+            from = to;
         }
         cuts.push(0.0);
         cuts.push(1.0);
@@ -507,25 +554,46 @@ impl ObstacleMap {
     /// long is paused for a capped search from `b`, which either finds the
     /// path (just as short) or runs dry, proving there is none; otherwise
     /// the first search resumes.
-    fn find(&self, graph: &Graph, a: Coord<f64>, b: Coord<f64>) -> Option<Vec<Coord<f64>>> {
+    fn find(
+        &self,
+        graph: &Graph,
+        a: Coord<f64>,
+        b: Coord<f64>,
+        work: &mut usize,
+        cap: usize,
+    ) -> Result<Option<Vec<Coord<f64>>>, TransitError> {
         let mut forward = AStar::new(self, graph, a, b);
-        match forward.run(Some(self.probe_closed)) {
-            Search::Found(path) => return Some(path),
-            Search::Exhausted => return None,
+        forward.cap = cap.saturating_sub(*work);
+        let first = forward.run(Some(self.probe_closed));
+        *work += forward.work;
+        match first {
+            Search::Found(path) => return Ok(Some(path)),
+            Search::Exhausted => return Ok(None),
+            Search::OverBudget => return Err(TransitError::OverBudget),
             Search::Capped => {}
         }
         // Enclosures are small: the probe gets a quarter of the budget.
-        match AStar::new(self, graph, b, a).run(Some(self.probe_closed.div_ceil(4))) {
+        let mut backward = AStar::new(self, graph, b, a);
+        backward.cap = cap.saturating_sub(*work);
+        let probe = backward.run(Some(self.probe_closed.div_ceil(4)));
+        *work += backward.work;
+        match probe {
             Search::Found(mut path) => {
                 path.reverse();
-                return Some(path);
+                return Ok(Some(path));
             }
-            Search::Exhausted => return None,
+            Search::Exhausted => return Ok(None),
+            Search::OverBudget => return Err(TransitError::OverBudget),
             Search::Capped => {}
         }
-        match forward.run(None) {
-            Search::Found(path) => Some(path),
-            _ => None,
+        let before = forward.work;
+        forward.cap = forward.work.saturating_add(cap.saturating_sub(*work));
+        let last = forward.run(None);
+        *work += forward.work - before;
+        match last {
+            Search::Found(path) => Ok(Some(path)),
+            Search::OverBudget => Err(TransitError::OverBudget),
+            _ => Ok(None),
         }
     }
 }
@@ -554,6 +622,10 @@ struct AStar<'m> {
     heap: BinaryHeap<QueueEntry>,
     ring_base: f64,
     all_nodes: AABB<[f64; 2]>,
+    /// Effort so far (closed nodes and obstacle edges tested), and the
+    /// effort after which the run gives up.
+    work: usize,
+    cap: usize,
 }
 
 impl<'m> AStar<'m> {
@@ -572,6 +644,8 @@ impl<'m> AStar<'m> {
             heap: BinaryHeap::new(),
             ring_base: (RING_BASE_FRACTION * dist(a, b)).max(1.0),
             all_nodes: graph.tree.root().envelope(),
+            work: 0,
+            cap: usize::MAX,
         };
         let start = search.start();
         search.g[start] = 0.0;
@@ -618,6 +692,9 @@ impl<'m> AStar<'m> {
                 // Cancelled: the caller checks again and reports it.
                 return Search::Exhausted;
             }
+            if self.work > self.cap {
+                return Search::OverBudget;
+            }
             let Some(entry) = self.heap.pop() else {
                 return Search::Exhausted;
             };
@@ -651,7 +728,7 @@ impl<'m> AStar<'m> {
                 known[..=k].rotate_right(1);
                 continue;
             }
-            if let Err(blocker) = self.map.segment_check(pf, pt) {
+            if let Err(blocker) = self.map.segment_check_counted(pf, pt, &mut self.work) {
                 if let Some(edge) = blocker {
                     if known.len() == MAX_OCCLUDERS {
                         known.pop();
@@ -660,6 +737,7 @@ impl<'m> AStar<'m> {
                 }
                 continue;
             }
+            self.work += 1;
             self.slot[to] = self.occluders.len() as u32;
             self.occluders.push(Vec::new());
             self.g[to] = self.g[from] + dist(pf, pt);
@@ -745,7 +823,13 @@ enum Search {
     Exhausted,
     /// Stopped at the cap on closed nodes.
     Capped,
+    /// Stopped at the cap on effort.
+    OverBudget,
 }
+
+/// Length of the pieces a segment is checked in, metres, and most pieces.
+const CHECK_PIECE_M: f64 = 25.0;
+const MAX_CHECK_PIECES: usize = 128;
 
 /// Closed nodes after which a search pauses to probe from the goal.
 const PROBE_CLOSED: usize = 256;
@@ -1381,10 +1465,24 @@ mod tests {
         let map = ObstacleMap::new(&nfz, 3.0);
         let a = coord! { x: 20.0, y: 20.0 };
         let b = coord! { x: 35.0, y: 60.0 };
-        assert!(map.find(&map.graph, a, b).is_none());
+        assert_eq!(map.find(&map.graph, a, b, &mut 0, usize::MAX), Ok(None));
         let path = map.shortest_path(a, b).unwrap();
         assert_path_clear(&map, &path);
         assert_eq!(path.len(), 3, "{path:?}");
+        // Budgeted: the same path with its effort counted, or a refusal
+        // when the budget is too small for it.
+        let mut work = 0;
+        assert_eq!(
+            map.shortest_path_counted(a, b, &mut work, usize::MAX),
+            Ok(path.clone())
+        );
+        assert!(work > 2, "{work}");
+        let mut spent = 0;
+        assert_eq!(
+            map.shortest_path_counted(a, b, &mut spent, work / 2),
+            Err(TransitError::OverBudget)
+        );
+        assert!(spent <= work, "{spent} > {work}");
         assert_relative_eq!(path[1].x, 20.5, epsilon = 1e-9);
         assert_relative_eq!(path[1].y, 50.0, epsilon = 1e-9);
         // Without the door there is no way out at all.

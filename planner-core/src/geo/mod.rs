@@ -3,6 +3,7 @@
 
 mod clearance;
 mod geojson_input;
+pub mod overlay;
 mod utm;
 mod validate;
 

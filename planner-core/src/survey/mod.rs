@@ -1513,7 +1513,7 @@ fn roi_minus(area: &SurveyArea, zones: &[Polygon<f64>]) -> MultiPolygon<f64> {
     }
     if area.roi.0.len() > 1 {
         // Overlapping ROI parts must not be surveyed twice.
-        geo::unary_union(parts.iter())
+        crate::geo::overlay::unary_union(parts.iter())
     } else {
         MultiPolygon(parts)
     }
@@ -1530,7 +1530,7 @@ fn cancelled_or(e: PlanError) -> PlanError {
 
 /// One pass over all zones: folding pairwise unions is quadratic.
 fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
-    geo::unary_union(no_fly.iter())
+    crate::geo::overlay::unary_union(no_fly.iter())
 }
 
 /// Cells at one slice angle and the lawnmower plan of each.
