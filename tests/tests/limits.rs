@@ -16,9 +16,10 @@ use terraplan_e2e::{
 };
 
 /// A round field of 5000 vertices and 2 km radius at a lane spacing of
-/// 1.3 m: about 9 700 km of lanes, just under the default limit
-/// of 10 000. Slow by its size: thousands of lanes, each clipped to a
-/// boundary of thousands of edges (tens of seconds in a debug build).
+/// 1.3 m (about 9 700 km of lanes, just under the default limit of
+/// 10 000) among 3000 small no-fly zones. Slow by its size: thousands of
+/// lanes and cells, and transits threading through the zones (over a
+/// minute in a debug build; the field alone now plans in seconds).
 fn slow_survey() -> Value {
     let (lon0, lat0, r_m, n) = (6.06f64, 51.51f64, 2000.0, 5000);
     let mut ring: Vec<[f64; 2]> = (0..n)
@@ -31,8 +32,34 @@ fn slow_survey() -> Value {
         })
         .collect();
     ring.push(ring[0]);
+    // Hexagons of 3 m radius at pseudo-random places inside the field.
+    let mut seed = 0x5eed_u64;
+    let mut next = || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let zones: Vec<Value> = (0..3000)
+        .map(|_| {
+            let (a, r) = (std::f64::consts::TAU * next(), 1900.0 * next().sqrt());
+            let (x, y) = (r * a.cos(), r * a.sin());
+            let mut hexagon: Vec<[f64; 2]> = (0..6)
+                .map(|k| {
+                    let b = std::f64::consts::TAU * f64::from(k) / 6.0;
+                    [
+                        lon0 + (x + 3.0 * b.cos()) / (111_320.0 * lat0.to_radians().cos()),
+                        lat0 + (y + 3.0 * b.sin()) / 110_540.0,
+                    ]
+                })
+                .collect();
+            hexagon.push(hexagon[0]);
+            json!([hexagon])
+        })
+        .collect();
     json!({
         "roi": {"type": "Polygon", "coordinates": [ring]},
+        "no_fly_zones": [{"type": "MultiPolygon", "coordinates": zones}],
         "line_spacing_m": 1.3,
         "altitude_m": 60,
         "slice_angle_deg": 0,
@@ -121,6 +148,8 @@ fn the_cli_stops_a_survey_at_its_timeout() {
     let survey = slow_survey();
     let roi = dir.path().join("roi.geojson");
     std::fs::write(&roi, survey["roi"].to_string()).unwrap();
+    let zones = dir.path().join("zones.geojson");
+    std::fs::write(&zones, survey["no_fly_zones"][0].to_string()).unwrap();
     let params = dir.path().join("params.json");
     std::fs::write(
         &params,
@@ -133,6 +162,8 @@ fn the_cli_stops_a_survey_at_its_timeout() {
         "survey",
         "--roi",
         roi.to_str().unwrap(),
+        "--no-fly",
+        zones.to_str().unwrap(),
         "--params",
         params.to_str().unwrap(),
         "--out",
