@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Sets up a fresh machine and runs every test: formatting, unit and property
+# Sets up a fresh machine and runs every test: formatting, clippy, unit and property
 # tests, end-to-end tests of the real binary (CLI and HTTP service, with the
 # external validators pymavlink, shapely and pyproj inside them) on SQLite,
 # the service suite again on a throwaway PostgreSQL, schemathesis against
@@ -8,6 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh --with-validators
 cargo fmt --all -- --check
+cargo clippy --workspace --all-targets -- -D warnings
 # The end-to-end tests run the real binary, so build it first.
 cargo build --workspace --bins
 export TERRAPLAN_VENV="$PWD/.venv"
