@@ -151,21 +151,8 @@ struct SurveyArgs {
     dem_crs: Option<String>,
     /// Stop planning after this many seconds (fractions allowed) and exit
     /// 1; no limit by default.
-    #[arg(long, value_name = "SECONDS", value_parser = parse_timeout_s)]
+    #[arg(long, value_name = "SECONDS", value_parser = crate::config::parse_planning_timeout)]
     timeout_s: Option<f64>,
-}
-
-/// `--timeout-s`: a number of seconds in (0, 86400].
-fn parse_timeout_s(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
-    if v > 0.0 && v <= 86_400.0 {
-        Ok(v)
-    } else {
-        Err(format!("{s} is outside (0, 86400] seconds"))
-    }
 }
 
 /// A failure with its exit status.

@@ -58,11 +58,11 @@ pub struct ServeConfig {
     pub costmap_jobs: u64,
     /// Longest a route search may take, seconds (fractions allowed); a
     /// search still running then is stopped and answered with a 503.
-    #[arg(long, env = "TERRAPLAN_ROUTE_TIMEOUT_S", default_value_t = 120.0, value_parser = parse_route_timeout)]
+    #[arg(long, env = "TERRAPLAN_ROUTE_TIMEOUT_S", default_value_t = 120.0, value_parser = parse_planning_timeout)]
     pub route_timeout_s: f64,
     /// Longest a survey may plan, seconds (fractions allowed); a survey
     /// still planning then is stopped and answered with a 503.
-    #[arg(long, env = "TERRAPLAN_SURVEY_TIMEOUT_S", default_value_t = crate::app::SURVEY_TIMEOUT.as_secs_f64(), value_parser = parse_route_timeout)]
+    #[arg(long, env = "TERRAPLAN_SURVEY_TIMEOUT_S", default_value_t = crate::app::SURVEY_TIMEOUT.as_secs_f64(), value_parser = parse_planning_timeout)]
     pub survey_timeout_s: f64,
     /// Memory for the route searches kept for replanning (D* Lite states,
     /// about 17 bytes per costmap cell each), MiB; the least recently used
@@ -119,9 +119,9 @@ pub enum LogFormat {
     Json,
 }
 
-/// `--route-timeout-s`, `--survey-timeout-s`: a number of seconds in
-/// (0, 86400].
-fn parse_route_timeout(s: &str) -> Result<f64, String> {
+/// `--route-timeout-s`, `--survey-timeout-s` (and `terraplan survey
+/// --timeout-s`): a number of seconds in (0, 86400].
+pub(crate) fn parse_planning_timeout(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .trim()
         .parse()
