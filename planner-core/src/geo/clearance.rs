@@ -20,6 +20,11 @@ const SLACK_M: f64 = 1e-3;
 /// tips are cut, and the cut lies far beyond the clearance.
 const MITER_MIN_ANGLE: f64 = 0.01 * std::f64::consts::PI;
 
+/// Half the width of the narrowest gap left open between offset zones,
+/// metres (see [`keep_out_area`]): well above the transit planner's 1 cm
+/// side probe, far below anything a vehicle could fly through.
+const CLOSING_M: f64 = 0.05;
+
 /// Every point within `clearance_m` of `zones` (UTM metres), as polygons
 /// whose boundary is at least `clearance_m` from every zone.
 ///
@@ -32,8 +37,16 @@ pub fn keep_out_area(zones: &MultiPolygon<f64>, clearance_m: f64) -> MultiPolygo
     if zones.0.is_empty() || clearance_m.is_nan() || clearance_m <= 0.0 {
         return zones.clone();
     }
-    let style = BufferStyle::new(clearance_m + SLACK_M).line_join(LineJoin::Miter(MITER_MIN_ANGLE));
-    zones.buffer_with_style(style)
+    let style =
+        |distance: f64| BufferStyle::new(distance).line_join(LineJoin::Miter(MITER_MIN_ANGLE));
+    // Grown a little further and shrunk back (a morphological closing):
+    // gaps and notches narrower than twice `CLOSING_M` between the offset
+    // zones are filled. Nothing flies through a gap of centimetres, and the
+    // transit planner treats such slits as closed, so a lane must not end
+    // in one. Closing only adds area: the clearance still holds.
+    zones
+        .buffer_with_style(style(clearance_m + SLACK_M + CLOSING_M))
+        .buffer_with_style(style(-CLOSING_M))
 }
 
 /// The holes of `area` (regions enclosed by it) that hold none of `keep`,
@@ -171,6 +184,37 @@ mod tests {
         let open = keep_out_area(&zones, 2.0);
         assert_eq!(open.0.len(), 4);
         assert!(open.difference(&zones).unsigned_area() > 0.0);
+    }
+
+    #[test]
+    fn slits_between_offset_zones_are_closed_wider_gaps_stay() {
+        // Two squares 10.05 m apart at 5 m clearance: the offset squares
+        // leave a slit of about 5 cm, which nothing can fly through and the
+        // transit planner treats as closed, so it is filled. At 20 cm the
+        // gap stays open.
+        let square = |x0: f64| polygon![(x: x0, y: 0.0), (x: x0 + 20.0, y: 0.0), (x: x0 + 20.0, y: 20.0), (x: x0, y: 20.0)];
+        for (gap, merged) in [(10.05, true), (10.2, false)] {
+            let zones = MultiPolygon(vec![square(0.0), square(20.0 + gap)]);
+            let keep_out = keep_out_area(&zones, 5.0);
+            assert_eq!(keep_out.0.len() == 1, merged, "gap {gap}: {keep_out:?}");
+            let middle = Point(Coord {
+                x: 20.0 + gap / 2.0,
+                y: 10.0,
+            });
+            assert_eq!(keep_out.intersects(&middle), merged, "gap {gap}");
+            // Closing adds area only in the slit: the outer edges stay at
+            // the clearance (plus the slack).
+            let width = keep_out
+                .0
+                .iter()
+                .flat_map(|p| p.exterior().0.iter())
+                .map(|c| c.x)
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert!(
+                (width - (40.0 + gap + 5.0 + SLACK_M)).abs() < 1e-4,
+                "{width}"
+            );
+        }
     }
 
     #[test]
