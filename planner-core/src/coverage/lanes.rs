@@ -54,17 +54,7 @@ pub fn plan_cell_in(
     line_spacing_m: f64,
     slice_angle_deg: f64,
 ) -> Option<CellPlan> {
-    let mut best: Option<CellPlan> = None;
-    for plan in plan_cell_candidates_in(cell_index, cell, free, line_spacing_m, slice_angle_deg)? {
-        let better = match &best {
-            None => true,
-            Some(b) => plan.length_m() < b.length_m() * (1.0 - 1e-12),
-        };
-        if better {
-            best = Some(plan);
-        }
-    }
-    best
+    CellLayouts::new(cell_index, cell, line_spacing_m, slice_angle_deg)?.best_plan(cell, free)
 }
 
 /// Every lane layout of `cell` with the fewest turns (one per candidate
@@ -78,78 +68,191 @@ pub fn plan_cell_candidates_in(
     line_spacing_m: f64,
     slice_angle_deg: f64,
 ) -> Option<Vec<CellPlan>> {
-    if !is_positive(line_spacing_m) {
-        return None;
-    }
-    let ring = clean_ring(cell);
-    if ring.len() < 3
-        || ring.iter().any(|c| !c.x.is_finite() || !c.y.is_finite())
-        || cell.unsigned_area() <= EPS * EPS
-    {
-        return None;
-    }
-    // Indexed: every lane line of every candidate is clipped against it.
-    let cell_region = Region::from_polygon(cell).indexed();
-    // Rank cheaply before building lanes: the lane count of a direction only
-    // needs the cell's extent across it. Directions are tried by increasing
-    // lane count (turns are 2 per lane change) and the first count with a
-    // monotone direction wins; only those finalists get their free-space
-    // clipping and links computed. Cells with a curved outline have hundreds
-    // of candidate directions, so this matters.
-    let mut candidates: Vec<(Frame, Vec<RowOffset>)> = candidate_bearings(&ring, slice_angle_deg)
-        .into_iter()
-        .filter_map(|b| {
-            // Cancelled: no more candidates; checked again below.
-            crate::cancel::check().ok()?;
-            let frame = Frame::new(b, &ring);
-            let offsets = row_offsets(frame.v, line_spacing_m)?;
-            Some((frame, offsets))
-        })
-        .collect();
-    candidates.sort_by_key(|(_, offsets)| offsets.len());
-    let mut finalists: Vec<Layout> = Vec::new();
-    let mut rejected: Vec<Layout> = Vec::new();
-    for group in candidates.chunk_by(|a, b| a.1.len() == b.1.len()) {
-        for (frame, offsets) in group {
-            // Cancelled: no plan; the caller checks again and reports it.
-            crate::cancel::check().ok()?;
-            let layout = Layout::new(*frame, offsets, &cell_region);
-            if layout.is_monotone() {
-                finalists.push(layout);
-            } else {
-                rejected.push(layout);
-            }
-        }
-        if !finalists.is_empty() {
-            break;
-        }
-    }
-    if finalists.is_empty() {
-        // The cell is not monotone along any candidate (not a cell from the
-        // decomposition): fly every piece of every line, fewest pieces first.
-        let fewest = rejected.iter().map(Layout::lane_count).min()?;
-        finalists = rejected
-            .into_iter()
-            .filter(|l| l.lane_count() == fewest)
-            .collect();
-    }
-    let free_region = free.region();
+    let layouts = CellLayouts::new(cell_index, cell, line_spacing_m, slice_angle_deg)?;
     let router = LinkRouter::new(cell, free);
-    let plans: Vec<CellPlan> = finalists
+    let plans: Vec<CellPlan> = layouts
+        .all_finalists()
         .iter()
         .filter_map(|layout| {
             crate::cancel::check().ok()?;
-            let lanes = layout.lanes(&ring, free_region);
-            (!lanes.is_empty()).then(|| CellPlan {
-                cell_index,
-                direction_deg: layout.frame.bearing,
-                links: router.links(&lanes),
-                lanes,
-            })
+            layouts.plan(layout, free.region(), &router)
         })
         .collect();
-    let fewest = plans.iter().map(CellPlan::turns).min()?;
-    Some(plans.into_iter().filter(|p| p.turns() == fewest).collect())
+    (!plans.is_empty()).then_some(plans)
+}
+
+/// The lane layouts of one cell that reach its fewest turns, before their
+/// lanes are extended through free space and linked: the turn count of a
+/// cell is known at this stage, and the costly rest is only done for the
+/// layouts (and slice angles) that may win.
+pub struct CellLayouts {
+    cell_index: usize,
+    ring: Vec<Coord<f64>>,
+    cell_region: Region,
+    /// Each with [`CellLayouts::lanes`] lanes, in candidate order.
+    finalists: Vec<Layout>,
+    /// Candidates after the finalists, of the same row count, not looked at
+    /// yet: with one row, the first monotone layout already tells the lane
+    /// count (one), and most cells among many small NFZs have one row.
+    pending: Vec<(Frame, Vec<RowOffset>)>,
+    lanes: usize,
+}
+
+impl CellLayouts {
+    /// Ranks the candidate directions of `cell` (see [`plan_cell`] for the
+    /// arguments and when there is no plan).
+    pub fn new(
+        cell_index: usize,
+        cell: &Polygon<f64>,
+        line_spacing_m: f64,
+        slice_angle_deg: f64,
+    ) -> Option<CellLayouts> {
+        if !is_positive(line_spacing_m) {
+            return None;
+        }
+        let ring = clean_ring(cell);
+        if ring.len() < 3
+            || ring.iter().any(|c| !c.x.is_finite() || !c.y.is_finite())
+            || cell.unsigned_area() <= EPS * EPS
+        {
+            return None;
+        }
+        // Indexed: every lane line of every candidate is clipped against it.
+        let cell_region = Region::from_polygon(cell).indexed();
+        // Rank cheaply before building lanes: the lane count of a direction
+        // only needs the cell's extent across it. Directions are tried by
+        // increasing lane count (turns are 2 per lane change) and the first
+        // count with a monotone direction wins; only those finalists get
+        // their free-space clipping and links computed. Cells with a curved
+        // outline have hundreds of candidate directions, so this matters.
+        let mut candidates: Vec<(Frame, Vec<RowOffset>)> =
+            candidate_bearings(&ring, slice_angle_deg)
+                .into_iter()
+                .filter_map(|b| {
+                    // Cancelled: no more candidates; checked again below.
+                    crate::cancel::check().ok()?;
+                    let frame = Frame::new(b, &ring);
+                    let offsets = row_offsets(frame.v, line_spacing_m)?;
+                    Some((frame, offsets))
+                })
+                .collect();
+        candidates.sort_by_key(|(_, offsets)| offsets.len());
+        let mut finalists: Vec<Layout> = Vec::new();
+        let mut rejected: Vec<Layout> = Vec::new();
+        let mut pending = Vec::new();
+        for group in candidates.chunk_by(|a, b| a.1.len() == b.1.len()) {
+            for (k, (frame, offsets)) in group.iter().enumerate() {
+                // Cancelled: no plan; the caller checks again and reports it.
+                crate::cancel::check().ok()?;
+                let layout = Layout::new(*frame, offsets, &cell_region);
+                if layout.is_monotone() {
+                    finalists.push(layout);
+                    if offsets.len() == 1 {
+                        pending = group[k + 1..].to_vec();
+                        break;
+                    }
+                } else {
+                    rejected.push(layout);
+                }
+            }
+            if !finalists.is_empty() {
+                break;
+            }
+        }
+        if finalists.is_empty() {
+            // The cell is not monotone along any candidate (not a cell from
+            // the decomposition): fly every piece of every line, fewest
+            // pieces first.
+            finalists = rejected;
+        }
+        // Every segment of a row becomes one lane: the turns are known.
+        finalists.retain(|l| l.lane_count() > 0);
+        let lanes = finalists.iter().map(Layout::lane_count).min()?;
+        finalists.retain(|l| l.lane_count() == lanes);
+        Some(CellLayouts {
+            cell_index,
+            ring,
+            cell_region,
+            finalists,
+            pending,
+            lanes,
+        })
+    }
+
+    /// Every finalist, the pending ones laid out now.
+    fn all_finalists(&self) -> Vec<std::borrow::Cow<'_, Layout>> {
+        let mut all: Vec<std::borrow::Cow<'_, Layout>> = self
+            .finalists
+            .iter()
+            .map(std::borrow::Cow::Borrowed)
+            .collect();
+        for (frame, offsets) in &self.pending {
+            if crate::cancel::check().is_err() {
+                break; // the caller checks again
+            }
+            let layout = Layout::new(*frame, offsets, &self.cell_region);
+            if layout.is_monotone() && layout.lane_count() == self.lanes {
+                all.push(std::borrow::Cow::Owned(layout));
+            }
+        }
+        all
+    }
+
+    /// Turns of the cell's plans (2 per lane change).
+    pub fn turns(&self) -> usize {
+        2 * self.lanes.saturating_sub(1)
+    }
+
+    /// The shortest plan (lanes and links) among the finalists; the first
+    /// in candidate order among equally long ones. Finalists are planned by
+    /// increasing lower bound (the cell's own part of every lane: the flown
+    /// lanes contain it) and the search stops once the bound passes the best
+    /// length, so a small cell with dozens of equally good directions plans
+    /// two or three of them.
+    pub fn best_plan(&self, cell: &Polygon<f64>, free: &FreeSpace) -> Option<CellPlan> {
+        let finalists = self.all_finalists();
+        let mut order: Vec<(f64, usize)> = finalists
+            .iter()
+            .enumerate()
+            .map(|(i, layout)| (layout.length_lower_bound(), i))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let router = LinkRouter::new(cell, free);
+        let mut best: Option<(f64, usize, CellPlan)> = None;
+        for (bound, i) in order {
+            crate::cancel::check().ok()?;
+            if let Some((length, _, _)) = &best
+                && bound > length * (1.0 + 1e-12)
+            {
+                break;
+            }
+            let Some(plan) = self.plan(&finalists[i], free.region(), &router) else {
+                continue;
+            };
+            let length = plan.length_m();
+            let better = match &best {
+                None => true,
+                Some((b, j, _)) => {
+                    length < b * (1.0 - 1e-12) || (length <= b * (1.0 + 1e-12) && i < *j)
+                }
+            };
+            if better {
+                best = Some((length, i, plan));
+            }
+        }
+        best.map(|(_, _, plan)| plan)
+    }
+
+    /// The plan of one finalist: lanes extended through free space, linked.
+    fn plan(&self, layout: &Layout, free: &Region, router: &LinkRouter) -> Option<CellPlan> {
+        let lanes = layout.lanes(&self.ring, free);
+        (!lanes.is_empty()).then(|| CellPlan {
+            cell_index: self.cell_index,
+            direction_deg: layout.frame.bearing,
+            links: router.links(&lanes),
+            lanes,
+        })
+    }
 }
 
 /// Exterior ring without repeated points or the closing point.
@@ -321,11 +424,13 @@ fn row_offsets((vmin, vmax): (f64, f64), spacing: f64) -> Option<Vec<RowOffset>>
 }
 
 /// Lane rows of one candidate direction.
+#[derive(Clone)]
 struct Layout {
     frame: Frame,
     rows: Vec<Row>,
 }
 
+#[derive(Clone)]
 struct Row {
     /// Offset of the lane line along `n`.
     v: f64,
@@ -363,6 +468,16 @@ impl Layout {
 
     fn lane_count(&self) -> usize {
         self.rows.iter().map(|r| r.segments.len()).sum()
+    }
+
+    /// No plan of this layout is shorter: its lanes contain these segments
+    /// (up to the tolerance at each end).
+    fn length_lower_bound(&self) -> f64 {
+        self.rows
+            .iter()
+            .flat_map(|r| &r.segments)
+            .map(|&(a, b)| (b - a - 2.0 * EPS).max(0.0))
+            .sum()
     }
 
     fn point(&self, u: f64, v: f64) -> Coord<f64> {
@@ -469,9 +584,7 @@ impl Layout {
     ) -> (f64, f64) {
         let start = self.point(lo, v);
         let mid = (a + b) / 2.0 - lo;
-        free.intervals(start, self.frame.d, 0.0, hi - lo)
-            .into_iter()
-            .find(|&(s, e)| s <= mid + EPS && e >= mid - EPS)
+        free.interval_around(start, self.frame.d, (0.0, hi - lo), mid)
             .map(|(s, e)| (lo + s, lo + e))
             // The cell is not in free space (inconsistent input): fly only
             // the part in the cell.

@@ -11,7 +11,7 @@ pub use camera::{
     Camera, Orientation, PRESETS, SurveyGeometry, altitude_for_gsd, photo_count, survey_geometry,
 };
 pub use coverage_ratio::coverage_ratio;
-pub use lanes::{plan_cell, plan_cell_candidates_in, plan_cell_in};
+pub use lanes::{CellLayouts, plan_cell, plan_cell_candidates_in, plan_cell_in};
 pub use region::FreeSpace;
 
 use geo_types::Coord;

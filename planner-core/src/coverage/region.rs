@@ -333,14 +333,75 @@ impl Region {
         t0: f64,
         t1: f64,
     ) -> Vec<(f64, f64)> {
+        let Some(cuts) = self.pieces(o, d, t0, t1) else {
+            return if self.inside_at(o, d, (t0 + t1) / 2.0) {
+                vec![(t0, t1)]
+            } else {
+                Vec::new()
+            };
+        };
+        let mut out: Vec<(f64, f64)> = Vec::new();
+        for w in cuts.windows(2) {
+            if !self.inside_at(o, d, (w[0] + w[1]) / 2.0) {
+                continue;
+            }
+            match out.last_mut() {
+                Some(last) if (w[0] - last.1).abs() <= EPS => last.1 = w[1],
+                _ => out.push((w[0], w[1])),
+            }
+        }
+        out
+    }
+
+    /// The first of [`Region::intervals`]`(o, d, t0, t1)` that comes within
+    /// [`EPS`] of `t`, found by classifying only the pieces around `t`
+    /// instead of every piece of the segment: a lane across a field of
+    /// thousands of NFZs is cut hundreds of times, and each piece's test
+    /// walks a ray across the field.
+    pub(crate) fn interval_around(
+        &self,
+        o: Coord<f64>,
+        d: Coord<f64>,
+        (t0, t1): (f64, f64),
+        t: f64,
+    ) -> Option<(f64, f64)> {
+        let Some(cuts) = self.pieces(o, d, t0, t1) else {
+            let hit = t0 <= t + EPS && t1 >= t - EPS;
+            return (hit && self.inside_at(o, d, (t0 + t1) / 2.0)).then_some((t0, t1));
+        };
+        let pieces = cuts.len() - 1;
+        let inside = |k: usize| self.inside_at(o, d, (cuts[k] + cuts[k + 1]) / 2.0);
+        // Pieces ending before `t − EPS` belong to runs that cannot reach
+        // `t`; of the pieces from there that start by `t + EPS`, the first
+        // inside one lies in the wanted run (any earlier run reaching `t`
+        // would hold one of the pieces already seen to be outside).
+        let first = cuts[1..].partition_point(|&c| c < t - EPS);
+        let k = (first..pieces)
+            .take_while(|&k| cuts[k] <= t + EPS)
+            .find(|&k| inside(k))?;
+        let (mut lo, mut hi) = (k, k);
+        while lo > 0 && inside(lo - 1) {
+            lo -= 1;
+        }
+        while hi + 1 < pieces && inside(hi + 1) {
+            hi += 1;
+        }
+        Some((cuts[lo], cuts[hi + 1]))
+    }
+
+    /// Whether `o + t·d` is in the closed region.
+    fn inside_at(&self, o: Coord<f64>, d: Coord<f64>, t: f64) -> bool {
+        self.position(o + d * t) != Position::Outside
+    }
+
+    /// The cut parameters of `[t0, t1]` where the segment meets the
+    /// boundary, sorted and at least [`EPS`] apart, starting at `t0` and
+    /// ending at `t1`: consecutive ones bound a piece that is wholly inside
+    /// or wholly outside. `None` for a segment no longer than `EPS`.
+    fn pieces(&self, o: Coord<f64>, d: Coord<f64>, t0: f64, t1: f64) -> Option<Vec<f64>> {
         let span = t1 - t0;
         if span.is_nan() || span <= EPS {
-            let mid = o + d * ((t0 + t1) / 2.0);
-            return if self.position(mid) == Position::Outside {
-                Vec::new()
-            } else {
-                vec![(t0, t1)]
-            };
+            return None;
         }
         let mut cuts = self.cuts(o, d, t0, t1);
         cuts.push(t0);
@@ -352,18 +413,7 @@ impl Region {
         if let Some(last) = cuts.last_mut() {
             *last = t1;
         }
-        let mut out: Vec<(f64, f64)> = Vec::new();
-        for w in cuts.windows(2) {
-            let mid = o + d * ((w[0] + w[1]) / 2.0);
-            if self.position(mid) == Position::Outside {
-                continue;
-            }
-            match out.last_mut() {
-                Some(last) if (w[0] - last.1).abs() <= EPS => last.1 = w[1],
-                _ => out.push((w[0], w[1])),
-            }
-        }
-        out
+        Some(cuts)
     }
 
     /// Whether the straight segment `a`–`b` stays in the closed region
@@ -374,9 +424,12 @@ impl Region {
             return self.position(a) != Position::Outside && self.position(b) != Position::Outside;
         }
         let d = (b - a) / len;
-        match self.intervals(a, d, 0.0, len).as_slice() {
-            [(s, e)] => *s <= EPS && *e >= len - EPS,
-            _ => false,
+        // Every piece from 0 to `len` inside: one interval covering it all.
+        match self.pieces(a, d, 0.0, len) {
+            Some(cuts) => cuts
+                .windows(2)
+                .all(|w| self.inside_at(a, d, (w[0] + w[1]) / 2.0)),
+            None => self.inside_at(a, d, len / 2.0),
         }
     }
 
@@ -710,6 +763,35 @@ pub(crate) mod tests {
                 let iv = plain.intervals(a, d, -1.0, len + 1.0);
                 assert_eq!(indexed.intervals(a, d, -1.0, len + 1.0), iv, "{a:?} {b:?}");
                 cut += usize::from(iv.len() > 1);
+                // The run around one parameter, found without classifying
+                // every piece, is the one `intervals` gives; so is the
+                // early-exit cover test.
+                let ends = iv
+                    .iter()
+                    .flat_map(|&(s, e)| [s, e, s - 2.0 * EPS, e + 0.5 * EPS]);
+                for t in [-1.0, 0.0, len / 3.0, len / 2.0, len]
+                    .into_iter()
+                    .chain(ends)
+                {
+                    let want = iv
+                        .iter()
+                        .copied()
+                        .find(|&(s, e)| s <= t + EPS && e >= t - EPS);
+                    let range = (-1.0, len + 1.0);
+                    assert_eq!(
+                        indexed.interval_around(a, d, range, t),
+                        want,
+                        "{a:?} {b:?} {t}"
+                    );
+                    assert_eq!(
+                        plain.interval_around(a, d, range, t),
+                        want,
+                        "{a:?} {b:?} {t}"
+                    );
+                }
+                let whole = plain.intervals(a, d, 0.0, len);
+                let covered = matches!(whole.as_slice(), [(s, e)] if *s <= EPS && *e >= len - EPS);
+                assert_eq!(plain.covers_segment(a, b), covered, "{a:?} {b:?}");
             }
         }
         assert!(cut > 100, "{cut}");

@@ -4,6 +4,7 @@
 
 use geo::{Area, ConvexHull, Euclidean, Length, MultiPoint};
 use geo_types::{Coord, MultiPolygon, Point, Polygon};
+use rayon::prelude::*;
 use serde::{Deserialize, Deserializer, Serialize};
 use serde_json::{Map, Value, json};
 
@@ -1542,9 +1543,21 @@ struct Decomposition {
     length_m: f64,
 }
 
+/// The cells of one slice angle, their lane layouts and the turns these
+/// need in all.
+struct Laid {
+    angle: f64,
+    cells: Vec<Polygon<f64>>,
+    layouts: Vec<Option<coverage::CellLayouts>>,
+    turns: usize,
+}
+
 /// Decompose at the requested angle, or at every candidate angle for
 /// `auto`, and plan the lanes of every cell. `auto` keeps the angle with
 /// the fewest turns in total, then the shortest lanes-and-links length.
+/// The turns of an angle are known from its cells' lane layouts alone, so
+/// the lanes are only extended and linked for the angles that tie on the
+/// fewest (most of the work among thousands of NFZs).
 fn decompose_and_cover(
     free: &MultiPolygon<f64>,
     angle: SliceAngle,
@@ -1554,25 +1567,67 @@ fn decompose_and_cover(
         SliceAngle::Degrees(d) => vec![d],
         SliceAngle::Auto => auto_candidates(free),
     };
+    let token = crate::cancel::current();
+    // One decomposition per core at a time (each can hold tens of
+    // thousands of cells), the token taken along to the worker threads.
+    let decomposed = |a: f64| -> Result<Laid, PlanError> {
+        token.scope(|| {
+            crate::cancel::check()?;
+            let cells = decompose::decompose(free, a).map_err(|e| match e {
+                decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
+                    NO_FLY_POINTER,
+                    "the no-fly zones cover the whole region of interest: nothing is left to \
+                     survey",
+                )]),
+                decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
+                other => PlanError::Internal(other.to_string()),
+            })?;
+            let layouts: Vec<Option<coverage::CellLayouts>> = cells
+                .iter()
+                .enumerate()
+                .map(|(i, c)| coverage::CellLayouts::new(i, c, spacing, a))
+                .collect();
+            // The cells stop early when cancelled, with layouts to throw away.
+            crate::cancel::check()?;
+            let turns = layouts.iter().flatten().map(|l| l.turns()).sum();
+            Ok(Laid {
+                angle: a,
+                cells,
+                layouts,
+                turns,
+            })
+        })
+    };
+    let mut fewest = usize::MAX;
+    let mut contenders: Vec<Laid> = Vec::new();
+    for batch in candidates.chunks(rayon::current_num_threads().max(1)) {
+        let results: Vec<_> = batch.par_iter().map(|&a| decomposed(a)).collect();
+        for result in results {
+            let laid = result?;
+            if laid.turns < fewest {
+                fewest = laid.turns;
+                contenders.clear();
+            }
+            if laid.turns == fewest {
+                contenders.push(laid);
+            }
+        }
+    }
     let mut best: Option<Decomposition> = None;
-    // Index the free space once for every cell of every candidate angle.
+    // Index the free space once for every cell of every contending angle.
     let free_space = coverage::FreeSpace::new(free);
-    for a in candidates {
-        crate::cancel::check()?;
-        let cells = decompose::decompose(free, a).map_err(|e| match e {
-            decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
-                NO_FLY_POINTER,
-                "the no-fly zones cover the whole region of interest: nothing is left to survey",
-            )]),
-            decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
-            other => PlanError::Internal(other.to_string()),
-        })?;
-        let plans: Vec<CellPlan> = cells
-            .iter()
-            .enumerate()
-            .filter_map(|(i, c)| coverage::plan_cell_in(i, c, &free_space, spacing, a))
+    for Laid {
+        angle: a,
+        cells,
+        layouts,
+        ..
+    } in contenders
+    {
+        let plans: Vec<CellPlan> = layouts
+            .par_iter()
+            .zip(&cells)
+            .filter_map(|(l, c)| token.scope(|| l.as_ref()?.best_plan(c, &free_space)))
             .collect();
-        // The cells stop early when cancelled, with plans to throw away.
         crate::cancel::check()?;
         let turns: usize = plans.iter().map(CellPlan::turns).sum();
         let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();
