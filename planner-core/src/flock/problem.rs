@@ -255,9 +255,28 @@ impl<'a> Flock<'a> {
         if let Some((leg, _)) = self.memo.get(&(a, b)).or_else(|| self.memo.get(&(b, a))) {
             return Ok(*leg);
         }
-        let (pa, inner_a) = self.point(a);
-        let (pb, inner_b) = self.point(b);
+        let (pa, pb) = (self.point(a).0, self.point(b).0);
         let path = self.obstacles.shortest_path(pa, pb)?;
+        Ok(self.insert_leg(a, b, path))
+    }
+
+    /// Records `path` as the transit from `a` to `b`, already planned
+    /// elsewhere (the single-UAV tour plans every transit it flies): it
+    /// must be the one [`Flock::leg`] would find, from `a`'s point to `b`'s.
+    pub fn know_leg(&mut self, a: Stop, b: Stop, path: Vec<Coord<f64>>) {
+        let (pa, pb) = (self.point(a).0, self.point(b).0);
+        if path.first() == Some(&pa)
+            && path.last() == Some(&pb)
+            && !self.memo.contains_key(&(a, b))
+            && !self.memo.contains_key(&(b, a))
+        {
+            self.insert_leg(a, b, path);
+        }
+    }
+
+    fn insert_leg(&mut self, a: Stop, b: Stop, path: Vec<Coord<f64>>) -> Leg {
+        let inner_a = self.point(a).1;
+        let inner_b = self.point(b).1;
         let length_m = polyline_length(&path);
         let homes = [matches!(a, Stop::Home(_)), matches!(b, Stop::Home(_))];
         let length_3d_m = match self.lift {
@@ -275,7 +294,7 @@ impl<'a> Flock<'a> {
             turns: count_turns(&chain) as u32,
         };
         self.memo.insert((a, b), (leg, path));
-        Ok(leg)
+        leg
     }
 
     /// A lower bound of `leg(a, b)`'s 3D length that never searches: the

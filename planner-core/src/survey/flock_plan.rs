@@ -276,6 +276,13 @@ fn reorder_by_tour(
         let job = add_part(input, flock, parts, Part { piece, plan: visit })?;
         new_route.push(Visit::new(job, 0));
     }
+    // The tour's transits are the legs of the new route: known already.
+    for ((a, b), path) in Flock::legs_of(u, &new_route)
+        .into_iter()
+        .zip(candidate.transits)
+    {
+        flock.know_leg(a, b, path);
+    }
     *route = new_route;
     Ok(())
 }
