@@ -10,14 +10,15 @@ cd "$(dirname "$0")/.."
 base=${1:-HEAD}
 work=$(mktemp -d)
 trap 'git worktree remove --force "$work/base" >/dev/null 2>&1 || true; rm -rf "$work"' EXIT
-# The base is built in a worktree next to this one (the inputs are read
-# from ../shared relative to the checkout), with its own target directory.
+# The base is built from a worktree in the same target directory (its
+# dependencies are already compiled there) and its binary copied aside
+# before the working tree's is built over it.
+target=$(cargo metadata --format-version 1 --no-deps | python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])')
 git worktree add --detach "$work/base" "$base" >/dev/null
-base_target=${BASE_TARGET_DIR:-$PWD/target/compare-base}
-(cd "$work/base" && CARGO_TARGET_DIR="$base_target" cargo build --quiet --bin terraplan)
+(cd "$work/base" && CARGO_TARGET_DIR="$target" cargo build --quiet --bin terraplan)
+cp "$target/debug/terraplan" "$work/terraplan-base"
 cargo build --quiet --bin terraplan
-target=${CARGO_TARGET_DIR:-target}
-python3 scripts/output_snapshot.py "$base_target/debug/terraplan" "$work/before"
+python3 scripts/output_snapshot.py "$work/terraplan-base" "$work/before"
 python3 scripts/output_snapshot.py "$target/debug/terraplan" "$work/after"
 files=$(cd "$work/after" && find . -type f | wc -l)
 if diff -r "$work/before" "$work/after"; then
