@@ -11,8 +11,11 @@
 
 use geo_types::{Coord, MultiPolygon, Polygon};
 
-use super::PlanError;
+use super::cells::Decomposition;
+use super::homes::FlockSetup;
+use super::request::{Flight, PlanError, SurveyParams, cancelled_or};
 use super::terrain_flight::{FlightRules, cell_length_3d, transit_length_3d};
+use super::terrain_prep::OverDem;
 use crate::coverage::CellPlan;
 use crate::flock::{
     Flock, FlockJob, FlockUav, ObstacleMap, Part, Piece, Policy, Stop, Tour, Visit, assign,
@@ -27,7 +30,7 @@ const MAX_PIECES_PER_UAV: usize = 10_000;
 const MAX_SORTIES_PER_UAV: usize = 100;
 
 /// What the flock stage needs from the survey.
-pub(super) struct FlockInput<'a> {
+struct FlockInput<'a> {
     pub plans: &'a [CellPlan],
     pub cells: &'a [Polygon<f64>],
     /// Where lanes and links may run: the ROI less the NFZs' keep-out area.
@@ -85,8 +88,45 @@ fn add_part(
     Ok(parts.len() - 1)
 }
 
+/// Shares the cells of `d` among the UAVs of `setup` (flying in its
+/// flyable space) by the request's policy, and flies each share.
+pub(super) fn share_cells(
+    setup: &FlockSetup,
+    d: &Decomposition,
+    params: &SurveyParams,
+    flight: &Flight,
+    over_dem: Option<&OverDem>,
+) -> Result<FlockOutcome, PlanError> {
+    let pointer = |i: usize, field: &str| setup.pointer(i, field);
+    let input = FlockInput {
+        plans: &d.plans,
+        cells: &d.cells,
+        free: &setup.flyable,
+        obstacles: &setup.obstacles,
+        uavs: setup
+            .homes
+            .iter()
+            .zip(&setup.specs)
+            .map(|(&home, u)| FlockUav {
+                home,
+                speed_m_s: u.speed_m_s.unwrap_or(params.speed_m_s),
+            })
+            .collect(),
+        batteries: setup.specs.iter().map(|u| u.max_flight_time_s).collect(),
+        ids: setup.specs.iter().map(|u| u.id.clone()).collect(),
+        pointer: &pointer,
+        policy: params.assignment,
+        turn_penalty_s: params.turn_penalty_s,
+        altitude_m: flight.altitude,
+        terrain: over_dem.map(|o| (&o.terrain.model, flight.rules)),
+    };
+    let outcome = share(&input).map_err(cancelled_or)?;
+    crate::cancel::check()?;
+    Ok(outcome)
+}
+
 /// Shares the survey among the UAVs and flies each share.
-pub(super) fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
+fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
     let internal = |e: crate::flock::FlockError| PlanError::Internal(e.to_string());
     let cell_3d = |plan: &CellPlan| input.cell_length_3d(plan);
     let whole: Vec<Part> = input

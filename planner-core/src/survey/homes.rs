@@ -1,14 +1,136 @@
-//! Take-off points against the no-fly zones: the default start of a
-//! survey given no UAV, and the checks of given starts (SPEC §3.3: every
-//! flown point keeps `nfz_clearance_m` from the NFZs, except the vertical
-//! take-off and landing at home).
+//! The flock on the ground: the keep-out area round the no-fly zones and
+//! the flyable space it leaves, the default start of a survey given no
+//! UAV, and the checks of given starts (SPEC §3.3: every flown point keeps
+//! `nfz_clearance_m` from the NFZs, except the vertical take-off and
+//! landing at home).
 
-use geo::{BooleanOps, Closest, ClosestPoint, Distance, Euclidean, Intersects};
+use geo::{Area, BooleanOps, Closest, ClosestPoint, Distance, Euclidean, Intersects};
 use geo_types::{Coord, Line, MultiLineString, MultiPolygon, Point, Polygon};
 
-use super::{PlanError, dist};
+use super::cells::{MIN_FREE_AREA_M2, dist, nfz_union, roi_minus};
+use super::request::{PlanError, SurveyRequest, UavSpec, cancelled_or};
 use crate::flock::ObstacleMap;
 use crate::geo::{Issue, SurveyArea, UtmProjection, distance_to_zones};
+
+/// The UAVs at their starts and the space they may fly in.
+pub(super) struct FlockSetup {
+    /// The UAVs given, or the default one.
+    pub specs: Vec<UavSpec>,
+    /// Whether the request gave no UAV (faults of the default one are
+    /// reported at `/uavs`).
+    pub default_uav: bool,
+    /// Every UAV's start in planning coordinates.
+    pub homes: Vec<Coord<f64>>,
+    /// The free space less the keep-out area: where lanes, links and
+    /// transits run.
+    pub flyable: MultiPolygon<f64>,
+    pub obstacles: ObstacleMap,
+    /// `nfz_clearance_m`.
+    pub clearance: f64,
+    /// Free area enclosed by the keep-out area and not flown, m².
+    pub enclosed_m2: f64,
+    pub warnings: Vec<String>,
+}
+
+impl FlockSetup {
+    /// The flock of `req` over `area`, whose free space is `free`.
+    pub(super) fn new(
+        req: &SurveyRequest,
+        area: &SurveyArea,
+        free: &MultiPolygon<f64>,
+    ) -> Result<FlockSetup, PlanError> {
+        let params = &req.params;
+        let proj = &area.projection;
+        // Everything flown keeps the clearance from the NFZs (they are exported
+        // as exclusion fences): lanes, links and transits are planned outside
+        // this keep-out area, coverage is still measured over the free space.
+        let clearance = params.nfz_clearance_m;
+        let nfz_union = nfz_union(&area.no_fly);
+        let keep_out = crate::geo::keep_out_area(&nfz_union, clearance);
+        let flyable = if clearance > 0.0 {
+            roi_minus(area, &keep_out.0)
+        } else {
+            free.clone()
+        };
+        crate::cancel::check()?;
+        if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
+            return Err(nothing_flyable(clearance));
+        }
+        let mut warnings = Vec::new();
+        let default_uav = params.uavs.is_empty();
+        let specs = if default_uav {
+            let (start, note) = default_start(&req.roi[0].polygon, area, &keep_out, clearance)?;
+            warnings.extend(note);
+            vec![UavSpec {
+                id: "uav1".to_string(),
+                start,
+                speed_m_s: None,
+                max_flight_time_s: None,
+            }]
+        } else {
+            params.uavs.clone()
+        };
+        let homes: Vec<Coord<f64>> = specs
+            .iter()
+            .map(|u| {
+                proj.to_utm(Coord {
+                    x: u.start[0],
+                    y: u.start[1],
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        // Pockets the keep-out area encloses cannot be reached (gaps between
+        // NFZs narrower than twice the clearance): not flown, unless a UAV
+        // takes off inside.
+        let (keep_out, enclosed_m2) = crate::geo::fill_enclosed(&keep_out, &homes);
+        let flyable = if enclosed_m2 > 0.0 {
+            roi_minus(area, &keep_out.0)
+        } else {
+            flyable
+        };
+        crate::cancel::check()?;
+        if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
+            return Err(nothing_flyable(clearance));
+        }
+        let mut flock = FlockSetup {
+            specs,
+            default_uav,
+            homes,
+            flyable,
+            obstacles: ObstacleMap::new(&keep_out, 0.0),
+            clearance,
+            enclosed_m2,
+            warnings,
+        };
+        let ids: Vec<String> = flock.specs.iter().map(|u| u.id.clone()).collect();
+        let pointer = |i: usize, field: &str| uav_pointer(default_uav, i, field);
+        let notes = check_homes(
+            &flock.homes,
+            &ids,
+            &pointer,
+            &area.no_fly,
+            clearance,
+            &mut flock.obstacles,
+            proj,
+        )
+        .map_err(cancelled_or)?;
+        flock.warnings.extend(notes);
+        Ok(flock)
+    }
+
+    /// JSON pointer of `field` of UAV `i`: `/uavs` for the default UAV.
+    pub(super) fn pointer(&self, i: usize, field: &str) -> String {
+        uav_pointer(self.default_uav, i, field)
+    }
+}
+
+fn uav_pointer(default_uav: bool, i: usize, field: &str) -> String {
+    if default_uav {
+        "/uavs".to_string()
+    } else {
+        format!("/uavs/{i}/{field}")
+    }
+}
 
 /// Where a survey given no UAV takes off, in lon/lat, and a note for the
 /// plan's warnings when that is not the ROI's first vertex.
@@ -16,7 +138,7 @@ use crate::geo::{Issue, SurveyArea, UtmProjection, distance_to_zones};
 /// The first vertex of the ROI (as given) that lies outside the keep-out
 /// area; else the point of the ROI's boundary outside it nearest to the
 /// first vertex. A default must never make a valid survey fail.
-pub(super) fn default_start(
+fn default_start(
     roi_wgs84: &Polygon<f64>,
     area: &SurveyArea,
     keep_out: &MultiPolygon<f64>,
@@ -84,7 +206,7 @@ pub(super) fn default_start(
 /// home inside an NFZ, and a home whose way out would run closer than the
 /// clearance to an NFZ once away from home (hemmed in between NFZs).
 /// Returns a note per home within the clearance.
-pub(super) fn check_homes(
+fn check_homes(
     homes: &[Coord<f64>],
     ids: &[String],
     pointer: &dyn Fn(usize, &str) -> String,
@@ -157,7 +279,7 @@ pub(super) fn check_homes(
 }
 
 /// The error of a keep-out area that leaves nothing to fly over.
-pub(super) fn nothing_flyable(clearance_m: f64) -> PlanError {
+fn nothing_flyable(clearance_m: f64) -> PlanError {
     PlanError::Invalid(vec![Issue::new(
         "/nfz_clearance_m",
         &format!(

@@ -5,16 +5,13 @@
 
 use geo::{Distance, Euclidean, Intersects};
 use geo_types::{Coord, Point, Polygon};
-use serde::{Deserialize, Serialize};
 
-use super::{PlanError, PlanFile, SurveyPlan, UavPlan};
+use super::files::PlanFile;
+use super::request::{DEM_POINTER, PlanError};
+use super::result::{RallyPoint, SurveyPlan, UavPlan};
 use crate::export::{GeoPoint, waypoints::write_rally};
 use crate::geo::{Issue, SurveyArea};
 use crate::terrain::{Dem, TerrainSampler};
-
-/// Most rally points in one survey (ArduPilot keeps as many as its rally
-/// storage holds, at least 10 on every board; PX4 as many as its dataman).
-pub const MAX_RALLY_POINTS: usize = 64;
 
 /// Farthest a rally point may lie from the survey area: it is where a UAV
 /// lands or loiters instead of home, so one farther off is a mistake
@@ -23,18 +20,6 @@ pub const MAX_RALLY_DISTANCE_M: f64 = 50_000.0;
 
 /// Suffix of each UAV's rally file, after `<uav id>.`.
 pub(super) const RALLY_FILE_SUFFIX: &str = "rally.waypoints";
-
-/// A rally point of a planned survey.
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct RallyPoint {
-    pub lon: f64,
-    pub lat: f64,
-    /// DEM height under the point (above mean sea level), when the survey
-    /// was planned over a DEM that covers it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ground_amsl_m: Option<f64>,
-}
 
 /// Checks the requested rally points (`/rally_points/i`) and returns them
 /// with their UTM positions (for the inclusion fence). Refused, each naming
@@ -50,9 +35,10 @@ pub(super) fn check_rally_points(
     dem: Option<&Dem>,
 ) -> Result<(Vec<RallyPoint>, Vec<Coord<f64>>), PlanError> {
     let sampler = match dem {
-        Some(d) if !points.is_empty() => Some(TerrainSampler::wgs84(d).map_err(|e| {
-            PlanError::Invalid(vec![Issue::new(super::DEM_POINTER, &e.to_string())])
-        })?),
+        Some(d) if !points.is_empty() => Some(
+            TerrainSampler::wgs84(d)
+                .map_err(|e| PlanError::Invalid(vec![Issue::new(DEM_POINTER, &e.to_string())]))?,
+        ),
         _ => None,
     };
     let mut issues = Vec::new();
@@ -194,7 +180,7 @@ mod tests {
     use geo_types::{LineString, Polygon};
     use serde_json::{Value, json};
 
-    use super::super::{SurveyRequest, plan_survey};
+    use super::super::{MAX_RALLY_POINTS, SurveyRequest, plan_survey};
     use super::*;
     use crate::geo::Limits;
 

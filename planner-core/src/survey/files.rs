@@ -1,0 +1,213 @@
+//! The files of a plan: their names, and each rendered alone (mission
+//! files per sortie, the fence per UAV, the cells), for the CLI's output
+//! directory and the service's downloads.
+
+use serde_json::{Map, Value, json};
+
+use super::result::SurveyPlan;
+use crate::export::{self, geojson as gj};
+
+/// A file produced from a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanFile {
+    pub name: String,
+    pub content_type: &'static str,
+    pub content: String,
+}
+
+impl SurveyPlan {
+    /// Names of the plan's files: per sortie `<stem>.waypoints`,
+    /// `<stem>.plan`, `<stem>.route.geojson` and `<stem>.kml` (the stem is
+    /// the UAV id, or `<id>.sortie<k>` for a UAV flying several sorties);
+    /// per UAV `<id>.fence.waypoints`; then `cells.geojson`.
+    pub fn file_names(&self) -> Vec<String> {
+        let mut out: Vec<String> = Vec::new();
+        for u in &self.uavs {
+            for s in &u.sorties {
+                out.extend(
+                    SORTIE_FILE_SUFFIXES
+                        .iter()
+                        .map(|suffix| format!("{}.{suffix}", s.file_stem)),
+                );
+            }
+            out.push(format!("{}.{FENCE_FILE_SUFFIX}", u.id));
+        }
+        out.extend(self.rally_file_names());
+        out.push(CELLS_FILE.to_string());
+        out
+    }
+
+    /// Every file of the plan, rendered.
+    pub fn files(&self) -> Vec<PlanFile> {
+        self.file_names()
+            .iter()
+            .filter_map(|n| self.file(n))
+            .collect()
+    }
+
+    /// One file of the plan by name (see [`SurveyPlan::file_names`]),
+    /// rendered alone; `None` for an unknown name.
+    pub fn file(&self, name: &str) -> Option<PlanFile> {
+        let text = "text/plain; charset=utf-8";
+        let done = |content_type: &'static str, content: String| {
+            Some(PlanFile {
+                name: name.to_string(),
+                content_type,
+                content,
+            })
+        };
+        if name == CELLS_FILE {
+            return done("application/geo+json", pretty(&self.cells_geojson()));
+        }
+        if let Some(rally) = self.rally_file(name) {
+            return Some(rally);
+        }
+        // The fence is the UAV's; it is also served under each sortie's stem.
+        let fence = format!(".{FENCE_FILE_SUFFIX}");
+        if self.uavs.iter().any(|u| {
+            std::iter::once(u.id.as_str())
+                .chain(u.sorties.iter().map(|s| s.file_stem.as_str()))
+                .any(|stem| name.strip_prefix(stem) == Some(fence.as_str()))
+        }) {
+            return done(text, export::write_fence(&self.fences));
+        }
+        let (u, s, suffix) = self.uavs.iter().find_map(|u| {
+            u.sorties.iter().find_map(|s| {
+                let rest = name.strip_prefix(s.file_stem.as_str())?.strip_prefix('.')?;
+                SORTIE_FILE_SUFFIXES.contains(&rest).then_some((u, s, rest))
+            })
+        })?;
+        match suffix {
+            "waypoints" => done(text, export::write_waypoints(&s.mission)),
+            "plan" => done(
+                "application/json",
+                pretty(&export::write_plan(
+                    &s.mission,
+                    &self.fences,
+                    &self.rally_for(u),
+                )),
+            ),
+            "route.geojson" => {
+                let mut props = Map::new();
+                props.insert("uav".into(), json!(u.id));
+                props.insert("sortie".into(), json!(s.file_stem));
+                props.insert("altitude_frame".into(), json!(self.altitude_frame));
+                props.insert("length_m".into(), json!(s.stats.length_m));
+                props.insert("flight_time_s".into(), json!(s.stats.flight_time_s));
+                let route =
+                    json!({"type": "FeatureCollection", "features": [s.route_feature(props)]});
+                done("application/geo+json", pretty(&route))
+            }
+            "kml" => {
+                let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
+                    .cells
+                    .iter()
+                    .filter(|c| s.cells.contains(&c.id))
+                    .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
+                    .collect();
+                let title = if u.sorties.len() > 1 {
+                    format!("terraplan survey, UAV {}, {}", u.id, s.file_stem)
+                } else {
+                    format!("terraplan survey, UAV {}", u.id)
+                };
+                done(
+                    "application/vnd.google-earth.kml+xml",
+                    export::write_kml(&title, &s.mission, &cell_rings),
+                )
+            }
+            _ => None,
+        }
+    }
+
+    /// The cells as a GeoJSON FeatureCollection (WGS84).
+    pub fn cells_geojson(&self) -> Value {
+        gj::feature_collection(self.cells.iter().map(|c| {
+            let mut props = Map::new();
+            props.insert("id".into(), json!(c.id));
+            props.insert("area_m2".into(), json!(c.area_m2));
+            props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
+            props.insert("lanes".into(), json!(c.lanes));
+            props.insert("lane_length_m".into(), json!(c.lane_length_m));
+            (c.polygon.clone(), props)
+        }))
+    }
+}
+
+/// Suffixes of each sortie's files, after `<stem>.`.
+const SORTIE_FILE_SUFFIXES: [&str; 4] = ["waypoints", "plan", "route.geojson", "kml"];
+/// Suffix of each UAV's fence file, after `<uav id>.`.
+const FENCE_FILE_SUFFIX: &str = "fence.waypoints";
+/// Name of the cells file.
+const CELLS_FILE: &str = "cells.geojson";
+
+/// The exterior ring of a GeoJSON Polygon geometry as [lon, lat] pairs.
+fn geojson_exterior(polygon: &Value) -> Vec<[f64; 2]> {
+    polygon["coordinates"][0]
+        .as_array()
+        .map(|ring| {
+            ring.iter()
+                .filter_map(|p| Some([p[0].as_f64()?, p[1].as_f64()?]))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn pretty(v: &Value) -> String {
+    let mut s = serde_json::to_string_pretty(v).unwrap_or_default();
+    s.push('\n');
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{SurveyRequest, plan_survey};
+    use crate::geo::Limits;
+    use serde_json::json;
+
+    #[test]
+    fn plans_a_square_and_renders_each_file_alone() {
+        let doc = json!({
+            "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
+            "no_fly_zones": [{"type": "Polygon", "coordinates": [[[5.001, 52.001], [5.002, 52.001], [5.002, 52.002], [5.001, 52.002]]]}],
+            "slice_angle_deg": 0,
+            "uavs": [{"id": "a-1", "start": [4.999, 51.999]}],
+        });
+        let plan = plan_survey(
+            &SurveyRequest::from_document(&doc).unwrap(),
+            &Limits::default(),
+        )
+        .unwrap();
+        // An NFZ inside a square sliced north-south: left, below, above, right.
+        assert_eq!(plan.stats.cell_count, 4);
+        assert!(
+            plan.stats.coverage_ratio >= 0.995,
+            "{}",
+            plan.stats.coverage_ratio
+        );
+        let names = plan.file_names();
+        assert_eq!(
+            names,
+            [
+                "a-1.waypoints",
+                "a-1.plan",
+                "a-1.route.geojson",
+                "a-1.kml",
+                "a-1.fence.waypoints",
+                "cells.geojson"
+            ]
+        );
+        let all = plan.files();
+        assert_eq!(all.len(), names.len());
+        for f in &all {
+            assert_eq!(plan.file(&f.name).as_ref(), Some(f));
+        }
+        assert!(plan.file("a-1.exe").is_none());
+        assert!(plan.file("b.waypoints").is_none());
+        assert!(
+            plan.file("a-1.waypoints")
+                .unwrap()
+                .content
+                .starts_with("QGC WPL 110\n")
+        );
+    }
+}
