@@ -20,3 +20,4 @@ pub mod survey;
 pub mod terrain;
 #[cfg(test)]
 pub(crate) mod test_rng;
+mod xml;

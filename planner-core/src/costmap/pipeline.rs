@@ -19,7 +19,7 @@ use super::{
     Class, Costmap, CostmapError, CostmapOptions, InflationMode, Layer, MAX_RADIUS_CELLS, Progress,
     ResolvedParams, Stage, StepMode, Vehicle,
 };
-use crate::export::geotiff::{Band, BandData, Page, write_geotiff};
+use crate::terrain::geotiff::{Band, BandData, Page, write_geotiff};
 use crate::geo::Issue;
 use crate::terrain::Dem;
 

@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use super::{Class, Costmap};
-use crate::export::xml_escape;
+use crate::xml::xml_escape;
 
 /// RGB of each obstacle class and of unknown cells (drawn transparent).
 pub fn class_colour(class: Class) -> [u8; 3] {

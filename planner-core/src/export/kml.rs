@@ -3,7 +3,7 @@
 use std::fmt::Write;
 
 use super::mission::{AltitudeFrame, Mission};
-use super::xml_escape;
+use crate::xml::xml_escape;
 
 /// A KML document with the route of `mission` as a 3D LineString and each
 /// cell ring (lon/lat, closed) as a Polygon. Terrain-frame altitudes are

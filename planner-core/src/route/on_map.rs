@@ -1117,7 +1117,7 @@ mod tests {
     #[test]
     fn costmap_geotiff_round_trip_with_the_dem() {
         use crate::costmap::{CostmapOptions, Stage, VehiclePreset, build_costmap};
-        use crate::export::geotiff::{Band, BandData, Page, write_geotiff};
+        use crate::terrain::geotiff::{Band, BandData, Page, write_geotiff};
         use crate::terrain::test_support::{dem, north_up};
         let (w, h) = (120, 100);
         // A gentle plane (2 %) with a 3 m wall across columns 60..64,

@@ -12,7 +12,7 @@
 //! ±f32::MAX, a height no ground has). The CRS lives in a `.prj` side file, which a single file's bytes
 //! do not have: an ASCII grid needs the caller's CRS.
 
-use super::read::{c_atof, check_limits, resolve_crs};
+use super::common::{c_atof, check_limits, resolve_crs};
 use super::{Dem, DemFormat, DemLimits, GeoTransform, TerrainError};
 
 /// Header keywords a grid may start with (GDAL's identification rule).

@@ -1,8 +1,10 @@
 //! A DEM's horizontal CRS: an EPSG code, its name, whether its units are
 //! degrees (geographic) or metres (projected), and its PROJ.4 definition.
 
+use std::collections::HashMap;
 use std::ffi::{CStr, CString};
 use std::ptr;
+use std::sync::{Mutex, OnceLock};
 
 use proj::Proj;
 use serde::{Deserialize, Serialize};
@@ -86,7 +88,7 @@ impl Crs {
     /// does not know the code.
     pub fn fill_proj4(&mut self) {
         if self.proj4.is_empty()
-            && let Ok(crs) = super::read::crs_from_epsg(self.epsg)
+            && let Ok(crs) = crs_from_epsg(self.epsg)
         {
             self.proj4 = crs.proj4;
         }
@@ -96,6 +98,23 @@ impl Crs {
     pub fn proj_id(&self) -> String {
         format!("EPSG:{}", self.epsg)
     }
+}
+
+/// [`Crs::from_epsg`], remembered: asking PROJ costs milliseconds, about
+/// as much as reading a DEM of a few megabytes.
+pub(super) fn crs_from_epsg(code: u32) -> Result<Crs, TerrainError> {
+    static CACHE: OnceLock<Mutex<HashMap<u32, Crs>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(crs) = cache.lock().ok().and_then(|c| c.get(&code).cloned()) {
+        return Ok(crs);
+    }
+    let crs = Crs::from_epsg(code)?;
+    if let Ok(mut c) = cache.lock()
+        && c.len() < 4096
+    {
+        c.insert(code, crs.clone());
+    }
+    Ok(crs)
 }
 
 /// The PROJ.4 string of the CRS `def` bound to WGS84, without `+type=crs`

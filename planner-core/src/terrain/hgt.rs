@@ -6,7 +6,7 @@
 //! edge is half a sample outside the 1°×1° square (as GDAL's SRTMHGT
 //! driver reads it).
 
-use super::read::{check_limits, resolve_crs};
+use super::common::{check_limits, resolve_crs};
 use super::{Dem, DemFormat, DemLimits, GeoTransform, TerrainError};
 
 /// The void marker of SRTM tiles.

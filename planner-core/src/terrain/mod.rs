@@ -1,16 +1,18 @@
 //! Digital elevation models (SPEC §4.1): reading GeoTIFF, ESRI ASCII grids
 //! and SRTM `.hgt` into one [`Dem`] type, sampling heights, grey-scale
-//! dilation and hillshade.
+//! dilation and hillshade; writing georeferenced Float32 and Byte rasters
+//! (costmaps) as GeoTIFF ([`geotiff`]).
 //!
 //! A DEM keeps its own CRS; points are transformed into it to be sampled
 //! ([`TerrainSampler`]). Nodata is never a height: nodata cells hold `NaN`
 //! in [`Dem::values`] and every sample that touches one is `None`.
 
 mod asc;
+mod common;
 mod crs;
 pub(crate) mod dilate;
 mod follow;
-mod geotiff;
+pub mod geotiff;
 mod hgt;
 mod hillshade;
 mod info;

@@ -1,0 +1,330 @@
+//! Reading a GeoTIFF page's pixels: strips and tiles decompressed and
+//! un-predicted by the `tiff` crate, one chunk at a time, into `f64`s,
+//! nodata and infinite samples becoming `NaN`.
+
+use std::io::Cursor;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+use tiff::TiffError;
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+
+use super::header::{Header, NoDataMatch, parse_header};
+use super::{invalid, unsupported};
+use crate::terrain::common::resolve_crs;
+use crate::terrain::{Dem, DemFormat, DemLimits, TerrainError};
+
+fn tiff_error(e: TiffError) -> TerrainError {
+    match e {
+        TiffError::UnsupportedError(u) => {
+            unsupported(format!("the TIFF uses an unsupported feature: {u}"))
+        }
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => invalid(
+            format!("the TIFF's image data ends early ({io}): the file is truncated or corrupt"),
+        ),
+        TiffError::LimitsExceeded => {
+            invalid("the TIFF's image data is larger than its header declares")
+        }
+        other => invalid(format!("the TIFF's image data is corrupt: {other}")),
+    }
+}
+
+/// Read a single-band GeoTIFF as a DEM (its first page).
+pub(in crate::terrain) fn read(
+    bytes: &[u8],
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    read_raster(bytes, 0, None, crs, limits)
+}
+
+/// Read band `band` (1-based) of page `page` (1-based) of a GeoTIFF with
+/// any number of pages and bands.
+pub(in crate::terrain) fn read_band(
+    bytes: &[u8],
+    page: usize,
+    band: usize,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    if page == 0 {
+        return Err(invalid("page 0 does not exist: pages are numbered from 1"));
+    }
+    read_raster(bytes, page - 1, Some(band), crs, limits)
+}
+
+/// The one reading path: on page `page` (0-based), band `band`
+/// (1-based), or with `None` the only band of a single-band page.
+fn read_raster(
+    bytes: &[u8],
+    page: usize,
+    band: Option<usize>,
+    crs: Option<u32>,
+    limits: &DemLimits,
+) -> Result<Dem, TerrainError> {
+    let h = parse_header(bytes, limits, page, band)?;
+    let crs = resolve_crs(h.crs_code.clone(), crs)?;
+    let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
+    let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
+    let n = width
+        .checked_mul(height)
+        .ok_or_else(|| invalid("the TIFF's pixel count overflows"))?;
+    let matcher = NoDataMatch::new(h.nodata, h.sample);
+    let mut values = crate::buffer::filled(n, 0.0f64);
+
+    let decoded = catch_unwind(AssertUnwindSafe(|| {
+        decode(bytes, &h, page, matcher, width, &mut values)
+    }));
+    match decoded {
+        Ok(r) => r?,
+        Err(_) => {
+            return Err(invalid(
+                "the TIFF's image data is corrupt (the decoder failed)",
+            ));
+        }
+    }
+    if h.vertical_scale != 1.0 {
+        for v in &mut values {
+            *v *= h.vertical_scale;
+        }
+    }
+    Ok(Dem {
+        width,
+        height,
+        values,
+        nodata: h.nodata,
+        transform: h.transform,
+        crs,
+        format: DemFormat::GeoTiff,
+    })
+}
+
+/// Decode every chunk into `out` (row-major, `width` wide).
+fn decode(
+    bytes: &[u8],
+    h: &Header,
+    page: usize,
+    nd: NoDataMatch,
+    width: usize,
+    out: &mut [f64],
+) -> Result<(), TerrainError> {
+    // The tiff crate (0.11.3) reads the right-hand tiles of an image whose
+    // width is not a multiple of the tile width row by row, and its LZW
+    // reader then fails on valid streams ("no lzw end code found" when the
+    // last bytes come out of the decoder's buffer after the input is
+    // consumed). Declaring the image as wide as its tiles makes every tile a
+    // whole-tile read; the padding columns are dropped below.
+    let padded_width = if h.grid.tiled {
+        h.grid.across * h.grid.cw
+    } else {
+        h.width
+    };
+    let widened;
+    let bytes = match h.width_entry {
+        Some(pos) if padded_width != h.width => {
+            widened = widen(bytes, h, pos, padded_width)?;
+            &widened[..]
+        }
+        _ => bytes,
+    };
+    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_error)?;
+    // Before the limits below, which are sized for the image data: the
+    // decoder reads the page's tags (GDAL_METADATA, ...) when it seeks, as
+    // it read the first page's in `new`.
+    if page > 0 {
+        dec.seek_to_image(page).map_err(tiff_error)?;
+    }
+    let mut limits = Limits::default();
+    // The largest decoded chunk: a whole strip or tile (cut at the bottom).
+    let chunk_bytes = h
+        .grid
+        .cw
+        .saturating_mul(h.decoded_rows)
+        .saturating_mul(h.chunk_samples as u64)
+        .saturating_mul(h.sample.bytes());
+    limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
+    limits.intermediate_buffer_size = bytes.len().max(1);
+    dec = dec.with_limits(limits);
+    let inconsistent = || {
+        invalid(format!(
+            "the TIFF's image directory {} is inconsistent",
+            page + 1
+        ))
+    };
+    let (dw, dh) = dec.dimensions().map_err(tiff_error)?;
+    if (u64::from(dw), u64::from(dh)) != (padded_width, h.height) {
+        return Err(inconsistent());
+    }
+    if h.bands > 1 {
+        // The decoder parses the IFD itself: it must see the same bands.
+        let samples = match dec.colortype().map_err(tiff_error)? {
+            tiff::ColorType::Multiband { num_samples, .. } => u64::from(num_samples),
+            _ => 0,
+        };
+        if samples != h.bands {
+            return Err(inconsistent());
+        }
+    }
+
+    let n = h.grid.count();
+    for i in 0..n {
+        let (cx, cy) = (i % h.grid.across, i / h.grid.across);
+        let x0 = cx * h.grid.cw;
+        let y0 = cy * h.grid.ch;
+        let cw = h.grid.cw.min(h.width - x0);
+        let ch = h.grid.ch.min(h.height - y0);
+        let (x0, y0, cw, ch) = (x0 as usize, y0 as usize, cw as usize, ch as usize);
+        let chunk = h.first_chunk + i;
+        let idx = usize::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
+        if h.byte_counts.get(idx) == Some(&0) && h.offsets.get(idx) == Some(&0) {
+            // Sparse chunk: GDAL reads nodata (or 0).
+            for r in 0..ch {
+                let start = (y0 + r) * width + x0;
+                if let Some(row) = out.get_mut(start..start + cw) {
+                    row.fill(nd.fill());
+                }
+            }
+            continue;
+        }
+        let chunk_index =
+            u32::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
+        let res = dec.read_chunk(chunk_index).map_err(|e| {
+            let e = tiff_error(e);
+            invalid(format!("{} {i} of {n}: {e}", h.grid.kind()))
+        })?;
+        let src_width = if h.grid.tiled { h.grid.cw as usize } else { cw };
+        put_chunk(
+            res,
+            h.white_is_zero,
+            nd,
+            out,
+            width,
+            (src_width, h.chunk_samples, h.sample_index),
+            x0,
+            y0,
+            cw,
+            ch,
+        )
+        .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
+    }
+    Ok(())
+}
+
+/// A copy of the file whose ImageWidth entry says `new_width` (as a LONG).
+fn widen(bytes: &[u8], h: &Header, pos: u64, new_width: u64) -> Result<Vec<u8>, TerrainError> {
+    let value = u32::try_from(new_width).map_err(|_| invalid("the TIFF's tiles are too wide"))?;
+    let mut b = bytes.to_vec();
+    let mut put = |at: u64, data: &[u8]| -> Option<()> {
+        let at = usize::try_from(at).ok()?;
+        b.get_mut(at..at.checked_add(data.len())?)?
+            .copy_from_slice(data);
+        Some(())
+    };
+    let (typ, count, v) = if h.le {
+        (4u16.to_le_bytes(), 1u64.to_le_bytes(), value.to_le_bytes())
+    } else {
+        (4u16.to_be_bytes(), 1u64.to_be_bytes(), value.to_be_bytes())
+    };
+    let ok = if h.big {
+        put(pos + 2, &typ)
+            .and_then(|_| put(pos + 4, &count))
+            .and_then(|_| put(pos + 12, &[0; 8]))
+            .and_then(|_| put(pos + 12, &v))
+    } else {
+        let count32 = if h.le {
+            1u32.to_le_bytes()
+        } else {
+            1u32.to_be_bytes()
+        };
+        put(pos + 2, &typ)
+            .and_then(|_| put(pos + 4, &count32))
+            .and_then(|_| put(pos + 8, &v))
+    };
+    ok.ok_or_else(|| invalid("the TIFF's ImageWidth entry is outside the file"))?;
+    Ok(b)
+}
+
+/// Copy sample `sample` of every pixel of one decoded chunk (`cw`×`ch`
+/// pixels of `spp` interleaved samples, rows `src_width` pixels apart)
+/// into the output.
+#[allow(clippy::too_many_arguments)]
+fn put_chunk(
+    res: DecodingResult,
+    white_is_zero: bool,
+    nd: NoDataMatch,
+    out: &mut [f64],
+    width: usize,
+    (src_width, spp, sample): (usize, usize, usize),
+    x0: usize,
+    y0: usize,
+    cw: usize,
+    ch: usize,
+) -> Result<(), String> {
+    #[allow(clippy::type_complexity)]
+    fn copy<T: Copy>(
+        src: &[T],
+        out: &mut [f64],
+        width: usize,
+        (x0, y0, cw, ch, sw, spp, sample): (usize, usize, usize, usize, usize, usize, usize),
+        conv: impl Fn(T) -> f64,
+    ) -> Result<(), String> {
+        let row_len = sw.checked_mul(spp).ok_or("chunk too large")?;
+        let need = row_len.checked_mul(ch).ok_or("chunk too large")?;
+        if src.len() < need || sw < cw || sample >= spp {
+            return Err(format!("decoded {} samples, expected {need}", src.len()));
+        }
+        for r in 0..ch {
+            let s = src
+                .get(r * row_len..r * row_len + cw * spp)
+                .ok_or("chunk row out of range")?;
+            let start = (y0 + r) * width + x0;
+            let d = out
+                .get_mut(start..start + cw)
+                .ok_or("chunk outside the image")?;
+            if spp == 1 {
+                for (d, &s) in d.iter_mut().zip(s) {
+                    *d = conv(s);
+                }
+            } else {
+                for (d, &s) in d.iter_mut().zip(s.iter().skip(sample).step_by(spp)) {
+                    *d = conv(s);
+                }
+            }
+        }
+        Ok(())
+    }
+    let area = (x0, y0, cw, ch, src_width, spp, sample);
+    let int = move |v: i64| -> f64 {
+        match nd {
+            NoDataMatch::Int(n) if n == v => f64::NAN,
+            _ => v as f64,
+        }
+    };
+    match res {
+        DecodingResult::U8(v) => copy(&v, out, width, area, |x: u8| {
+            int(i64::from(if white_is_zero { !x } else { x }))
+        }),
+        DecodingResult::I8(v) => copy(&v, out, width, area, |x: i8| int(i64::from(x))),
+        DecodingResult::U16(v) => copy(&v, out, width, area, |x: u16| {
+            int(i64::from(if white_is_zero { !x } else { x }))
+        }),
+        DecodingResult::I16(v) => copy(&v, out, width, area, |x: i16| int(i64::from(x))),
+        DecodingResult::U32(v) => copy(&v, out, width, area, |x: u32| {
+            int(i64::from(if white_is_zero { !x } else { x }))
+        }),
+        DecodingResult::I32(v) => copy(&v, out, width, area, |x: i32| int(i64::from(x))),
+        DecodingResult::F32(v) => copy(&v, out, width, area, |x: f32| match nd {
+            _ if !x.is_finite() => f64::NAN,
+            NoDataMatch::F32(n) if n == x => f64::NAN,
+            _ => f64::from(x),
+        }),
+        DecodingResult::F64(v) => copy(&v, out, width, area, |x: f64| match nd {
+            _ if !x.is_finite() => f64::NAN,
+            NoDataMatch::F64(n) if n == x => f64::NAN,
+            _ => x,
+        }),
+        _ => Err("the decoder returned an unexpected sample type".into()),
+    }
+}
+
+#[cfg(test)]
+mod tests;
