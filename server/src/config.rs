@@ -6,6 +6,9 @@ use std::path::PathBuf;
 use planner_core::geo::Limits;
 use planner_core::terrain::DemLimits;
 
+/// `--survey-timeout-s` by default.
+pub const SURVEY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
+
 #[derive(clap::Args, Clone, Debug)]
 pub struct ServeConfig {
     /// Address to listen on.
@@ -62,7 +65,7 @@ pub struct ServeConfig {
     pub route_timeout_s: f64,
     /// Longest a survey may plan, seconds (fractions allowed); a survey
     /// still planning then is stopped and answered with a 503.
-    #[arg(long, env = "TERRAPLAN_SURVEY_TIMEOUT_S", default_value_t = crate::app::SURVEY_TIMEOUT.as_secs_f64(), value_parser = parse_planning_timeout)]
+    #[arg(long, env = "TERRAPLAN_SURVEY_TIMEOUT_S", default_value_t = SURVEY_TIMEOUT.as_secs_f64(), value_parser = parse_planning_timeout)]
     pub survey_timeout_s: f64,
     /// Memory for the route searches kept for replanning (D* Lite states,
     /// about 17 bytes per costmap cell each), MiB; the least recently used

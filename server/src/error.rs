@@ -5,7 +5,9 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::cancel::Cancelled;
 use planner_core::geo::Issue;
+use planner_core::route::RouteError;
 use planner_core::survey::PlanError;
+use planner_core::terrain::TerrainError;
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -67,6 +69,27 @@ pub struct IssueSchema {
     /// JSON pointer (RFC 6901) of the member at fault; "" for the whole body.
     pointer: String,
     message: String,
+}
+
+/// The 404 of a resource that does not exist: `kind` names it ("DEM",
+/// "costmap", "survey", "route").
+pub fn not_found(kind: &str, id: &str) -> ApiError {
+    ApiError::NotFound(format!("there is no {kind} with id {id:?}"))
+}
+
+/// The resource a lookup found, or the 404 of [`not_found`].
+pub fn found<T>(row: Option<T>, kind: &str, id: &str) -> Result<T, ApiError> {
+    row.ok_or_else(|| not_found(kind, id))
+}
+
+/// `Ok` when a resource was deleted, the 404 of [`not_found`] when there
+/// was none.
+pub fn deleted(deleted: bool, kind: &str, id: &str) -> Result<StatusCode, ApiError> {
+    if deleted {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(not_found(kind, id))
+    }
 }
 
 impl ApiError {
@@ -160,6 +183,42 @@ impl From<PlanError> for ApiError {
             PlanError::Invalid(issues) => ApiError::Validation(issues),
             PlanError::Internal(m) => ApiError::Internal(m),
             PlanError::Cancelled(c) => c.into(),
+        }
+    }
+}
+
+/// A raster of the request that cannot be read: the client's fault (422,
+/// or 413 over the pixel limits).
+impl From<TerrainError> for ApiError {
+    fn from(e: TerrainError) -> Self {
+        let invalid = |m: String| ApiError::Validation(vec![Issue::new("", &m)]);
+        match e {
+            TerrainError::TooLarge { .. } => {
+                ApiError::PayloadTooLarge(format!("the DEM is too large: {e}"))
+            }
+            TerrainError::UnknownCrs(why) => invalid(format!(
+                "the raster's coordinate reference system cannot be determined ({why}): give it \
+                 in the query string, e.g. ?crs=EPSG:32633"
+            )),
+            TerrainError::Invalid(m) => invalid(format!("the file cannot be read as a DEM: {m}")),
+            TerrainError::Unsupported(m) => invalid(format!(
+                "the DEM uses a feature terraplan does not read: {m}"
+            )),
+            TerrainError::Crs(m) => invalid(format!("coordinate reference system: {m}")),
+            TerrainError::Cancelled(c) => c.into(),
+        }
+    }
+}
+
+/// A failed route search, for the faults that need no context: invalid
+/// options are the request's (422), the rest a bug (500). The handler
+/// names the faults of the start, the goal and a cancellation itself,
+/// since their pointers and messages depend on the request.
+impl From<RouteError> for ApiError {
+    fn from(e: RouteError) -> Self {
+        match e {
+            RouteError::InvalidOptions(issues) => ApiError::Validation(issues),
+            other => ApiError::Internal(format!("route search: {other}")),
         }
     }
 }

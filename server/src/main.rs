@@ -4,15 +4,22 @@
 mod api;
 mod app;
 mod cli;
+mod clock;
 mod config;
 mod conn;
-mod costmap_jobs;
 mod db;
 mod error;
-mod experiment;
+/// Former home of the costmap jobs (`jobs`) and `now_millis` (`clock`),
+/// for code not moved to them yet.
+mod costmap_jobs {
+    pub use crate::clock::now_millis;
+    pub use crate::jobs::*;
+}
+mod jobs;
 mod linger;
 mod memory;
 mod serve;
+mod state;
 mod web_ui;
 
 fn main() -> std::process::ExitCode {

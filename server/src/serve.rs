@@ -3,17 +3,16 @@
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::str::FromStr;
-use std::sync::Arc;
 use std::time::Duration;
 
 use sqlx::sqlite::SqliteConnectOptions;
 use tokio::net::{TcpListener, TcpSocket};
 use tracing_subscriber::EnvFilter;
 
-use crate::app::{AppState, router};
+use crate::app::router;
 use crate::config::{LogFormat, ServeConfig};
-use crate::costmap_jobs::CostmapJobs;
 use crate::db::Db;
+use crate::state::AppState;
 
 pub fn init_tracing(format: LogFormat) {
     let filter = EnvFilter::try_from_env("TERRAPLAN_LOG")
@@ -46,30 +45,19 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         .map_err(|e| format!("cannot open the database: {e}"))?;
     tracing::info!(backend = db.backend(), data_dir = %config.data_dir.display(), "database ready, migrations applied");
 
-    let jobs = Arc::new(CostmapJobs::new(
-        usize::try_from(config.costmap_jobs).unwrap_or(usize::MAX),
-    ));
-    let state = AppState {
-        db: db.clone(),
-        limits: config.limits(),
-        planner: Arc::new(crate::app::Planners::from_config(&config)),
-        dems: Arc::new(crate::app::DemStore::from_config(&config)),
-        costmaps: jobs.clone(),
-        routes: Arc::new(crate::app::RouteStore::from_config(&config)),
-        web: Arc::new(crate::web_ui::WebUi::new(&config.web_dir)),
-        memory: Arc::new(crate::memory::MemoryBudget::new(config.memory_budget_mb)),
-    };
+    let state = AppState::from_config(&config, db.clone());
+    let jobs = state.costmaps.clone();
     if state.web.is_built() {
         tracing::info!(dir = %config.web_dir.display(), "serving the web page at /");
     } else {
         tracing::warn!(dir = %config.web_dir.display(), "the web page is not built: / explains how to build it");
     }
     // Jobs a previous server left queued or running are queued again.
-    let recovered = jobs.recover(&state).await;
+    let recovered = jobs.recover().await;
     if recovered > 0 {
         tracing::info!(jobs = recovered, "unfinished costmap jobs queued again");
     }
-    jobs.start_maintenance(&state);
+    jobs.start_maintenance();
     let app = router(state, &config.cors_origins, config.max_body_bytes);
     let listener = listen(&config.host, config.port)
         .await
@@ -100,7 +88,7 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     })
     .await;
     jobs.begin_shutdown();
-    jobs.finish(&db).await;
+    jobs.finish().await;
     db.close().await;
     tracing::info!("shut down cleanly");
     Ok(())

@@ -6,6 +6,10 @@ use axum::Json;
 use planner_core::coverage::{Camera, PRESETS};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::state::AppState;
 
 /// A preset: its name and its camera.
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -41,4 +45,9 @@ pub async fn list_cameras() -> Json<CameraList> {
             })
             .collect(),
     })
+}
+
+/// `GET /api/v1/cameras`.
+pub fn routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(list_cameras))
 }

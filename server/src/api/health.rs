@@ -5,8 +5,11 @@ use axum::extract::State;
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::app::AppState;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
 use crate::error::{ApiError, Problem};
+use crate::state::AppState;
 
 #[derive(Serialize, ToSchema)]
 pub struct Health {
@@ -34,4 +37,9 @@ pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiE
         database: state.db.backend(),
         version: env!("CARGO_PKG_VERSION"),
     }))
+}
+
+/// `GET /healthz`.
+pub fn routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(healthz))
 }

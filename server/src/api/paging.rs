@@ -34,3 +34,52 @@ pub fn page(query: Result<Query<ListQuery>, QueryRejection>) -> Result<(i64, i64
     }
     Ok((limit, offset))
 }
+
+/// One page of a listing: its items, how many there are in all, and the
+/// page asked for.
+pub struct Page<T> {
+    pub items: Vec<T>,
+    pub total: i64,
+    pub limit: i64,
+    pub offset: i64,
+}
+
+/// The page of a listing that `query` asks for: `fetch` reads the stored
+/// rows of the page and the total for (limit, offset), `item` answers
+/// each row.
+pub async fn list<R, T, Fut>(
+    query: Result<Query<ListQuery>, QueryRejection>,
+    fetch: impl FnOnce(i64, i64) -> Fut,
+    item: impl FnMut(&R) -> Result<T, ApiError>,
+) -> Result<Page<T>, ApiError>
+where
+    Fut: Future<Output = Result<(Vec<R>, i64), sqlx::Error>>,
+{
+    let (limit, offset) = page(query)?;
+    let (rows, total) = fetch(limit, offset).await?;
+    let items = rows.iter().map(item).collect::<Result<Vec<_>, _>>()?;
+    Ok(Page {
+        items,
+        total,
+        limit,
+        offset,
+    })
+}
+
+/// `From<Page<$item>>` for a listing type `$list`, which has the fields
+/// of a page (each listing has a type of its own for its OpenAPI schema).
+macro_rules! listing {
+    ($list:ty, $item:ty) => {
+        impl From<$crate::api::paging::Page<$item>> for $list {
+            fn from(page: $crate::api::paging::Page<$item>) -> Self {
+                Self {
+                    items: page.items,
+                    total: page.total,
+                    limit: page.limit,
+                    offset: page.offset,
+                }
+            }
+        }
+    };
+}
+pub(crate) use listing;

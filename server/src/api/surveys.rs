@@ -17,13 +17,16 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use utoipa::ToSchema;
 
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
 use super::json_body::JsonBody;
-use super::paging::{ListQuery, page};
-use super::{rfc3339, short_id};
-use crate::app::{AppState, Work, off_runtime};
-use crate::costmap_jobs::now_millis;
+use super::paging::{ListQuery, list};
+use super::short_id;
+use crate::clock::{now_millis, rfc3339};
 use crate::db::{SurveyRow, SurveySummaryRow};
-use crate::error::{ApiError, Problem};
+use crate::error::{ApiError, Problem, deleted, found};
+use crate::state::{AppState, Work, off_runtime};
 
 const NAME_MAX_CHARS: usize = 200;
 
@@ -216,12 +219,10 @@ pub struct SurveyList {
     offset: i64,
 }
 
+crate::api::paging::listing!(SurveyList, SurveySummary);
+
 fn survey_url(id: &str) -> String {
     format!("/api/v1/surveys/{id}")
-}
-
-fn not_found(id: &str) -> ApiError {
-    ApiError::NotFound(format!("there is no survey with id {id:?}"))
 }
 
 fn parse_plan(row_plan: &str) -> Result<SurveyPlan, ApiError> {
@@ -431,11 +432,7 @@ pub async fn get_survey(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<SurveyResponse>, ApiError> {
-    let row = state
-        .db
-        .get_survey(&id)
-        .await?
-        .ok_or_else(|| not_found(&id))?;
+    let row = found(state.db.get_survey(&id).await?, "survey", &id)?;
     let plan = parse_plan(&row.plan)?;
     Ok(Json(response(&row, plan)))
 }
@@ -455,15 +452,13 @@ pub async fn list_surveys(
     State(state): State<AppState>,
     query: Result<Query<ListQuery>, QueryRejection>,
 ) -> Result<Json<SurveyList>, ApiError> {
-    let (limit, offset) = page(query)?;
-    let (rows, total) = state.db.list_surveys(limit, offset).await?;
-    let items = rows.iter().map(summary).collect::<Result<Vec<_>, _>>()?;
-    Ok(Json(SurveyList {
-        items,
-        total,
-        limit,
-        offset,
-    }))
+    let page = list(
+        query,
+        |limit, offset| state.db.list_surveys(limit, offset),
+        summary,
+    )
+    .await?;
+    Ok(Json(page.into()))
 }
 
 fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
@@ -502,11 +497,7 @@ pub async fn delete_survey(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    if state.db.delete_survey(&id).await? {
-        Ok(StatusCode::NO_CONTENT)
-    } else {
-        Err(not_found(&id))
-    }
+    deleted(state.db.delete_survey(&id).await?, "survey", &id)
 }
 
 /// Serve one rendered file of a stored plan as a download.
@@ -518,11 +509,7 @@ async fn download(
     download_name: &str,
     missing: impl FnOnce() -> String,
 ) -> Result<Response, ApiError> {
-    let row = state
-        .db
-        .get_survey(id)
-        .await?
-        .ok_or_else(|| not_found(id))?;
+    let row = found(state.db.get_survey(id).await?, "survey", id)?;
     // Rendering a big mission is work: off the runtime threads.
     let name = file_name.to_string();
     let file = off_runtime(move || parse_plan(&row.plan).map(|plan| plan.file(&name)))
@@ -661,4 +648,13 @@ pub async fn cells_file(
         format!("survey {id} has no cells file")
     })
     .await
+}
+
+/// The survey endpoints.
+pub fn routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(create_survey, list_surveys))
+        .routes(routes!(get_survey, delete_survey))
+        .routes(routes!(uav_file))
+        .routes(routes!(cells_file))
 }

@@ -6,6 +6,10 @@ use axum::Json;
 use planner_core::costmap::{Vehicle, VehiclePreset};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::state::AppState;
 
 /// Every preset, the default (`u-go`) first.
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -26,4 +30,9 @@ pub async fn list_vehicles() -> Json<VehicleList> {
     Json(VehicleList {
         items: VehiclePreset::ALL.iter().map(|p| p.vehicle()).collect(),
     })
+}
+
+/// `GET /api/v1/vehicles`.
+pub fn routes() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(list_vehicles))
 }

@@ -19,159 +19,22 @@
 //! server.
 
 use std::collections::HashMap;
-use std::io::Cursor;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use planner_core::costmap::{
-    Costmap, CostmapError, CostmapOptions, CostmapStats, Layer, ResolvedParams, Stage, Vehicle,
-    build_costmap, legend_svg, preview_png,
-};
-use planner_core::terrain::{Crs, Dem};
-use serde::{Deserialize, Serialize};
-use tokio::sync::{Notify, Semaphore, watch};
-use utoipa::ToSchema;
+use tokio::sync::{Semaphore, watch};
 
-use crate::app::AppState;
-use crate::db::{CostmapFileRow, CostmapRow, Db};
-use crate::error::ApiError;
-use crate::memory::costmap_build_bytes;
+use super::build::{Outcome, Run, build};
+use super::live::{JobHandle, Live};
+use super::record::{JobStatus, LEASE_MS, MAX_ATTEMPTS};
+use crate::clock::now_millis;
+use crate::db::Db;
+use crate::state::dem_store::DemLoader;
 
-/// How long a claim on a job lasts unless renewed, ms.
-pub const LEASE_MS: i64 = 15_000;
 /// How often leases are renewed and orphaned jobs looked for.
 const MAINTENANCE_EVERY: Duration = Duration::from_secs(3);
-/// Runs a job may start; one interrupted more often (its server killed
-/// each time) is failed rather than run again.
-pub const MAX_ATTEMPTS: i64 = 3;
-/// Longest side of the stored preview image, pixels.
-pub const PREVIEW_MAX_SIDE: usize = 1024;
 /// How long shutdown waits for the runs to stop.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
-
-pub const COSTMAP_TIF: &str = "costmap.tif";
-pub const PREVIEW_PNG: &str = "preview.png";
-pub const LEGEND_SVG: &str = "legend.svg";
-
-/// The stored name of a layer's file.
-pub fn layer_file(layer: Layer) -> String {
-    format!("layers/{}.tif", layer.name())
-}
-
-pub fn now_millis() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
-}
-
-/// Where a job stands.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum JobStatus {
-    /// Waiting for a free slot (`--costmap-jobs`).
-    Queued,
-    Running,
-    /// Finished: the files are ready.
-    Done,
-    /// Stopped by an error (see `error`).
-    Failed,
-}
-
-impl JobStatus {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JobStatus::Queued => "queued",
-            JobStatus::Running => "running",
-            JobStatus::Done => "done",
-            JobStatus::Failed => "failed",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<JobStatus> {
-        [
-            JobStatus::Queued,
-            JobStatus::Running,
-            JobStatus::Done,
-            JobStatus::Failed,
-        ]
-        .into_iter()
-        .find(|j| j.as_str() == s)
-    }
-
-    pub fn is_finished(self) -> bool {
-        matches!(self, JobStatus::Done | JobStatus::Failed)
-    }
-}
-
-/// A stage's name as stored (its serde name).
-pub fn stage_name(stage: Stage) -> String {
-    serde_json::to_value(stage)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default()
-}
-
-pub fn parse_stage(name: &str) -> Option<Stage> {
-    serde_json::from_value(serde_json::Value::String(name.to_string())).ok()
-}
-
-/// A job's progress as it happens.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Live {
-    pub status: JobStatus,
-    /// [0, 1].
-    pub progress: f64,
-    pub stage: Option<Stage>,
-}
-
-/// What a finished job found, stored as JSON with status done.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct CostmapResult {
-    pub vehicle: Vehicle,
-    pub params: ResolvedParams,
-    pub stats: CostmapStats,
-    pub warnings: Vec<String>,
-    pub width: usize,
-    pub height: usize,
-    pub crs: Crs,
-    /// The layers kept, each with a file.
-    pub layers: Vec<Layer>,
-    /// [min x, min y, max x, max y] of the working grid in `crs`, and in
-    /// WGS84 lon/lat (absent from costmaps built before they were kept).
-    #[serde(default)]
-    pub bounds: Option<[f64; 4]>,
-    #[serde(default)]
-    pub bounds_wgs84: Option<[f64; 4]>,
-}
-
-/// What a job was asked for, stored as JSON.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct StoredRequest {
-    /// The vehicle as given (preset and overrides); `null` for the default.
-    pub vehicle: serde_json::Value,
-    pub options: CostmapOptions,
-}
-
-/// One job this process holds.
-struct JobHandle {
-    live: watch::Sender<Live>,
-    /// Set by `DELETE` (and shutdown): the run stops at its next report.
-    cancel: AtomicBool,
-    /// Wakes a queued job that was cancelled.
-    cancelled: Notify,
-}
-
-impl JobHandle {
-    fn is_cancelled(&self) -> bool {
-        self.cancel.load(Ordering::Relaxed)
-    }
-
-    fn cancel(&self) {
-        self.cancel.store(true, Ordering::Relaxed);
-        self.cancelled.notify_one();
-    }
-}
 
 /// The costmap jobs of this server process.
 pub struct CostmapJobs {
@@ -182,6 +45,8 @@ pub struct CostmapJobs {
     shutdown: watch::Sender<bool>,
     /// Job tasks alive.
     active: watch::Sender<usize>,
+    /// The database of the jobs and the DEMs they are built from.
+    dems: DemLoader,
 }
 
 /// Counts a job task as alive while it exists.
@@ -194,15 +59,21 @@ impl Drop for ActiveGuard<'_> {
 }
 
 impl CostmapJobs {
-    /// A runner of at most `max_jobs` (≥ 1) builds at once.
-    pub fn new(max_jobs: usize) -> CostmapJobs {
+    /// A runner of at most `max_jobs` (≥ 1) builds at once, of the jobs
+    /// stored in `dems.db`.
+    pub fn new(max_jobs: usize, dems: DemLoader) -> CostmapJobs {
         CostmapJobs {
             instance: uuid::Uuid::new_v4().to_string(),
             slots: Arc::new(Semaphore::new(max_jobs.max(1))),
             jobs: Mutex::new(HashMap::new()),
             shutdown: watch::Sender::new(false),
             active: watch::Sender::new(0),
+            dems,
         }
+    }
+
+    fn db(&self) -> &Db {
+        &self.dems.db
     }
 
     /// This process' name as a job holder.
@@ -257,7 +128,7 @@ impl CostmapJobs {
     /// After [`CostmapJobs::begin_shutdown`]: wait (briefly) for the runs
     /// to stop, then give back every job still held, queued for the next
     /// server.
-    pub async fn finish(&self, db: &Db) {
+    pub async fn finish(&self) {
         let mut active = self.active.subscribe();
         if tokio::time::timeout(SHUTDOWN_GRACE, active.wait_for(|n| *n == 0))
             .await
@@ -265,7 +136,8 @@ impl CostmapJobs {
         {
             tracing::warn!("costmap runs still busy at shutdown: their jobs are given back");
         }
-        match db
+        match self
+            .db()
             .release_costmaps(&self.instance, None, now_millis())
             .await
         {
@@ -277,16 +149,8 @@ impl CostmapJobs {
 
     /// Hold job `id` (stored, queued, owned by this process) and run it
     /// when a slot is free.
-    pub fn enqueue(&self, state: &AppState, id: &str) {
-        let handle = Arc::new(JobHandle {
-            live: watch::Sender::new(Live {
-                status: JobStatus::Queued,
-                progress: 0.0,
-                stage: None,
-            }),
-            cancel: AtomicBool::new(false),
-            cancelled: Notify::new(),
-        });
+    pub fn enqueue(self: &Arc<Self>, id: &str) {
+        let handle = Arc::new(JobHandle::queued());
         if self.is_shutting_down() {
             handle.cancel();
         }
@@ -303,12 +167,11 @@ impl CostmapJobs {
             std::task::Poll::Ready(permit) => Slot::Held(permit.ok()),
             std::task::Poll::Pending => Slot::Waiting(wait),
         };
-        let state = state.clone();
+        let jobs = self.clone();
         let id = id.to_string();
         tokio::spawn(async move {
-            let jobs = state.costmaps.clone();
             let _active = ActiveGuard(&jobs.active);
-            run_job(&state, &id, &handle, slot).await;
+            jobs.run_job(&id, &handle, slot).await;
             let mut map = jobs.lock();
             if map.get(&id).is_some_and(|h| Arc::ptr_eq(h, &handle)) {
                 map.remove(&id);
@@ -318,8 +181,8 @@ impl CostmapJobs {
 
     /// Take over the unfinished jobs nobody holds (leases ended before
     /// `expired_before`) and queue them here.
-    pub async fn adopt_orphans(&self, state: &AppState, expired_before: i64) -> usize {
-        let ids = match state.db.orphaned_costmaps(expired_before).await {
+    pub async fn adopt_orphans(self: &Arc<Self>, expired_before: i64) -> usize {
+        let ids = match self.db().orphaned_costmaps(expired_before).await {
             Ok(ids) => ids,
             Err(e) => {
                 tracing::warn!(error = %e, "cannot look for orphaned costmap jobs");
@@ -337,14 +200,14 @@ impl CostmapJobs {
                 continue;
             }
             let now = now_millis();
-            match state
-                .db
+            match self
+                .db()
                 .adopt_costmap(&id, &self.instance, expired_before, now, now + LEASE_MS)
                 .await
             {
                 Ok(true) => {
                     tracing::info!(costmap = %id, "costmap job taken over and queued again");
-                    self.enqueue(state, &id);
+                    self.enqueue(&id);
                     adopted += 1;
                 }
                 Ok(false) => {}
@@ -361,12 +224,12 @@ impl CostmapJobs {
     /// unfinished job is taken over at once; on PostgreSQL other servers
     /// may share it, so only jobs whose holder's lease ran out (the rest
     /// are taken over by the maintenance loop when theirs does).
-    pub async fn recover(&self, state: &AppState) -> usize {
-        let expired_before = match state.db {
+    pub async fn recover(self: &Arc<Self>) -> usize {
+        let expired_before = match self.db() {
             Db::Sqlite(_) => i64::MAX,
             Db::Postgres(_) => now_millis(),
         };
-        self.adopt_orphans(state, expired_before).await
+        self.adopt_orphans(expired_before).await
     }
 
     /// The jobs this process has in hand, queued or running.
@@ -378,12 +241,13 @@ impl CostmapJobs {
     /// owns in the database but no longer has in hand (its run ended
     /// without recording an outcome) is left to run out its lease and be
     /// taken over.
-    async fn renew_leases(&self, db: &Db) {
+    async fn renew_leases(&self) {
         let held = self.held();
         if held.is_empty() {
             return;
         }
-        if let Err(e) = db
+        if let Err(e) = self
+            .db()
             .renew_costmap_leases(&self.instance, &held, now_millis() + LEASE_MS)
             .await
         {
@@ -393,18 +257,17 @@ impl CostmapJobs {
 
     /// Renew this process' leases and take over orphaned jobs, every few
     /// seconds until shutdown.
-    pub fn start_maintenance(&self, state: &AppState) {
-        let state = state.clone();
+    pub fn start_maintenance(self: &Arc<Self>) {
+        let jobs = self.clone();
         let stop = self.shutdown_signal();
         tokio::spawn(async move {
-            let jobs = state.costmaps.clone();
             let work = async {
                 let mut tick = tokio::time::interval(MAINTENANCE_EVERY);
                 tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
                 loop {
                     tick.tick().await;
-                    jobs.renew_leases(&state.db).await;
-                    jobs.adopt_orphans(&state, now_millis()).await;
+                    jobs.renew_leases().await;
+                    jobs.adopt_orphans(now_millis()).await;
                 }
             };
             tokio::select! {
@@ -413,23 +276,6 @@ impl CostmapJobs {
             }
         });
     }
-}
-
-/// How a run ended.
-enum Outcome {
-    Built(Box<Built>),
-    /// Cancelled: deleted, taken over, or shutdown.
-    Cancelled,
-    Failed(String),
-}
-
-/// A finished costmap, encoded for storage.
-struct Built {
-    result: String,
-    files: Vec<CostmapFileRow>,
-    /// The build's room in the memory budget, held until the files are
-    /// stored.
-    room: Option<crate::memory::Reservation>,
 }
 
 /// A job's request for a slot, made when it was enqueued.
@@ -448,409 +294,159 @@ enum Slot {
     Waiting(SlotWait),
 }
 
-async fn run_job(state: &AppState, id: &str, handle: &Arc<JobHandle>, slot: Slot) {
-    let jobs = &state.costmaps;
-    let owner = jobs.instance.clone();
-    let permit = match slot {
-        Slot::Held(permit) => permit,
-        Slot::Waiting(wait) => tokio::select! {
-            p = wait => p.ok(),
-            () = jobs.shutdown_signal() => None,
-            () = handle.cancelled.notified() => None,
-        },
-    };
-    let Some(_permit) = permit.filter(|_| !handle.is_cancelled()) else {
-        if jobs.is_shutting_down() {
-            give_back(state, id).await;
-        }
-        return;
-    };
-    let now = now_millis();
-    let row = match state
-        .db
-        .claim_costmap(id, &owner, now, now + LEASE_MS)
-        .await
-    {
-        Ok(Some(row)) => row,
-        // Deleted, or no longer ours.
-        Ok(None) => return,
-        Err(e) => {
-            tracing::error!(costmap = %id, error = %e, "cannot start a costmap job");
-            release_after_error(state, id, &format!("the job could not be started: {e}")).await;
-            return;
-        }
-    };
-    handle.live.send_replace(Live {
-        status: JobStatus::Running,
-        progress: 0.0,
-        stage: None,
-    });
-    tracing::info!(costmap = %id, dem = %row.dem_id, attempt = row.attempts, "costmap job started");
-    let started = std::time::Instant::now();
-    let outcome = if row.attempts > MAX_ATTEMPTS {
-        Outcome::Failed(format!(
-            "the job was interrupted {} times (its server stopped while it ran) and is not \
-             tried again",
-            row.attempts - 1
-        ))
-    } else {
-        build(state, &row, handle).await
-    };
-    let now = now_millis();
-    match outcome {
-        Outcome::Built(built) => {
-            match state
-                .db
-                .finish_costmap(id, &owner, &built.result, &built.files, now)
-                .await
-            {
-                Ok(true) => tracing::info!(
-                    costmap = %id,
-                    seconds = started.elapsed().as_secs_f64(),
-                    "costmap job done"
-                ),
-                Ok(false) => {
-                    tracing::info!(costmap = %id, "costmap finished after it was deleted or taken over: discarded")
-                }
-                Err(e) => {
-                    tracing::error!(costmap = %id, error = %e, "cannot store a costmap");
-                    fail(state, id, &format!("the result could not be stored: {e}")).await;
-                }
-            }
-        }
-        Outcome::Cancelled => {
+impl CostmapJobs {
+    /// Run job `id` once it has a slot, and record its outcome.
+    async fn run_job(&self, id: &str, handle: &Arc<JobHandle>, slot: Slot) {
+        let jobs = self;
+        let owner = jobs.instance.clone();
+        let permit = match slot {
+            Slot::Held(permit) => permit,
+            Slot::Waiting(wait) => tokio::select! {
+                p = wait => p.ok(),
+                () = jobs.shutdown_signal() => None,
+                () = handle.cancelled.notified() => None,
+            },
+        };
+        let Some(_permit) = permit.filter(|_| !handle.is_cancelled()) else {
             if jobs.is_shutting_down() {
-                give_back(state, id).await;
-            } else {
-                tracing::info!(costmap = %id, "costmap job cancelled");
+                self.give_back(id).await;
             }
-        }
-        Outcome::Failed(message) => {
-            tracing::warn!(costmap = %id, error = %message, "costmap job failed");
-            fail(state, id, &message).await;
-        }
-    }
-}
-
-async fn fail(state: &AppState, id: &str, message: &str) {
-    if let Err(e) = state
-        .db
-        .fail_costmap(id, &state.costmaps.instance, message, now_millis())
-        .await
-    {
-        tracing::error!(costmap = %id, error = %e, "cannot record a costmap job's failure");
-        release_after_error(
-            state,
-            id,
-            &format!("{message} (and the failure could not be recorded: {e})"),
-        )
-        .await;
-    }
-}
-
-/// After a storage error left a run without a recorded outcome: let the
-/// job go, queued with no owner, so that the maintenance loop (here or on
-/// another server) takes it over and runs it again within a few seconds;
-/// once [`MAX_ATTEMPTS`] runs have started it is failed with `error`
-/// instead. Should this fail too (the database is unreachable), the job
-/// is no longer in hand here, so its lease is not renewed and it is taken
-/// over once the lease runs out.
-async fn release_after_error(state: &AppState, id: &str, error: &str) {
-    let give_up = format!("{error}; given up after {MAX_ATTEMPTS} attempts");
-    match state
-        .db
-        .release_costmap_after_error(
-            id,
-            &state.costmaps.instance,
-            now_millis(),
-            MAX_ATTEMPTS,
-            &give_up,
-        )
-        .await
-    {
-        Ok(Some(status)) if status == JobStatus::Failed.as_str() => {
-            tracing::warn!(costmap = %id, "costmap job failed: {give_up}")
-        }
-        Ok(Some(_)) => {
-            tracing::info!(costmap = %id, "costmap job let go after a storage error: it is run again")
-        }
-        Ok(None) => {}
-        Err(e) => tracing::warn!(
-            costmap = %id,
-            error = %e,
-            "cannot let go of a costmap job: it is taken over once its lease runs out"
-        ),
-    }
-}
-
-/// Give a job back, queued, for whichever server runs next (at shutdown).
-async fn give_back(state: &AppState, id: &str) {
-    if let Err(e) = state
-        .db
-        .release_costmaps(&state.costmaps.instance, Some(id), now_millis())
-        .await
-    {
-        tracing::warn!(costmap = %id, error = %e, "cannot give back a costmap job");
-    }
-}
-
-/// The DEM a job needs, or why the job cannot run.
-async fn job_dem(state: &AppState, id: &str, what: &str) -> Result<Arc<Dem>, String> {
-    state
-        .load_dem(id)
-        .await
-        .map_err(|e| dem_load_error(e, id, what))
-}
-
-/// Why the job cannot run when its DEM (`what`, DEM `id`) cannot be had.
-fn dem_load_error(e: ApiError, id: &str, what: &str) -> String {
-    match e {
-        ApiError::NotFound(_) => format!(
-            "the {what} (DEM {id:?}) was deleted before the costmap was built: upload it again \
-             and ask for a new costmap"
-        ),
-        ApiError::Internal(m) => format!("the {what} (DEM {id:?}) cannot be read: {m}"),
-        // Over the memory budget.
-        ApiError::Validation(issues) => format!(
-            "the costmap cannot be built on this server: {}",
-            issues
-                .iter()
-                .map(|i| i.message.clone())
-                .collect::<Vec<_>>()
-                .join("; ")
-        ),
-        other => format!("the {what} (DEM {id:?}) cannot be loaded: {other}"),
-    }
-}
-
-async fn build(state: &AppState, row: &CostmapRow, handle: &Arc<JobHandle>) -> Outcome {
-    let request: StoredRequest = match serde_json::from_str(&row.request) {
-        Ok(r) => r,
-        Err(e) => return Outcome::Failed(format!("the stored request is unreadable: {e}")),
-    };
-    let vehicle: Vehicle = match serde_json::from_str(&row.vehicle) {
-        Ok(v) => v,
-        Err(e) => return Outcome::Failed(format!("the stored vehicle is unreadable: {e}")),
-    };
-    let options = request.options;
-    let landcover = match &options.landcover {
-        None => None,
-        Some(l) => match job_dem(state, &l.source, "land-cover raster").await {
-            Ok(d) => Some(d),
-            Err(m) => return Outcome::Failed(m),
-        },
-    };
-    if handle.is_cancelled() {
-        return Outcome::Cancelled;
-    }
-    // The DEM with room in the memory budget for the build (and for
-    // reading the DEM, when it is not cached), held until the files are
-    // stored; a job waits for room as long as it takes.
-    let layers = options.layers.len() as u64 + u64::from(landcover.is_some());
-    let loading = state.load_dem_within(
-        &row.dem_id,
-        "a costmap build",
-        |w, h| costmap_build_bytes(w.saturating_mul(h), layers),
-        None,
-    );
-    let (dem, room) = tokio::select! {
-        loaded = loading => match loaded {
-            Ok(l) => l,
-            Err(e) => return Outcome::Failed(dem_load_error(e, &row.dem_id, "DEM")),
-        },
-        () = handle.cancelled.notified() => return Outcome::Cancelled,
-        () = state.costmaps.shutdown_signal() => return Outcome::Cancelled,
-    };
-    if handle.is_cancelled() {
-        return Outcome::Cancelled;
-    }
-
-    // Persist stage changes (not every report) while the build runs.
-    let monitor = {
-        let db = state.db.clone();
-        let id = row.id.clone();
-        let owner = state.costmaps.instance.clone();
-        let mut rx = handle.live.subscribe();
-        let handle = handle.clone();
-        tokio::spawn(async move {
-            let mut stored: Option<Stage> = None;
-            while rx.changed().await.is_ok() {
-                let live = *rx.borrow_and_update();
-                if live.stage.is_none() || live.stage == stored {
-                    continue;
-                }
-                stored = live.stage;
-                let stage = live.stage.map(stage_name);
-                match db
-                    .set_costmap_progress(
-                        &id,
-                        &owner,
-                        live.progress,
-                        stage.as_deref(),
-                        now_millis(),
-                    )
+            return;
+        };
+        let now = now_millis();
+        let row = match self
+            .db()
+            .claim_costmap(id, &owner, now, now + LEASE_MS)
+            .await
+        {
+            Ok(Some(row)) => row,
+            // Deleted, or no longer ours.
+            Ok(None) => return,
+            Err(e) => {
+                tracing::error!(costmap = %id, error = %e, "cannot start a costmap job");
+                self.release_after_error(id, &format!("the job could not be started: {e}"))
+                    .await;
+                return;
+            }
+        };
+        handle.live.send_replace(Live {
+            status: JobStatus::Running,
+            progress: 0.0,
+            stage: None,
+        });
+        tracing::info!(costmap = %id, dem = %row.dem_id, attempt = row.attempts, "costmap job started");
+        let started = std::time::Instant::now();
+        let outcome = if row.attempts > MAX_ATTEMPTS {
+            Outcome::Failed(format!(
+                "the job was interrupted {} times (its server stopped while it ran) and is not \
+             tried again",
+                row.attempts - 1
+            ))
+        } else {
+            let run = Run {
+                dems: &self.dems,
+                owner: &owner,
+                shutdown: self.shutdown_signal(),
+            };
+            build(run, &row, handle).await
+        };
+        let now = now_millis();
+        match outcome {
+            Outcome::Built(built) => {
+                match self
+                    .db()
+                    .finish_costmap(id, &owner, &built.result, &built.files, now)
                     .await
                 {
-                    Ok(true) => {}
-                    // Deleted, or taken over by another server: stop.
-                    Ok(false) => handle.cancel(),
+                    Ok(true) => tracing::info!(
+                        costmap = %id,
+                        seconds = started.elapsed().as_secs_f64(),
+                        "costmap job done"
+                    ),
+                    Ok(false) => {
+                        tracing::info!(costmap = %id, "costmap finished after it was deleted or taken over: discarded")
+                    }
                     Err(e) => {
-                        tracing::warn!(costmap = %id, error = %e, "cannot record a costmap job's stage")
+                        tracing::error!(costmap = %id, error = %e, "cannot store a costmap");
+                        self.fail(id, &format!("the result could not be stored: {e}"))
+                            .await;
                     }
                 }
             }
-        })
-    };
-
-    let reporter = handle.clone();
-    let task = tokio::task::spawn_blocking(move || {
-        let progress = move |stage: Stage, done: f64| -> bool {
-            if reporter.is_cancelled() {
-                return false;
-            }
-            let done = if done.is_finite() {
-                done.clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            reporter.live.send_if_modified(|l| {
-                let changed = l.stage != Some(stage) || (done - l.progress).abs() >= 0.005;
-                if changed {
-                    l.stage = Some(stage);
-                    l.progress = done;
+            Outcome::Cancelled => {
+                if jobs.is_shutting_down() {
+                    self.give_back(id).await;
+                } else {
+                    tracing::info!(costmap = %id, "costmap job cancelled");
                 }
-                changed
-            });
-            true
-        };
-        let costmap = build_costmap(&dem, &vehicle, &options, landcover.as_deref(), &progress);
-        match costmap {
-            Ok(c) => encode(&c).map(|b| Outcome::Built(Box::new(b))),
-            Err(CostmapError::Cancelled) => Ok(Outcome::Cancelled),
-            Err(CostmapError::Invalid(issues)) => Ok(Outcome::Failed(format!(
-                "the costmap cannot be built with these parameters: {}",
-                issues
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            ))),
-        }
-    });
-    let outcome = match task.await {
-        Ok(Ok(Outcome::Built(mut built))) => {
-            built.room = Some(room);
-            Outcome::Built(built)
-        }
-        Ok(Ok(outcome)) => outcome,
-        Ok(Err(e)) => Outcome::Failed(format!("the costmap files could not be written: {e}")),
-        Err(e) if e.is_panic() => {
-            let payload = e.into_panic();
-            let what = payload
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "no message".to_string());
-            Outcome::Failed(format!(
-                "internal error: the costmap builder panicked ({what}); this is a bug, please \
-                 report it"
-            ))
-        }
-        Err(_) => Outcome::Cancelled,
-    };
-    monitor.abort();
-    outcome
-}
-
-/// The files and the result document of a finished costmap.
-fn encode(costmap: &Costmap) -> std::io::Result<Built> {
-    let mut files = Vec::new();
-    let mut tif = Cursor::new(Vec::new());
-    costmap.write_geotiff(&mut tif)?;
-    files.push(CostmapFileRow {
-        name: COSTMAP_TIF.to_string(),
-        content_type: "image/tiff".to_string(),
-        data: tif.into_inner(),
-    });
-    files.push(CostmapFileRow {
-        name: PREVIEW_PNG.to_string(),
-        content_type: "image/png".to_string(),
-        data: preview_png(costmap, PREVIEW_MAX_SIDE),
-    });
-    files.push(CostmapFileRow {
-        name: LEGEND_SVG.to_string(),
-        content_type: "image/svg+xml".to_string(),
-        data: legend_svg(costmap).into_bytes(),
-    });
-    let mut layers = Vec::new();
-    for (layer, _) in &costmap.layers {
-        let mut tif = Cursor::new(Vec::new());
-        if costmap.write_layer_geotiff(*layer, &mut tif)? {
-            layers.push(*layer);
-            files.push(CostmapFileRow {
-                name: layer_file(*layer),
-                content_type: "image/tiff".to_string(),
-                data: tif.into_inner(),
-            });
+            }
+            Outcome::Failed(message) => {
+                tracing::warn!(costmap = %id, error = %message, "costmap job failed");
+                self.fail(id, &message).await;
+            }
         }
     }
-    let (bounds, bounds_wgs84) = planner_core::terrain::raster_bounds(
-        &costmap.transform,
-        costmap.width,
-        costmap.height,
-        &costmap.crs,
-    )
-    .map_err(std::io::Error::other)?;
-    let result = CostmapResult {
-        bounds: Some(bounds),
-        bounds_wgs84: Some(bounds_wgs84),
-        vehicle: costmap.vehicle.clone(),
-        params: costmap.params.clone(),
-        stats: costmap.stats.clone(),
-        warnings: costmap.warnings.clone(),
-        width: costmap.width,
-        height: costmap.height,
-        crs: costmap.crs.clone(),
-        layers,
-    };
-    let result = serde_json::to_string(&result).map_err(std::io::Error::other)?;
-    Ok(Built {
-        result,
-        files,
-        room: None,
-    })
+
+    async fn fail(&self, id: &str, message: &str) {
+        if let Err(e) = self
+            .db()
+            .fail_costmap(id, &self.instance, message, now_millis())
+            .await
+        {
+            tracing::error!(costmap = %id, error = %e, "cannot record a costmap job's failure");
+            self.release_after_error(
+                id,
+                &format!("{message} (and the failure could not be recorded: {e})"),
+            )
+            .await;
+        }
+    }
+
+    /// After a storage error left a run without a recorded outcome: let the
+    /// job go, queued with no owner, so that the maintenance loop (here or on
+    /// another server) takes it over and runs it again within a few seconds;
+    /// once [`MAX_ATTEMPTS`] runs have started it is failed with `error`
+    /// instead. Should this fail too (the database is unreachable), the job
+    /// is no longer in hand here, so its lease is not renewed and it is taken
+    /// over once the lease runs out.
+    async fn release_after_error(&self, id: &str, error: &str) {
+        let give_up = format!("{error}; given up after {MAX_ATTEMPTS} attempts");
+        match self
+            .db()
+            .release_costmap_after_error(id, &self.instance, now_millis(), MAX_ATTEMPTS, &give_up)
+            .await
+        {
+            Ok(Some(status)) if status == JobStatus::Failed.as_str() => {
+                tracing::warn!(costmap = %id, "costmap job failed: {give_up}")
+            }
+            Ok(Some(_)) => {
+                tracing::info!(costmap = %id, "costmap job let go after a storage error: it is run again")
+            }
+            Ok(None) => {}
+            Err(e) => tracing::warn!(
+                costmap = %id,
+                error = %e,
+                "cannot let go of a costmap job: it is taken over once its lease runs out"
+            ),
+        }
+    }
+
+    /// Give a job back, queued, for whichever server runs next (at shutdown).
+    async fn give_back(&self, id: &str) {
+        if let Err(e) = self
+            .db()
+            .release_costmaps(&self.instance, Some(id), now_millis())
+            .await
+        {
+            tracing::warn!(costmap = %id, error = %e, "cannot give back a costmap job");
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn status_and_stage_names() {
-        for s in [
-            JobStatus::Queued,
-            JobStatus::Running,
-            JobStatus::Done,
-            JobStatus::Failed,
-        ] {
-            assert_eq!(JobStatus::parse(s.as_str()), Some(s));
-            assert_eq!(
-                serde_json::to_value(s).unwrap(),
-                serde_json::json!(s.as_str())
-            );
-        }
-        assert_eq!(JobStatus::parse("lost"), None);
-        assert_eq!(stage_name(Stage::Normals), "normals");
-        assert_eq!(parse_stage("inflate"), Some(Stage::Inflate));
-        assert_eq!(parse_stage("nope"), None);
-    }
-
-    #[test]
-    fn layer_files() {
-        assert_eq!(layer_file(Layer::NegativeStep), "layers/negative_step.tif");
-    }
-
-    // The storage errors below are caused in the database itself, by
     // SQLite triggers that refuse one kind of update (`RAISE(ABORT)`, an
     // ordinary database error to the server), so the production code runs
     // unchanged, with no test hook; no maintenance loop runs, so every
@@ -858,15 +454,19 @@ mod tests {
 
     use std::path::PathBuf;
 
-    use planner_core::costmap::VehicleSpec;
+    use planner_core::costmap::{CostmapOptions, VehicleSpec};
     use planner_core::terrain::DemLimits;
 
-    use crate::app::DemStore;
-    use crate::db::DemMetaRow;
+    use crate::db::{CostmapRow, DemMetaRow};
+    use crate::jobs::record::{COSTMAP_TIF, StoredRequest};
+    use crate::memory::MemoryBudget;
+    use crate::state::{DemStore, Planners};
 
-    /// A server's state on a SQLite database of its own, removed on drop.
+    /// A server's costmap jobs on a SQLite database of its own, removed on
+    /// drop.
     struct TestServer {
-        state: AppState,
+        db: Db,
+        jobs: Arc<CostmapJobs>,
         dir: PathBuf,
     }
 
@@ -886,25 +486,22 @@ mod tests {
                 max_pixels: u64::MAX,
                 max_side: u32::MAX,
             };
-            let state = AppState {
-                db,
-                limits: Default::default(),
-                planner: Arc::new(crate::app::Planners::default()),
-                dems: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
-                costmaps: Arc::new(CostmapJobs::new(1)),
-                routes: Arc::new(crate::app::RouteStore::default()),
-                web: Arc::new(crate::web_ui::WebUi::new(&dir)),
-                memory: Arc::new(crate::memory::MemoryBudget::new(1024)),
+            let dems = DemLoader {
+                db: db.clone(),
+                store: Arc::new(DemStore::new(limits, usize::MAX, 64 << 20)),
+                memory: Arc::new(MemoryBudget::new(1024)),
+                planner: Arc::new(Planners::default()),
             };
-            TestServer { state, dir }
+            let jobs = Arc::new(CostmapJobs::new(1, dems));
+            TestServer { db, jobs, dir }
         }
 
-        fn jobs(&self) -> &CostmapJobs {
-            &self.state.costmaps
+        fn jobs(&self) -> &Arc<CostmapJobs> {
+            &self.jobs
         }
 
         fn pool(&self) -> &sqlx::SqlitePool {
-            match &self.state.db {
+            match &self.db {
                 Db::Sqlite(pool) => pool,
                 Db::Postgres(_) => unreachable!("the tests run on SQLite"),
             }
@@ -939,11 +536,7 @@ mod tests {
                 size_bytes: asc.len() as i64,
                 read_bytes: None,
             };
-            self.state
-                .db
-                .insert_dem(&meta, asc.as_bytes())
-                .await
-                .unwrap();
+            self.db.insert_dem(&meta, asc.as_bytes()).await.unwrap();
             id
         }
 
@@ -971,8 +564,7 @@ mod tests {
                 error: None,
                 attempts: 0,
             };
-            self.state
-                .db
+            self.db
                 .insert_costmap(&row, self.jobs().instance(), now + LEASE_MS)
                 .await
                 .unwrap();
@@ -989,7 +581,7 @@ mod tests {
         }
 
         async fn row(&self, id: &str) -> CostmapRow {
-            self.state.db.get_costmap(id).await.unwrap().unwrap()
+            self.db.get_costmap(id).await.unwrap().unwrap()
         }
 
         /// The job's holder and lease.
@@ -1004,7 +596,7 @@ mod tests {
         /// Take over the orphaned jobs (as the maintenance loop does) and
         /// let them run.
         async fn adopt(&self, expired_before: i64) -> usize {
-            let n = self.jobs().adopt_orphans(&self.state, expired_before).await;
+            let n = self.jobs().adopt_orphans(expired_before).await;
             self.settle().await;
             n
         }
@@ -1020,7 +612,7 @@ mod tests {
              WHEN NEW.status = 'running' BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
         )
         .await;
-        t.jobs().enqueue(&t.state, &id);
+        t.jobs().enqueue(&id);
         t.settle().await;
         // Not started (no attempt counted), no longer held: any server's
         // maintenance takes it over at once, and its events follow the
@@ -1030,7 +622,7 @@ mod tests {
         assert_eq!(t.holder(&id).await, (None, 0));
         assert!(t.jobs().live(&id).is_none());
         assert_eq!(
-            t.state.db.orphaned_costmaps(now_millis()).await.unwrap(),
+            t.db.orphaned_costmaps(now_millis()).await.unwrap(),
             std::slice::from_ref(&id)
         );
 
@@ -1044,9 +636,7 @@ mod tests {
         assert_eq!(row.status, "done", "{:?}", row.error);
         assert_eq!(row.attempts, 1);
         assert!(
-            t.state
-                .db
-                .get_costmap_file(&id, COSTMAP_TIF)
+            t.db.get_costmap_file(&id, COSTMAP_TIF)
                 .await
                 .unwrap()
                 .is_some()
@@ -1065,7 +655,7 @@ mod tests {
              BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
         )
         .await;
-        t.jobs().enqueue(&t.state, &id);
+        t.jobs().enqueue(&id);
         t.settle().await;
         for attempt in 1..MAX_ATTEMPTS {
             let row = t.row(&id).await;
@@ -1086,19 +676,12 @@ mod tests {
             "{error}"
         );
         assert_eq!(t.holder(&id).await, (None, 0));
-        assert!(
-            t.state
-                .db
-                .orphaned_costmaps(i64::MAX)
-                .await
-                .unwrap()
-                .is_empty()
-        );
+        assert!(t.db.orphaned_costmaps(i64::MAX).await.unwrap().is_empty());
 
         // Once the database records failures again, one is stored at once.
         t.sql("DROP TRIGGER refuse_failure").await;
         let id = t.job("no-such-dem").await;
-        t.jobs().enqueue(&t.state, &id);
+        t.jobs().enqueue(&id);
         t.settle().await;
         let row = t.row(&id).await;
         assert_eq!((row.status.as_str(), row.attempts), ("failed", 1));
@@ -1115,7 +698,7 @@ mod tests {
         let stray = t.job(&dem).await;
         let queued = t.job(&dem).await;
         let busy = t.jobs().slots.clone().acquire_owned().await.unwrap();
-        t.jobs().enqueue(&t.state, &queued);
+        t.jobs().enqueue(&queued);
         let lease = now_millis() + 100;
         sqlx::query("UPDATE costmaps SET lease_until = $1")
             .bind(lease)
@@ -1123,7 +706,7 @@ mod tests {
             .await
             .unwrap();
 
-        t.jobs().renew_leases(&t.state.db).await;
+        t.jobs().renew_leases().await;
         let (owner, stray_lease) = t.holder(&stray).await;
         assert_eq!(owner.as_deref(), Some(t.jobs().instance()));
         assert_eq!(stray_lease, lease, "a job not in hand is not renewed");
@@ -1134,10 +717,10 @@ mod tests {
         // the queued one is still in hand, so it is not taken over twice.
         let later = lease + 1;
         assert_eq!(
-            t.state.db.orphaned_costmaps(later).await.unwrap(),
+            t.db.orphaned_costmaps(later).await.unwrap(),
             std::slice::from_ref(&stray)
         );
-        assert_eq!(t.jobs().adopt_orphans(&t.state, i64::MAX).await, 1);
+        assert_eq!(t.jobs().adopt_orphans(i64::MAX).await, 1);
         drop(busy);
         t.settle().await;
         for id in [&stray, &queued] {

@@ -1,0 +1,141 @@
+//! `GET /api/v1/costmaps/{id}/events`: a job's progress as Server-Sent
+//! Events.
+
+use std::convert::Infallible;
+use std::time::Duration;
+
+use axum::extract::{Path, State};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use futures_util::Stream;
+use tokio::sync::mpsc;
+
+use super::model::{JobEvent, JobState, job_state};
+use crate::error::{ApiError, Problem, not_found};
+use crate::jobs::JobStatus;
+use crate::state::AppState;
+
+/// How often an event stream looks at a job another server runs.
+const EVENTS_POLL: Duration = Duration::from_secs(1);
+/// Least time between two progress events.
+const EVENTS_MIN_GAP: Duration = Duration::from_millis(100);
+
+fn event_of(state: &JobState, error: Option<String>) -> JobEvent {
+    JobEvent {
+        status: state.status,
+        progress: state.progress,
+        stage: state.stage,
+        error,
+    }
+}
+
+fn sse_event(data: &JobEvent) -> Event {
+    let kind = match data.status {
+        JobStatus::Done => "done",
+        JobStatus::Failed => "failed",
+        JobStatus::Queued | JobStatus::Running => "progress",
+    };
+    Event::default()
+        .event(kind)
+        .json_data(data)
+        .unwrap_or_else(|_| Event::default().event(kind))
+}
+
+/// Feed the events of job `id` to `tx` until the job ends, the client
+/// goes, or the server shuts down.
+async fn follow(state: AppState, id: String, tx: mpsc::Sender<Event>) {
+    let jobs = state.costmaps.clone();
+    let mut last: Option<JobEvent> = None;
+    // Send `ev` unless it repeats the last one; false once the client is gone.
+    let send = |ev: JobEvent, last: &mut Option<JobEvent>| {
+        let tx = tx.clone();
+        let repeat = last.as_ref() == Some(&ev);
+        *last = Some(ev.clone());
+        async move { repeat || tx.send(sse_event(&ev)).await.is_ok() }
+    };
+    loop {
+        // A job this process runs: follow its live progress until its
+        // outcome is stored (the channel closes).
+        if let Some(mut rx) = jobs.subscribe(&id) {
+            loop {
+                let live = *rx.borrow_and_update();
+                let ev = JobEvent {
+                    status: live.status,
+                    progress: live.progress,
+                    stage: live.stage,
+                    error: None,
+                };
+                if !send(ev, &mut last).await {
+                    return;
+                }
+                tokio::select! {
+                    changed = rx.changed() => if changed.is_err() { break },
+                    () = jobs.shutdown_signal() => return,
+                    () = tx.closed() => return,
+                }
+                tokio::time::sleep(EVENTS_MIN_GAP).await;
+            }
+        }
+        let row = match state.db.get_costmap(&id).await {
+            Ok(Some(row)) => row,
+            Ok(None) => {
+                let ev = JobEvent {
+                    status: JobStatus::Failed,
+                    progress: last.as_ref().map_or(0.0, |l| l.progress),
+                    stage: None,
+                    error: Some("the costmap was deleted".into()),
+                };
+                send(ev, &mut last).await;
+                return;
+            }
+            Err(e) => {
+                tracing::warn!(costmap = %id, error = %e, "event stream cannot read the job");
+                return;
+            }
+        };
+        let Ok(state_now) = job_state(&row, jobs.live(&id)) else {
+            return;
+        };
+        let finished = state_now.status.is_finished();
+        if !send(event_of(&state_now, row.error.clone()), &mut last).await || finished {
+            return;
+        }
+        // Queued or running on another server, or between two states
+        // here: look again shortly.
+        tokio::select! {
+            () = tokio::time::sleep(EVENTS_POLL) => {},
+            () = jobs.shutdown_signal() => return,
+            () = tx.closed() => return,
+        }
+    }
+}
+
+/// The job's progress as Server-Sent Events: `progress` events (data
+/// `{status, progress, stage}`) while it is queued or running, then one
+/// `done` or `failed` (with `error`) event, and the stream ends. For a
+/// finished job only the last event is sent. Comments keep the connection
+/// alive.
+#[utoipa::path(
+    get,
+    path = "/api/v1/costmaps/{id}/events",
+    tag = "costmaps",
+    params(("id" = String, Path, description = "Costmap id")),
+    responses(
+        (status = 200, description = "An event stream: `event: progress|done|failed`, `data:` a JobEvent as JSON",
+            content_type = "text/event-stream", body = JobEvent),
+        (status = 404, description = "No such costmap", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn costmap_events(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    if state.db.get_costmap(&id).await?.is_none() {
+        return Err(not_found("costmap", &id));
+    }
+    let (tx, rx) = mpsc::channel(16);
+    tokio::spawn(follow(state, id, tx));
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+        rx.recv().await.map(|ev| (Ok(ev), rx))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}
