@@ -7,7 +7,7 @@
 
 use std::borrow::Cow;
 
-use crate::terrain::dilate::cell_size_m;
+use crate::terrain::cell_size_m;
 use crate::terrain::{Dem, GeoTransform};
 
 /// Heights on the working grid.

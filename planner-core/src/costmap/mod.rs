@@ -24,6 +24,7 @@ pub mod landcover;
 pub mod normals;
 pub mod pipeline;
 pub mod preview;
+pub mod progress;
 pub mod regions;
 pub mod smooth;
 pub mod stats;
@@ -33,6 +34,7 @@ pub mod vehicle;
 pub use distance::distance_transform;
 pub use pipeline::build_costmap;
 pub use preview::{legend_svg, preview_png};
+pub use progress::{Progress, Stage};
 pub use stats::{CostHistogram, CostmapStats};
 pub use vehicle::{Vehicle, VehiclePreset, VehicleSpec};
 
@@ -300,18 +302,7 @@ impl CostmapOptions {
     pub fn validate(&self, prefix: &str) -> Vec<Issue> {
         let mut issues = Vec::new();
         let range = |field: &str, x: Option<f64>, lo: f64, lo_open: bool, hi: f64| {
-            let x = x?;
-            let low_ok = if lo_open { x > lo } else { x >= lo };
-            (!(x.is_finite() && low_ok && x <= hi)).then(|| {
-                let open = if lo_open { "(" } else { "[" };
-                Issue::new(
-                    &format!("{prefix}/{field}"),
-                    &format!(
-                        "must be in {open}{lo}, {hi}], got {}",
-                        crate::num::readable(x)
-                    ),
-                )
-            })
+            range_issue(prefix, field, x, (lo, lo_open), hi)
         };
         issues.extend(range(
             "resolution_m",
@@ -375,40 +366,15 @@ impl CostmapOptions {
             ));
         }
         if let Some(l) = &self.landcover {
-            // Over the cap the classes are not looked at one by one: the
-            // duplicate check is quadratic in their count.
-            let classes = if l.classes.is_empty() || l.classes.len() > 256 {
-                issues.push(Issue::new(
-                    &format!("{prefix}/landcover/classes"),
-                    &format!("give 1 to 256 classes, got {}", l.classes.len()),
-                ));
-                &[][..]
-            } else {
-                &l.classes[..]
-            };
-            for (i, c) in classes.iter().enumerate() {
-                issues.extend(range(
-                    &format!("landcover/classes/{i}/cost"),
-                    Some(c.cost),
-                    0.0,
-                    false,
-                    1000.0,
-                ));
-                if classes[..i].iter().any(|d| d.code == c.code) {
-                    issues.push(Issue::new(
-                        &format!("{prefix}/landcover/classes/{i}/code"),
-                        &format!("code {} is listed twice", c.code),
-                    ));
-                }
-            }
-            issues.extend(range(
-                "landcover/unlisted_cost",
-                Some(l.unlisted_cost),
-                0.0,
-                false,
-                1000.0,
-            ));
+            landcover_issues(l, prefix, &mut issues);
         }
+        self.layer_issues(prefix, &mut issues);
+        issues
+    }
+
+    /// Layers listed twice, or asked for without the option that makes
+    /// them.
+    fn layer_issues(&self, prefix: &str, issues: &mut Vec<Issue>) {
         let mut seen = Vec::new();
         for (i, layer) in self.layers.iter().enumerate() {
             if seen.contains(layer) {
@@ -431,8 +397,68 @@ impl CostmapOptions {
                 ));
             }
         }
-        issues
     }
+}
+
+/// An issue at `{prefix}/{field}` unless `x` (when given) is finite and in
+/// the range from `lo` (excluded when `lo_open`) to `hi`.
+fn range_issue(
+    prefix: &str,
+    field: &str,
+    x: Option<f64>,
+    (lo, lo_open): (f64, bool),
+    hi: f64,
+) -> Option<Issue> {
+    let x = x?;
+    let low_ok = if lo_open { x > lo } else { x >= lo };
+    (!(x.is_finite() && low_ok && x <= hi)).then(|| {
+        let open = if lo_open { "(" } else { "[" };
+        Issue::new(
+            &format!("{prefix}/{field}"),
+            &format!(
+                "must be in {open}{lo}, {hi}], got {}",
+                crate::num::readable(x)
+            ),
+        )
+    })
+}
+
+/// The land-cover options' faults: the class count, each class's cost,
+/// codes listed twice, the unlisted cost.
+fn landcover_issues(l: &LandcoverOptions, prefix: &str, issues: &mut Vec<Issue>) {
+    // Over the cap the classes are not looked at one by one: the
+    // duplicate check is quadratic in their count.
+    let classes = if l.classes.is_empty() || l.classes.len() > 256 {
+        issues.push(Issue::new(
+            &format!("{prefix}/landcover/classes"),
+            &format!("give 1 to 256 classes, got {}", l.classes.len()),
+        ));
+        &[][..]
+    } else {
+        &l.classes[..]
+    };
+    for (i, c) in classes.iter().enumerate() {
+        issues.extend(range_issue(
+            prefix,
+            &format!("landcover/classes/{i}/cost"),
+            Some(c.cost),
+            (0.0, false),
+            1000.0,
+        ));
+        if classes[..i].iter().any(|d| d.code == c.code) {
+            issues.push(Issue::new(
+                &format!("{prefix}/landcover/classes/{i}/code"),
+                &format!("code {} is listed twice", c.code),
+            ));
+        }
+    }
+    issues.extend(range_issue(
+        prefix,
+        "landcover/unlisted_cost",
+        Some(l.unlisted_cost),
+        (0.0, false),
+        1000.0,
+    ));
 }
 
 /// The parameters a costmap was actually built with (defaults filled in).
@@ -473,49 +499,6 @@ pub struct Costmap {
     pub stats: CostmapStats,
     /// What the caller should know (e.g. a DEM too coarse for the vehicle).
     pub warnings: Vec<String>,
-}
-
-/// The pipeline's stages, as progress reports them.
-#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    Resample,
-    Steps,
-    /// Smoothing and normals, band by band.
-    Normals,
-    Layers,
-    Regions,
-    Inflate,
-    Cost,
-}
-
-impl Stage {
-    /// Share of the whole run where this stage starts, and its length
-    /// (rough timings on real DEMs), so progress moves evenly.
-    pub(crate) fn span(self) -> (f64, f64) {
-        match self {
-            Stage::Resample => (0.0, 0.05),
-            Stage::Steps => (0.05, 0.15),
-            Stage::Normals => (0.20, 0.45),
-            Stage::Layers => (0.65, 0.05),
-            Stage::Regions => (0.70, 0.10),
-            Stage::Inflate => (0.80, 0.12),
-            Stage::Cost => (0.92, 0.08),
-        }
-    }
-}
-
-/// Progress reports: the stage and the fraction of the whole run done,
-/// [0, 1]. Returning `false` cancels the run.
-pub trait Progress: Sync {
-    fn report(&self, stage: Stage, done: f64) -> bool;
-}
-
-impl<F: Fn(Stage, f64) -> bool + Sync> Progress for F {
-    fn report(&self, stage: Stage, done: f64) -> bool {
-        self(stage, done)
-    }
 }
 
 /// Why a costmap could not be built.

@@ -16,7 +16,7 @@ use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
 
 use super::CostmapError;
-use super::pipeline::Ticker;
+use super::progress::Ticker;
 use super::smooth::Smoother;
 
 /// A cell's neighbourhood within `radius_m`, cells `sx`×`sy` metres:
@@ -555,7 +555,7 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::costmap::pipeline::Ticker;
+    use crate::costmap::progress::Ticker;
     use crate::costmap::{Progress, Stage};
     use crate::test_rng::Lcg;
 

@@ -3,25 +3,25 @@
 
 use std::borrow::Cow;
 use std::io::{Seek, Write};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use super::grid::{resample_factor, work_grid};
+use super::grid::{WorkGrid, resample_factor, work_grid};
 use super::inflate::inflation;
 use super::landcover::landcover_costs;
 use super::normals::normals;
+use super::progress::{Monotone, Ticker};
 use super::regions::fill_enclosed;
 use super::smooth::Smoother;
-use super::stats::costmap_stats;
+use super::stats::{CostmapStats, costmap_stats};
 use super::steps::{depth_below_plane, step_heights};
 use super::{
     Class, Costmap, CostmapError, CostmapOptions, InflationMode, Layer, MAX_RADIUS_CELLS, Progress,
     ResolvedParams, Stage, StepMode, Vehicle,
 };
-use crate::terrain::geotiff::{Band, BandData, Page, write_geotiff};
 use crate::geo::Issue;
 use crate::terrain::Dem;
+use crate::terrain::geotiff::{Band, BandData, Page, write_geotiff};
 
 /// Cells per parallel task of the whole-grid passes.
 const CHUNK: usize = 1 << 14;
@@ -33,65 +33,6 @@ pub const CLASS_NODATA: u8 = Class::Unknown as u8;
 /// Slope costs span [1, SLOPE_COST_MAX] (thesis §3.6.3: Zcomp remapped
 /// from [cos(max_slope), 1] to [10, 1]).
 pub const SLOPE_COST_MAX: f64 = 10.0;
-
-/// Counts the rows a stage has done and reports progress now and then,
-/// from any thread; remembers a cancellation.
-pub struct Ticker<'a> {
-    progress: &'a dyn Progress,
-    stage: Stage,
-    total: usize,
-    every: usize,
-    done: AtomicUsize,
-    cancelled: AtomicBool,
-}
-
-impl<'a> Ticker<'a> {
-    /// A stage of `total` rows; reports its start.
-    pub fn new(progress: &'a dyn Progress, stage: Stage, total: usize) -> Ticker<'a> {
-        let t = Ticker {
-            progress,
-            stage,
-            total: total.max(1),
-            every: (total / 50).max(1),
-            done: AtomicUsize::new(0),
-            cancelled: AtomicBool::new(false),
-        };
-        if !progress.report(stage, stage.span().0) {
-            t.cancelled.store(true, Ordering::Relaxed);
-        }
-        t
-    }
-
-    /// One more row done; false once the run is cancelled.
-    pub fn tick(&self) -> bool {
-        if self.cancelled.load(Ordering::Relaxed) {
-            return false;
-        }
-        let n = self.done.fetch_add(1, Ordering::Relaxed) + 1;
-        if n.is_multiple_of(self.every) {
-            let (start, len) = self.stage.span();
-            let done = start + len * (n.min(self.total) as f64 / self.total as f64);
-            if !self.progress.report(self.stage, done) {
-                self.cancelled.store(true, Ordering::Relaxed);
-                return false;
-            }
-        }
-        true
-    }
-
-    pub fn cancelled(&self) -> bool {
-        self.cancelled.load(Ordering::Relaxed)
-    }
-
-    /// `Err(Cancelled)` if the run was cancelled.
-    fn check(&self) -> Result<(), CostmapError> {
-        if self.cancelled() {
-            Err(CostmapError::Cancelled)
-        } else {
-            Ok(())
-        }
-    }
-}
 
 /// Everything `options` leaves open, filled in for `dem` and `vehicle`.
 fn resolve(dem: &Dem, vehicle: &Vehicle, options: &CostmapOptions) -> ResolvedParams {
@@ -253,7 +194,7 @@ fn cell_extremes_m(dem: &Dem) -> [f64; 2] {
     }
     let rows = [0.5, dem.height as f64 / 2.0, dem.height as f64 - 0.5];
     let sizes = rows.map(|r| {
-        crate::terrain::dilate::cell_size_m(&dem.transform, true, dem.width as f64 / 2.0, r)
+        crate::terrain::cell_size_m(&dem.transform, true, dem.width as f64 / 2.0, r)
     });
     let lo = sizes
         .iter()
@@ -296,22 +237,6 @@ pub fn build_costmap_owned(
     run(Cow::Owned(dem), vehicle, options, landcover, progress)
 }
 
-/// Passes progress on never lower than before: rows finish out of order
-/// on several threads, and the optional ditch stage runs between others.
-struct Monotone<'a> {
-    inner: &'a dyn Progress,
-    best: std::sync::Mutex<f64>,
-}
-
-impl Progress for Monotone<'_> {
-    fn report(&self, stage: Stage, done: f64) -> bool {
-        // Held while reporting, so reports also arrive in order.
-        let mut best = self.best.lock().unwrap_or_else(|p| p.into_inner());
-        *best = best.max(done);
-        self.inner.report(stage, *best)
-    }
-}
-
 fn run(
     dem: Cow<'_, Dem>,
     vehicle: &Vehicle,
@@ -319,13 +244,82 @@ fn run(
     landcover: Option<&Dem>,
     progress: &dyn Progress,
 ) -> Result<Costmap, CostmapError> {
-    let progress = &Monotone {
-        inner: progress,
-        best: std::sync::Mutex::new(0.0),
+    let progress = &Monotone::new(progress);
+    check_request(&dem, vehicle, options, landcover)?;
+    let params = resolve(&dem, vehicle, options);
+    let crs = dem.crs.clone();
+    let mut warnings = Vec::new();
+
+    let grid = resample(dem, vehicle, options, &params, progress, &mut warnings)?;
+    let (w, h) = (grid.width, grid.height);
+    let cell = grid.centre_size_m();
+    // Step 4 before 2: steps are judged on the heights before smoothing
+    // (smoothing would shave them).
+    let steps = step_grid(&grid, vehicle, options, &params, progress)?;
+    let (zcomp, roughness) = surface_normals(&grid, options, &params, progress)?;
+    let transform = grid.transform;
+    drop(grid);
+    let landcover_cost = match (&options.landcover, landcover) {
+        (Some(table), Some(raster)) => {
+            Ticker::new(progress, Stage::Layers, 1).check()?;
+            Some(landcover_costs(raster, table, w, h, &transform, crs.epsg)?)
+        }
+        _ => None,
     };
+    let layers = CellLayers {
+        step: steps.step,
+        negative: steps.negative,
+        zcomp,
+        roughness,
+        landcover_cost,
+    };
+
+    let mut class = classify(&layers, &steps.unknown_height, vehicle, options);
+    fill_pockets(&mut class, [w, h], cell, &params, progress)?;
+    let inflated = inflate(
+        &class,
+        steps.unknown_height,
+        [w, h],
+        cell,
+        &params,
+        progress,
+    )?;
+    let (cost, inflation_layer) = costs(inflated, &class, &layers, vehicle, options, progress)?;
+
+    let stats = statistics(&cost, &class, [w, h], cell, vehicle, options);
+    if stats.class_fractions.traversable == 0.0 {
+        warnings.push(
+            "no cell is traversable for this vehicle: every cell is an obstacle or unknown"
+                .to_string(),
+        );
+    }
+    let layers = layer_rasters(&layers, inflation_layer, options);
+    Ok(Costmap {
+        width: w,
+        height: h,
+        transform,
+        crs,
+        vehicle: vehicle.clone(),
+        params,
+        cost,
+        class,
+        layers,
+        stats,
+        warnings,
+    })
+}
+
+/// The options' own checks, then those against the DEM, and a land-cover
+/// raster when the options ask for one; every fault at once.
+fn check_request(
+    dem: &Dem,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<&Dem>,
+) -> Result<(), CostmapError> {
     let mut issues = options.validate("/options");
     if issues.is_empty() {
-        issues = check_against_dem(&dem, vehicle, options, "/options");
+        issues = check_against_dem(dem, vehicle, options, "/options");
     }
     if options.landcover.is_some() && landcover.is_none() {
         issues.push(Issue::new(
@@ -333,19 +327,43 @@ fn run(
             "no land-cover raster was given",
         ));
     }
-    if !issues.is_empty() {
-        return Err(CostmapError::Invalid(issues));
+    if issues.is_empty() {
+        Ok(())
+    } else {
+        Err(CostmapError::Invalid(issues))
     }
-    let params = resolve(&dem, vehicle, options);
-    let crs = dem.crs.clone();
-    let mut warnings = Vec::new();
+}
 
-    // 1. Working grid.
+/// The per-cell grids of the working grid that classes and costs are
+/// made of (row-major).
+struct CellLayers {
+    /// Step height (SPEC §4.2 step 4).
+    step: Vec<f32>,
+    /// Depth below the local plane, and the deepest allowed (negative
+    /// steps, optional).
+    negative: Option<(Vec<f32>, f64)>,
+    /// |n_z| of the surface normal (step 2).
+    zcomp: Vec<f32>,
+    /// Plane-fit residual (optional).
+    roughness: Option<Vec<f32>>,
+    /// Land-cover class costs, `INFINITY` where lethal (optional).
+    landcover_cost: Option<Vec<f32>>,
+}
+
+/// SPEC §4.2 step 1: the working grid, DEM cells averaged in blocks of the
+/// resample factor; warnings for a grid too coarse for the vehicle or a
+/// resolution taken other than asked.
+fn resample(
+    dem: Cow<'_, Dem>,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+    warnings: &mut Vec<String>,
+) -> Result<WorkGrid, CostmapError> {
     Ticker::new(progress, Stage::Resample, 1).check()?;
     let grid = work_grid(dem, params.resample_factor);
-    let (w, h) = (grid.width, grid.height);
-    let [sx, sy] = grid.centre_size_m();
-    coarse_warnings(&params, vehicle, [sx, sy], &mut warnings);
+    coarse_warnings(params, vehicle, grid.centre_size_m(), warnings);
     if let Some(r) = options.resolution_m {
         let [ax, ay] = params.resolution_m;
         if (ax - r).abs() > 0.01 * r || (ay - r).abs() > 0.01 * r {
@@ -356,9 +374,28 @@ fn run(
             ));
         }
     }
+    Ok(grid)
+}
 
-    // 4. Steps, on the heights before smoothing (smoothing would shave
-    // them).
+/// What step 4 leaves: step heights, the optional negative steps, and
+/// which cells have no height.
+struct StepGrid {
+    step: Vec<f32>,
+    negative: Option<(Vec<f32>, f64)>,
+    unknown_height: Vec<bool>,
+}
+
+/// SPEC §4.2 step 4: step heights between neighbours (or against the
+/// local plane), the depth below the plane when negative steps are asked
+/// for, and the cells without a height.
+fn step_grid(
+    grid: &WorkGrid,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+) -> Result<StepGrid, CostmapError> {
+    let (w, h) = (grid.width, grid.height);
     let ticker = Ticker::new(progress, Stage::Steps, h);
     let step = step_heights(&grid.z, w, h, params.step_mode, &ticker)?;
     let negative = match &options.negative_steps {
@@ -377,38 +414,57 @@ fn run(
         .par_chunks_mut(CHUNK)
         .zip(grid.z.par_chunks(CHUNK))
         .for_each(|(u, z)| u.iter_mut().zip(z).for_each(|(u, z)| *u = z.is_nan()));
+    Ok(StepGrid {
+        step,
+        negative,
+        unknown_height,
+    })
+}
 
-    // 2. Smoothing and PCA normals, band by band.
-    let ticker = Ticker::new(progress, Stage::Normals, h);
+/// SPEC §4.2 step 2: Zcomp (and the roughness when asked for) from PCA
+/// normals of the lightly smoothed heights, band by band.
+fn surface_normals(
+    grid: &WorkGrid,
+    options: &CostmapOptions,
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+) -> Result<(Vec<f32>, Option<Vec<f32>>), CostmapError> {
+    let [sx, sy] = grid.centre_size_m();
+    let ticker = Ticker::new(progress, Stage::Normals, grid.height);
     let smoother = Smoother::new(
         params.smoothing_sigma_m / sx,
         params.smoothing_sigma_m / sy,
         3.0,
     );
-    let (zcomp, roughness) = normals(
+    normals(
         &grid.z,
-        w,
-        h,
+        grid.width,
+        grid.height,
         &grid.row_size_m,
         params.pca_radius_m,
         smoother.as_ref(),
         options.roughness.is_some(),
         &ticker,
-    )?;
-    let transform = grid.transform;
-    drop(grid);
+    )
+}
 
-    let landcover_cost = match (&options.landcover, landcover) {
-        (Some(table), Some(raster)) => {
-            Ticker::new(progress, Stage::Layers, 1).check()?;
-            Some(landcover_costs(raster, table, w, h, &transform, crs.epsg)?)
-        }
-        _ => None,
-    };
-
-    // 3–5. Classes.
+/// SPEC §4.2 steps 3–5 (first part): each cell's class from the slope
+/// grid, the step grid and the optional obstacle layers, united.
+fn classify(
+    layers: &CellLayers,
+    unknown_height: &[bool],
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+) -> Vec<u8> {
+    let CellLayers {
+        step,
+        negative,
+        zcomp,
+        roughness,
+        landcover_cost,
+    } = layers;
     let cos_max = vehicle.max_slope_deg.to_radians().cos();
-    let mut class = crate::buffer::filled(w * h, Class::Unknown as u8);
+    let mut class = crate::buffer::filled(step.len(), Class::Unknown as u8);
     let plain = negative.is_none() && roughness.is_none() && landcover_cost.is_none();
     if plain {
         // No optional layer: a loop without per-cell option checks. (A
@@ -430,7 +486,7 @@ fn run(
             let ditch = negative
                 .as_ref()
                 .is_some_and(|(d, max)| f64::from(d[i]) > *max);
-            let rough = match (&roughness, &options.roughness) {
+            let rough = match (roughness, &options.roughness) {
                 (Some(r), Some(o)) => f64::from(r[i]) > o.max_m,
                 _ => false,
             };
@@ -441,13 +497,34 @@ fn run(
             *k = class_of(step[i], zcomp[i], max_step, cos_max, ditch, rough || lethal) as u8;
         });
     }
-    let ticker = Ticker::new(progress, Stage::Regions, 1);
-    fill_enclosed(&mut class, w, h, params.min_region_area_m2 / (sx * sy));
-    ticker.check()?;
+    class
+}
 
-    // 6. Inflation: from obstacles and from cells without a height
-    // (unknown ground is no safer than an obstacle), not from the border
-    // ring, which is unknown only because it cannot be judged.
+/// SPEC §4.2 step 5 (second part): traversable pockets enclosed by
+/// obstacles and smaller than the minimum region become obstacles.
+fn fill_pockets(
+    class: &mut [u8],
+    [w, h]: [usize; 2],
+    [sx, sy]: [f64; 2],
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+) -> Result<(), CostmapError> {
+    let ticker = Ticker::new(progress, Stage::Regions, 1);
+    fill_enclosed(class, w, h, params.min_region_area_m2 / (sx * sy));
+    ticker.check()
+}
+
+/// SPEC §4.2 step 6: inflation from obstacles and from cells without a
+/// height (unknown ground is no safer than an obstacle), not from the
+/// border ring, which is unknown only because it cannot be judged.
+fn inflate(
+    class: &[u8],
+    unknown_height: Vec<bool>,
+    [w, h]: [usize; 2],
+    cell: [f64; 2],
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+) -> Result<Vec<f32>, CostmapError> {
     let ticker = Ticker::new(progress, Stage::Inflate, 1);
     let obstacle: Vec<bool> = class
         .par_iter()
@@ -459,17 +536,37 @@ fn run(
         &obstacle,
         w,
         h,
-        [sx, sy],
+        cell,
         params.inflation_sigma_m,
         params.inflation,
     );
     drop(obstacle);
     ticker.check()?;
+    Ok(inflated)
+}
 
-    // 7–8. Costs.
+/// SPEC §4.2 steps 7–8: the slope cost and the weighted sum with the
+/// inflation (plus the optional costs) on traversable cells, NaN
+/// elsewhere; in place of the inflation, which is also returned when kept
+/// as a layer.
+fn costs(
+    inflated: Vec<f32>,
+    class: &[u8],
+    layers: &CellLayers,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    progress: &dyn Progress,
+) -> Result<(Vec<f32>, Option<Vec<f32>>), CostmapError> {
     let ticker = Ticker::new(progress, Stage::Cost, 1);
+    let cos_max = vehicle.max_slope_deg.to_radians().cos();
     let slope_span = 1.0 - cos_max;
     let rough_opts = options.roughness.as_ref();
+    let CellLayers {
+        zcomp,
+        roughness,
+        landcover_cost,
+        ..
+    } = layers;
     // The costs take the inflation's place (one grid less to allocate).
     let inflation_layer = options
         .layers
@@ -490,10 +587,10 @@ fn run(
                 return;
             }
             let mut v = traversing_cost(zcomp[i], *c, weights);
-            if let (Some(r), Some(o)) = (&roughness, rough_opts) {
+            if let (Some(r), Some(o)) = (roughness, rough_opts) {
                 v += o.weight * (f64::from(r[i]) / o.max_m).min(1.0);
             }
-            if let Some(l) = &landcover_cost {
+            if let Some(l) = landcover_cost {
                 let lc = l[i];
                 if lc.is_finite() {
                     v += f64::from(lc);
@@ -503,9 +600,21 @@ fn run(
         });
     }
     ticker.check()?;
+    Ok((cost, inflation_layer))
+}
 
+/// The statistics, over costs spanning [w_slope, the highest cost the
+/// weights allow].
+fn statistics(
+    cost: &[f32],
+    class: &[u8],
+    [w, h]: [usize; 2],
+    [sx, sy]: [f64; 2],
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+) -> CostmapStats {
     let mut cost_hi = vehicle.w_infl + vehicle.w_slope * SLOPE_COST_MAX;
-    if let Some(o) = rough_opts {
+    if let Some(o) = &options.roughness {
         cost_hi += o.weight;
     }
     if let Some(l) = &options.landcover {
@@ -519,32 +628,38 @@ fn run(
         );
         cost_hi += most;
     }
-    let stats = costmap_stats(w, h, &cost, &class, sx * sy, [vehicle.w_slope, cost_hi]);
-    if stats.class_fractions.traversable == 0.0 {
-        warnings.push(
-            "no cell is traversable for this vehicle: every cell is an obstacle or unknown"
-                .to_string(),
-        );
-    }
+    costmap_stats(w, h, cost, class, sx * sy, [vehicle.w_slope, cost_hi])
+}
 
-    // Per-layer rasters asked for, in Layer::ALL order.
+/// The per-layer rasters asked for, in [`Layer::ALL`] order.
+fn layer_rasters(
+    layers: &CellLayers,
+    inflation_layer: Option<Vec<f32>>,
+    options: &CostmapOptions,
+) -> Vec<(Layer, Vec<f32>)> {
     let wanted = |l: Layer| options.layers.contains(&l);
-    let mut layers = Vec::new();
+    let mut out = Vec::new();
     for layer in Layer::ALL {
         if !wanted(layer) {
             continue;
         }
         let data = match layer {
-            Layer::Slope => zcomp
+            Layer::Slope => layers
+                .zcomp
                 .par_iter()
                 .map(|&z| f64::from(z).min(1.0).acos().to_degrees() as f32)
                 .collect(),
-            Layer::Zcomp => zcomp.clone(),
-            Layer::Step => step.clone(),
+            Layer::Zcomp => layers.zcomp.clone(),
+            Layer::Step => layers.step.clone(),
             Layer::Inflation => inflation_layer.clone().unwrap_or_default(),
-            Layer::Roughness => roughness.clone().unwrap_or_default(),
-            Layer::NegativeStep => negative.as_ref().map(|n| n.0.clone()).unwrap_or_default(),
-            Layer::Landcover => landcover_cost
+            Layer::Roughness => layers.roughness.clone().unwrap_or_default(),
+            Layer::NegativeStep => layers
+                .negative
+                .as_ref()
+                .map(|n| n.0.clone())
+                .unwrap_or_default(),
+            Layer::Landcover => layers
+                .landcover_cost
                 .as_ref()
                 .map(|l| {
                     l.iter()
@@ -553,21 +668,9 @@ fn run(
                 })
                 .unwrap_or_default(),
         };
-        layers.push((layer, data));
+        out.push((layer, data));
     }
-    Ok(Costmap {
-        width: w,
-        height: h,
-        transform,
-        crs,
-        vehicle: vehicle.clone(),
-        params,
-        cost,
-        class,
-        layers,
-        stats,
-        warnings,
-    })
+    out
 }
 
 /// A cell's class from its step height and Zcomp (NaN: unknown), and

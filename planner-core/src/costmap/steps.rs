@@ -25,7 +25,7 @@
 
 use rayon::prelude::*;
 
-use super::pipeline::Ticker;
+use super::progress::Ticker;
 use super::{CostmapError, StepMode};
 
 /// The 8 neighbour offsets (column, row).
