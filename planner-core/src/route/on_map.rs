@@ -16,7 +16,7 @@ use super::{Cell, CostGrid, GridError, Route, RouteError, RouteOptions, astar};
 use crate::costmap::Class;
 use crate::costmap::grid::work_grid;
 use crate::geo::UtmProjection;
-use crate::terrain::dilate::cell_size_m;
+use crate::terrain::cell_size_m;
 use crate::terrain::{
     Crs, Dem, DemLimits, GeoTransform, TerrainError, geotiff_pages, read_geotiff_page_band,
 };

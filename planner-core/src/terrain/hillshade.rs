@@ -25,7 +25,7 @@
 //! the longer side ≤ `max_side`) by averaging f×f blocks over their valid
 //! cells; a block with fewer than half of its cells valid is nodata.
 
-use super::dilate::metres_per_degree;
+use super::cell_size::metres_per_degree;
 use super::{Dem, GeoTransform};
 use crate::cancel::Cancelled;
 

@@ -8,9 +8,10 @@
 //! in [`Dem::values`] and every sample that touches one is `None`.
 
 mod asc;
+mod cell_size;
 mod common;
 mod crs;
-pub(crate) mod dilate;
+mod dilate;
 mod follow;
 pub mod geotiff;
 mod hgt;
@@ -19,6 +20,7 @@ mod info;
 mod read;
 mod sample;
 
+pub(crate) use cell_size::cell_size_m;
 pub use crs::Crs;
 pub use dilate::dilate;
 pub use follow::{HeightRule, Point3, TerrainModel, length_3d};
