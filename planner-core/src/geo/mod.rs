@@ -14,7 +14,10 @@ pub use validate::polygon_issues;
 
 use geo::{Area, Centroid, CoordsIter, Orient, orient::Direction};
 use geo_types::{MultiPolygon, Polygon};
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use serde_path_to_error::Segment;
 
 /// One fault in the input: the JSON pointer of the member at fault and what
 /// is wrong with it (the `{pointer, message}` entries of SPEC §2).
@@ -31,6 +34,32 @@ impl Issue {
             message: message.to_string(),
         }
     }
+}
+
+/// `token` escaped as one reference token of a JSON pointer (RFC 6901:
+/// `~` as `~0`, then `/` as `~1`).
+pub fn escape_pointer_token(token: &str) -> String {
+    token.replace('~', "~0").replace('/', "~1")
+}
+
+/// `value` deserialized as a `T`; a fault (unknown field, wrong type,
+/// missing member) is an [`Issue`] at the JSON pointer of the member at
+/// fault, under `prefix` (e.g. `"/options"`; `""` for the document).
+pub fn deserialize_at<T: DeserializeOwned>(value: &Value, prefix: &str) -> Result<T, Issue> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let mut pointer = prefix.to_string();
+        for segment in e.path().iter() {
+            match segment {
+                Segment::Seq { index } => pointer.push_str(&format!("/{index}")),
+                Segment::Map { key } | Segment::Enum { variant: key } => {
+                    pointer.push('/');
+                    pointer.push_str(&escape_pointer_token(key));
+                }
+                Segment::Unknown => {}
+            }
+        }
+        Issue::new(&pointer, &e.into_inner().to_string())
+    })
 }
 
 /// Most faults listed for one request: a request with thousands of bad
@@ -308,5 +337,44 @@ mod tests {
         };
         assert_eq!(issues[0].pointer, "/roi/coordinates/0");
         assert!(issues[0].message.contains("self-intersects"));
+    }
+
+    #[test]
+    fn serde_faults_are_named_by_escaped_pointers() {
+        use std::collections::BTreeMap;
+
+        #[derive(Debug, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code)]
+        struct Inner {
+            speed: f64,
+        }
+        #[derive(Debug, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code)]
+        struct Outer {
+            items: Vec<Inner>,
+            #[serde(default)]
+            named: BTreeMap<String, Inner>,
+        }
+        let fault =
+            |v: serde_json::Value, prefix: &str| deserialize_at::<Outer>(&v, prefix).unwrap_err();
+        // Plain names: the same pointer a path joined with '/' gives.
+        let e = fault(json!({"items": [{"speed": 1}, {"speed": "x"}]}), "/options");
+        assert_eq!(e.pointer, "/options/items/1/speed");
+        assert!(e.message.contains("invalid type"), "{}", e.message);
+        let e = fault(json!({"items": [], "extra": 1}), "");
+        // An unknown member is named by its own pointer.
+        assert_eq!(e.pointer, "/extra", "{e:?}");
+        assert!(e.message.contains("unknown field `extra`"), "{}", e.message);
+        // RFC 6901: '~' and '/' in a member name are escaped, '~' first.
+        let e = fault(
+            json!({"items": [], "named": {"a/b~c": {"speed": true}}}),
+            "/o",
+        );
+        assert_eq!(e.pointer, "/o/named/a~1b~0c/speed");
+        assert_eq!(escape_pointer_token("~1/"), "~01~1");
+        assert_eq!(escape_pointer_token("plain"), "plain");
+        assert!(deserialize_at::<Outer>(&json!({"items": []}), "/x").is_ok());
     }
 }
