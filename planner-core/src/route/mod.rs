@@ -7,6 +7,8 @@
 //!   change cost (Koenig & Likhachev 2002, optimised version), 13 bytes
 //!   per cell including the costs;
 //! - [`smooth`]: post-smoothing of a cell path into a few waypoints;
+//! - [`changes`]: the replanning rules, how blocked areas and cost
+//!   changes change cells and how a D* Lite search is repaired for them;
 //!
 //! and their parts: the 8-neighbourhood and step lengths
 //! (`neighbourhood`), the arc rules and heuristic (`arc_model`), a tiled
@@ -32,6 +34,7 @@
 mod arc_model;
 pub mod astar;
 mod bucket_queue;
+pub mod changes;
 mod dist_array;
 pub mod dstar_lite;
 mod neighbourhood;
@@ -43,6 +46,7 @@ mod testing;
 mod tiles;
 
 pub use astar::astar;
+pub use changes::{BlockedEnd, CellChanges, ChangeError, ChangedArea};
 pub use dstar_lite::DStarLite;
 pub use on_map::{Endpoint, MapRoute, MapRouteError, Position, RouteMap, RoutePoint};
 pub use smooth::{SegmentCost, polyline_cost, segment_cost, smooth_path, turning_points};
