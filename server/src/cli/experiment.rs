@@ -1,7 +1,7 @@
 //! `terraplan experiment flock`: the thesis' §5.6 flock experiment on real
 //! data, for the `competition` and `balanced` policies side by side.
 //!
-//! The area (embedded, see `experiments/flock/README.md`): a 7.9 ha
+//! The area (embedded, see `server/experiments/flock/README.md`): a 7.9 ha
 //! rectangle over the opengeos bare-earth DTM (Alexandria, VA) with four real
 //! building footprints as no-fly zones, decomposed at slice 0° into 12
 //! cells, flown terrain-following. Flocks of 3 to 8 UAVs start from 10
@@ -15,6 +15,8 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use clap::Subcommand;
+
 use geo::Contains;
 use geo_types::{Coord, Point, Polygon};
 use planner_core::flock::Policy;
@@ -23,9 +25,40 @@ use planner_core::survey::{SurveyRequest, plan_survey_over};
 use planner_core::terrain::{Dem, DemLimits, read_dem};
 use serde_json::{Value, json};
 
-const ROI: &str = include_str!("../experiments/flock/roi.geojson");
-const NO_FLY: &str = include_str!("../experiments/flock/no_fly.geojson");
-const DTM: &[u8] = include_bytes!("../experiments/flock/opengeos_dtm.tif");
+use super::Failure;
+
+const ROI: &str = include_str!("../../experiments/flock/roi.geojson");
+const NO_FLY: &str = include_str!("../../experiments/flock/no_fly.geojson");
+const DTM: &[u8] = include_bytes!("../../experiments/flock/opengeos_dtm.tif");
+
+#[derive(Subcommand)]
+pub(super) enum ExperimentCommand {
+    /// The thesis' flock experiment (§5.6): 12 cells, 3–8 UAVs, 10 starting
+    /// formations, 60 trials, `competition` and `balanced` side by side;
+    /// prints tables like thesis Tables 5.1–5.7.
+    Flock {
+        /// Also write trials.csv, uavs.csv and flocks.csv here.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
+}
+
+pub(super) fn experiment(command: &ExperimentCommand) -> Result<(), Failure> {
+    match command {
+        ExperimentCommand::Flock { out } => flock(out.as_deref()),
+    }
+}
+
+fn flock(out: Option<&Path>) -> Result<(), Failure> {
+    let trials = run_trials().map_err(Failure::other)?;
+    print!("{}", report(&trials));
+    if let Some(dir) = out {
+        for path in write_csv(&trials, dir).map_err(Failure::other)? {
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
 
 /// UTM zone of the area (18 N) and the ROI's extent in it, metres.
 const ZONE: u8 = 18;

@@ -5,8 +5,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use geo_types::Polygon;
 use planner_core::export::ground_route::{route_csv, route_geojson, rover_mission};
 use planner_core::export::write_waypoints;
+use planner_core::route::changes::{self, CellChanges, ChangeError, ChangedArea};
 use planner_core::route::{
     ArcCost, DStarLite, Endpoint, MapRoute, MapRouteError, Position, RouteMap, RouteOptions, astar,
 };
@@ -168,7 +170,7 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
             parsed
                 .map_err(Failure::input)?
                 .into_iter()
-                .map(|p| p.polygon),
+                .map(|p| (p.polygon, path.as_path())),
         );
     }
 
@@ -226,8 +228,9 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
     )
 }
 
-/// Block `areas`, then replan from the start with D* Lite reusing its
-/// first search, and time a from-scratch A* on the changed map beside it.
+/// Block `areas` (each with the file it came from), then replan from the
+/// start with D* Lite reusing its first search, and time a from-scratch
+/// A* on the changed map beside it.
 #[allow(clippy::too_many_arguments)]
 fn replan(
     args: &RouteArgs,
@@ -236,7 +239,7 @@ fn replan(
     start: &Position,
     goal: &Position,
     options: &RouteOptions,
-    areas: &[geo_types::Polygon<f64>],
+    areas: &[(Polygon<f64>, &Path)],
     mut request: Value,
 ) -> Result<(), Failure> {
     let fail = |e| map_failure(e, args);
@@ -255,8 +258,32 @@ fn replan(
                 .map_err(|e| Failure::input(format!("--replan-from: {e}")))?
         }
     };
-    let cells = map.cells_in_areas(areas).map_err(fail)?;
-    let changes: Vec<(usize, f32)> = cells.iter().map(|&i| (i, f32::NAN)).collect();
+    let polygons: Vec<&Polygon<f64>> = areas.iter().map(|(p, _)| p).collect();
+    let blocked = CellChanges::rasterise(map, &[], &polygons).map_err(|e| match e {
+        ChangeError::Areas(faults) => match faults.first() {
+            Some(f) if let ChangedArea::Blocked(index) = f.area => {
+                fail(MapRouteError::InvalidArea {
+                    index,
+                    reason: f.reason.clone(),
+                })
+            }
+            _ => Failure::other(ChangeError::Areas(faults).to_string()),
+        },
+        ChangeError::Map(e) => fail(e),
+    })?;
+    let changed = blocked.on(map.grid().costs());
+    changes::check_ends(map, &polygons, map.grid().costs(), &changed, robot, g).map_err(
+        |e| match e {
+            changes::BlockedEnd::Goal { area } => match area.map(|i| areas[i].1) {
+                Some(file) => Failure::input(format!("--block {}: {e}", file.display())),
+                None => Failure::input(format!("--block: {e}")),
+            },
+            _ if args.replan_from.is_some() => Failure::input(format!("--replan-from: {e}")),
+            _ => Failure::input(format!("--from: {e}")),
+        },
+    )?;
+    let changes: Vec<(usize, f32)> = changed.into_iter().collect();
+    let cells = blocked.blocked();
 
     let search = |e: planner_core::route::RouteError| fail(MapRouteError::Search(e));
     let t = Instant::now();
