@@ -41,7 +41,8 @@ pub fn plan_survey(req: &SurveyRequest, limits: &Limits) -> Result<SurveyPlan, P
 }
 
 /// Plan a survey end to end, following the terrain of `dem` when given
-/// (the DEM `params.dem_id` names, resolved by the caller).
+/// (the service resolves the `dem_id` of its requests into it; faults of
+/// the DEM are reported at [`DEM_POINTER`]).
 pub fn plan_survey_over(
     req: &SurveyRequest,
     limits: &Limits,
@@ -188,7 +189,6 @@ mod tests {
                 "agl_tolerance_m": 2,
                 "transit_clearance_m": 60,
                 "altitude_frame": frame,
-                "dem_id": "x",
                 "uavs": [{"id": "a", "start": start}],
             });
             let req = SurveyRequest::from_document(&doc).unwrap();
@@ -266,14 +266,14 @@ mod tests {
                     .all(|(a, b)| (a - b).abs() < 1e-3)
             );
         }
-        // Without the DEM, a dem_id cannot be planned.
+        // Without the DEM, a dem_id cannot be planned: DEM ids are the
+        // service's (it resolves them), the planner takes none.
         let doc = json!({
             "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.004, 52.0], [5.004, 52.003], [5.0, 52.003]]]},
             "dem_id": "x",
         });
-        let req = SurveyRequest::from_document(&doc).unwrap();
         assert!(
-            matches!(plan_survey(&req, &Limits::default()), Err(PlanError::Invalid(i)) if i[0].pointer == DEM_POINTER)
+            matches!(SurveyRequest::from_document(&doc), Err(PlanError::Invalid(i)) if i[0].pointer == DEM_POINTER)
         );
     }
 }

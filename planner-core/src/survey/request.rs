@@ -109,7 +109,9 @@ pub struct UavSpec {
 }
 
 /// Survey request parameters: the fields of the params file and of the API
-/// request body. Ranges are checked by [`SurveyParams::validate`].
+/// request body (which adds `dem_id`, a DEM stored in the service, that
+/// the service resolves into the DEM it plans over). Ranges are checked by
+/// [`SurveyParams::validate`].
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema), schema(default))]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -161,9 +163,6 @@ pub struct SurveyParams {
     /// (never less than `nfz_clearance_m`).
     #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 1000))]
     pub fence_margin_m: f64,
-    /// A stored DEM (`POST /api/v1/dems`) to follow the terrain over;
-    /// without one the survey is flown flat at `altitude_m` above home.
-    pub dem_id: Option<String>,
     /// Allowed deviation from `altitude_m` above the (dilated) terrain along
     /// lanes, m, in [0.5, 100], smaller than the altitude; default 5.
     #[cfg_attr(feature = "openapi", schema(minimum = 0.5, maximum = 100))]
@@ -209,7 +208,6 @@ impl Default for SurveyParams {
             altitude_frame: AltitudeFrame::Relative,
             nfz_clearance_m: DEFAULT_NFZ_CLEARANCE_M,
             fence_margin_m: 30.0,
-            dem_id: None,
             agl_tolerance_m: 5.0,
             transit_clearance_m: None,
             max_climb_rate_m_s: None,
@@ -283,11 +281,6 @@ impl SurveyParams {
         self.check_flight(&mut issues, &p);
         self.check_camera(&mut issues, &p);
         self.check_uavs(&mut issues, &p);
-        if let Some(id) = &self.dem_id
-            && (id.is_empty() || id.len() > 64)
-        {
-            issues.push(Issue::new(&p("dem_id"), "a DEM id has 1 to 64 characters"));
-        }
         self.check_terrain(&mut issues, &p);
         self.check_rally_points(&mut issues, &p);
         if issues.is_empty() {
@@ -636,7 +629,8 @@ fn is_empty_collection(v: &Value) -> bool {
         .is_some_and(Vec::is_empty)
 }
 
-/// JSON pointer of the DEM reference in a request document.
+/// JSON pointer the faults of the DEM a survey is planned over are
+/// reported at: the member naming the DEM in the service's request.
 pub const DEM_POINTER: &str = "/dem_id";
 
 /// `e`, or the cancellation that made a stage fail in its own words (see
@@ -649,15 +643,9 @@ pub(super) fn cancelled_or(e: PlanError) -> PlanError {
 }
 
 impl SurveyParams {
-    /// The checks that need to know whether a DEM is given: a `dem_id`
-    /// needs the DEM it names, the `amsl` frame needs terrain heights.
+    /// The check that needs to know whether a DEM is given: the `amsl`
+    /// frame needs terrain heights.
     pub(super) fn check_dem(&self, dem: Option<&Dem>) -> Result<(), PlanError> {
-        if dem.is_none() && self.dem_id.is_some() {
-            return Err(PlanError::Invalid(vec![Issue::new(
-                DEM_POINTER,
-                "this DEM id names a DEM stored in the service; outside it give the DEM file itself",
-            )]));
-        }
         if dem.is_none() && self.altitude_frame == AltitudeFrame::Amsl {
             return Err(PlanError::Invalid(vec![Issue::new(
                 "/altitude_frame",

@@ -10,8 +10,8 @@ use planner_core::export::{AltitudeFrame, FencePolygon};
 use planner_core::flock::Piece;
 use planner_core::geo::Issue;
 use planner_core::survey::{
-    DEM_POINTER, PlanError, SurveyParams, SurveyPlan, SurveyRequest, SurveyStats, UavStats,
-    UavTerrain, plan_survey_over,
+    DEM_POINTER, PlanError, SurveyParams, SurveyPlan, SurveyStats, UavStats, UavTerrain,
+    plan_survey_over,
 };
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
@@ -28,13 +28,17 @@ use crate::db::{SurveyRow, SurveySummaryRow};
 use crate::error::{ApiError, Problem, deleted, found};
 use crate::state::{AppState, Work, off_runtime};
 
+mod request;
+pub use request::read_document;
+
 const NAME_MAX_CHARS: usize = 200;
 
 /// Body of `POST /api/v1/surveys`: the area, the no-fly zones and the
 /// planning parameters (the fields of the CLI's params file) in one object.
 /// The handler reads the body as JSON so that every fault is reported by
 /// pointer; this type only carries its OpenAPI schema: the
-/// [`SurveyParams`] object with `name`, `roi` and `no_fly_zones` added.
+/// [`SurveyParams`] object with `name`, `roi`, `no_fly_zones` and `dem_id`
+/// added.
 pub struct CreateSurvey;
 
 impl utoipa::PartialSchema for CreateSurvey {
@@ -45,6 +49,7 @@ impl utoipa::PartialSchema for CreateSurvey {
             RefOr::T(Schema::Object(o)) => o,
             _ => Object::new(),
         };
+        request::add_dem_id_schema(&mut body);
         let geojson = |d: &str| {
             ObjectBuilder::new()
                 .schema_type(Type::Object)
@@ -366,9 +371,9 @@ pub async fn create_survey(
 ) -> Result<Response, ApiError> {
     let name = take_name(&mut doc)?;
     // Reading the request checks every member: off the runtime threads.
-    let (req, doc) =
-        off_runtime(move || SurveyRequest::from_document(&doc).map(|r| (r, doc))).await??;
-    let dem = match &req.params.dem_id {
+    let ((req, dem_id), doc) =
+        off_runtime(move || read_document(&mut doc).map(|r| (r, doc))).await??;
+    let dem = match &dem_id {
         None => None,
         Some(id) => Some(state.load_dem(id).await.map_err(|e| match e {
             // In a survey request an unknown DEM is a fault of the request.

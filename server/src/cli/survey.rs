@@ -5,9 +5,7 @@ use std::path::PathBuf;
 
 use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::{Issue, Limits};
-use planner_core::survey::{
-    DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, SurveyRequest, plan_survey_over,
-};
+use planner_core::survey::{DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, plan_survey_over};
 use planner_core::terrain::DemLimits;
 use serde_json::{Value, json};
 
@@ -91,7 +89,10 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         ..Limits::default()
     };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
-    let req = SurveyRequest::from_document(&doc).map_err(|e| plan_failure(e, &describe))?;
+    // The service's reader, so faults read as they do over HTTP; it finds
+    // no dem_id (refused above).
+    let (req, _) =
+        crate::api::surveys::read_document(&mut doc).map_err(|e| plan_failure(e, &describe))?;
     let token = match args.timeout_s {
         Some(s) => CancelToken::with_limit(std::time::Duration::from_secs_f64(s)),
         None => CancelToken::new(),
