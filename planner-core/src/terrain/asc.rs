@@ -191,9 +191,40 @@ pub(super) fn read(
         )));
     }
 
-    let (dx, dy) = match number(&pairs, "cellsize")? {
+    let transform = georeferencing(&pairs, ncols, nrows)?;
+    let crs = resolve_crs(
+        Err(
+            "an ESRI ASCII grid has no CRS of its own (it is in a .prj side file, \
+             which is not read)"
+                .into(),
+        ),
+        crs,
+    )?;
+
+    let (cell_type, nodata) = cell_type_and_nodata(&pairs, data)?;
+    let values = read_values(data, [ncols, nrows], cell_type, nodata)?;
+
+    Ok(Dem {
+        width: ncols as usize,
+        height: nrows as usize,
+        values,
+        nodata,
+        transform,
+        crs,
+        format: DemFormat::Asc,
+    })
+}
+
+/// The grid's transform from its cell size and lower-left corner (or
+/// centre), as GDAL computes it.
+fn georeferencing(
+    pairs: &[(String, String)],
+    ncols: u64,
+    nrows: u64,
+) -> Result<GeoTransform, TerrainError> {
+    let (dx, dy) = match number(pairs, "cellsize")? {
         Some(c) => (c, c),
-        None => match (number(&pairs, "dx")?, number(&pairs, "dy")?) {
+        None => match (number(pairs, "dx")?, number(pairs, "dy")?) {
             (Some(dx), Some(dy)) => (dx, dy),
             _ => {
                 return Err(TerrainError::Invalid(
@@ -210,10 +241,10 @@ pub(super) fn read(
     let (mut dx, mut dy) = (dx, dy);
     let rows_f = nrows as f64;
     let (origin_x, origin_y) = match (
-        number(&pairs, "xllcorner")?,
-        number(&pairs, "yllcorner")?,
-        number(&pairs, "xllcenter")?,
-        number(&pairs, "yllcenter")?,
+        number(pairs, "xllcorner")?,
+        number(pairs, "yllcorner")?,
+        number(pairs, "xllcenter")?,
+        number(pairs, "yllcenter")?,
     ) {
         (Some(x), Some(y), _, _) => {
             // GDAL's fix for grids whose cellsize lost precision (global
@@ -250,20 +281,18 @@ pub(super) fn read(
             "the ASCII grid's origin is not finite".into(),
         ));
     }
+    Ok(transform)
+}
 
-    let crs = resolve_crs(
-        Err(
-            "an ESRI ASCII grid has no CRS of its own (it is in a .prj side file, \
-             which is not read)"
-                .into(),
-        ),
-        crs,
-    )?;
-
-    // The cell type and nodata value, as GDAL decides them.
+/// The cell type and nodata value, as GDAL decides them: Int32 unless the
+/// nodata value or any data value has a decimal point, comma or exponent.
+fn cell_type_and_nodata(
+    pairs: &[(String, String)],
+    data: &[u8],
+) -> Result<(CellType, Option<f64>), TerrainError> {
     let mut cell_type = CellType::Int32;
     let mut nodata: Option<f64> = None;
-    if let Some(text) = get(&pairs, "nodata_value") {
+    if let Some(text) = get(pairs, "nodata_value") {
         if text == "null" {
             cell_type = CellType::Float32;
             nodata = Some(-f64::from(f32::MAX));
@@ -293,6 +322,17 @@ pub(super) fn read(
         cell_type = CellType::Float32;
         nodata = nodata.map(nodata_to_float);
     }
+    Ok((cell_type, nodata))
+}
+
+/// The `ncols`×`nrows` values of `data`, nodata and infinite ones `NaN`.
+fn read_values(
+    data: &[u8],
+    [ncols, nrows]: [u64; 2],
+    cell_type: CellType,
+    nodata: Option<f64>,
+) -> Result<Vec<f64>, TerrainError> {
+    let n_cells = ncols * nrows; // fits: checked against the limits
     let nodata_int = nodata
         .filter(|v| *v >= f64::from(i32::MIN) && *v <= f64::from(i32::MAX))
         .map(|v| v.trunc());
@@ -369,16 +409,7 @@ pub(super) fn read(
         };
         values.push(v);
     }
-
-    Ok(Dem {
-        width: ncols as usize,
-        height: nrows as usize,
-        values,
-        nodata,
-        transform,
-        crs,
-        format: DemFormat::Asc,
-    })
+    Ok(values)
 }
 
 #[cfg(test)]
