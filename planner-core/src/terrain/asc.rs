@@ -249,7 +249,7 @@ fn georeferencing(
         (Some(x), Some(y), _, _) => {
             // GDAL's fix for grids whose cellsize lost precision (global
             // grids of 360·k columns starting at -180).
-            if ncols % 360 == 0
+            if ncols.is_multiple_of(360)
                 && (x + 180.0).abs() < 1e-12
                 && dx == dy
                 && (dx - 360.0 / ncols as f64).abs() < 1e-9
