@@ -410,3 +410,68 @@ fn route_faults_exit_2() {
         "cannot be reached",
     );
 }
+
+/// `--block` with an area over the replan's start or over the goal: the
+/// service's replanning rules refuse it, exit 2 naming the flag or file.
+#[test]
+fn blocking_an_end_exits_2() {
+    let cm = dtm_costmap();
+    let tif = cm.tif.to_str().unwrap();
+    let picked = mcp(&["pick", tif]);
+    let (from, to) = (
+        dtm_cell_utm(&picked["start"]),
+        dtm_cell_utm(&picked["goal"]),
+    );
+    let out = cm.dir.join("ends");
+    let out = out.to_str().unwrap();
+    let o = terraplan(&["route", tif, "--from", &from, "--to", &to, "--out", out]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let r = read_json(&Path::new(out).join("route.json"));
+    let wps = r["waypoints"].as_array().unwrap();
+    let lonlat = |w: &Value| [w["lon"].as_f64().unwrap(), w["lat"].as_f64().unwrap()];
+    // A square of about 6 m around a point, at 38.8°N.
+    let square = |name: &str, [lon, lat]: [f64; 2]| -> PathBuf {
+        let (dlon, dlat) = (3.0 / 86_800.0, 3.0 / 111_000.0);
+        let ring = [
+            [lon - dlon, lat - dlat],
+            [lon + dlon, lat - dlat],
+            [lon + dlon, lat + dlat],
+            [lon - dlon, lat + dlat],
+            [lon - dlon, lat - dlat],
+        ];
+        let path = cm.dir.join(name);
+        std::fs::write(
+            &path,
+            json!({"type": "Polygon", "coordinates": [ring]}).to_string(),
+        )
+        .unwrap();
+        path
+    };
+    let at_start = square("start.geojson", lonlat(&wps[0]));
+    let at_goal = square("goal.geojson", lonlat(wps.last().unwrap()));
+    let fails = |block: &Path, says: &str| {
+        let b = block.to_str().unwrap();
+        let args = [
+            "route", tif, "--from", &from, "--to", &to, "--block", b, "--out", out,
+        ];
+        let o = terraplan(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", text(&o.stderr));
+        let err = text(&o.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    };
+    fails(
+        &at_start,
+        "--from: the position is inside an area this replan blocks",
+    );
+    fails(
+        &at_goal,
+        &format!(
+            "--block {}: this area covers the route's goal",
+            at_goal.display()
+        ),
+    );
+    assert!(
+        !Path::new(out).join("replanned").exists(),
+        "a refused replan wrote files"
+    );
+}

@@ -10,7 +10,7 @@ use planner_core::costmap::{
     Costmap, CostmapError, CostmapOptions, Layer, Stage, VehiclePreset, VehicleSpec, legend_svg,
     preview_png,
 };
-use planner_core::geo::Issue;
+use planner_core::geo::{Issue, deserialize_at};
 use planner_core::terrain::DemLimits;
 use serde_json::json;
 
@@ -173,14 +173,13 @@ fn read_vehicle(args: &CostmapArgs) -> Result<(VehicleSource<'_>, VehicleSpec), 
                 )));
             }
             let doc = read_json(path, "vehicle")?;
-            let spec = crate::api::costmaps::deserialize_at::<VehicleSpec>(&doc, "/vehicle")
-                .map_err(|i| {
-                    Failure::input(describe_costmap_issues(
-                        &[i],
-                        &VehicleSource::File(path),
-                        None,
-                    ))
-                })?;
+            let spec = deserialize_at::<VehicleSpec>(&doc, "/vehicle").map_err(|i| {
+                Failure::input(describe_costmap_issues(
+                    &[i],
+                    &VehicleSource::File(path),
+                    None,
+                ))
+            })?;
             (VehicleSource::File(path), spec)
         }
     })
@@ -195,7 +194,7 @@ fn read_options(
         None => CostmapOptions::default(),
         Some(path) => {
             let doc = read_json(path, "options")?;
-            crate::api::costmaps::deserialize_at::<CostmapOptions>(&doc, "/options")
+            deserialize_at::<CostmapOptions>(&doc, "/options")
                 .map_err(|i| Failure::input(describe(&[i])))?
         }
     };

@@ -15,7 +15,6 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 pub use self::model::costmap_url;
-pub use self::request::deserialize_at;
 use crate::state::AppState;
 
 /// The costmap endpoints.

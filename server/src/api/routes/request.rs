@@ -4,12 +4,13 @@
 
 use geo::{CoordsIter, Orient, orient::Direction};
 use geo_types::{LineString, Polygon};
-use planner_core::geo::{Issue, Limits, MAX_ISSUES, parse_polygons, polygon_issues};
+use planner_core::geo::{
+    Issue, Limits, MAX_ISSUES, deserialize_at, escape_pointer_token, parse_polygons, polygon_issues,
+};
 use planner_core::route::{ArcCost, Position};
 use serde_json::{Map, Value, json};
 
 use super::model::{Changes, SearchOptions};
-use crate::api::costmaps::deserialize_at;
 use crate::error::ApiError;
 
 const NAME_MAX_CHARS: usize = 200;
@@ -32,10 +33,6 @@ const COST_MAX: f64 = 1e6;
 const POSITION_FORMS: &str =
     "[lon, lat] (WGS84 degrees) or {\"utm\": [easting, northing]} (metres in the route's UTM zone)";
 
-fn escape_pointer(key: &str) -> String {
-    key.replace('~', "~0").replace('/', "~1")
-}
-
 fn unknown_fields(
     obj: &Map<String, Value>,
     allowed: &[&str],
@@ -44,7 +41,7 @@ fn unknown_fields(
 ) {
     for key in obj.keys().filter(|k| !allowed.contains(&k.as_str())) {
         issues.push(Issue::new(
-            &format!("/{}", escape_pointer(key)),
+            &format!("/{}", escape_pointer_token(key)),
             &format!("unknown field {key:?}: expected {expected}"),
         ));
     }
@@ -128,7 +125,7 @@ fn parse_position(
         Some(Value::Object(o)) => {
             if let Some(key) = o.keys().find(|k| *k != "utm") {
                 return fault(
-                    &format!("{pointer}/{}", escape_pointer(key)),
+                    &format!("{pointer}/{}", escape_pointer_token(key)),
                     &format!(
                         "unknown field {key:?}: a UTM position is {{\"utm\": [easting, northing]}}"
                     ),
@@ -454,7 +451,7 @@ fn parse_cost_change(
         .filter(|k| !["area", "cost"].contains(&k.as_str()))
     {
         issues.push(Issue::new(
-            &format!("{pointer}/{}", escape_pointer(key)),
+            &format!("{pointer}/{}", escape_pointer_token(key)),
             &format!("unknown field {key:?}: expected area or cost"),
         ));
     }
