@@ -14,7 +14,7 @@ use planner_core::geo::{Issue, deserialize_at};
 use planner_core::terrain::DemLimits;
 use serde_json::json;
 
-use super::{Failure, list_issues, read_dem_file, read_json};
+use super::common::{Failure, list_issues, read_dem_file, read_json};
 
 #[derive(clap::Args)]
 pub(super) struct CostmapArgs {

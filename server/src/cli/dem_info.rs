@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use planner_core::terrain::{DemInfo, DemLimits};
 use serde::Serialize;
 
-use super::{Failure, read_dem_file};
+use super::common::{Failure, read_dem_file};
 
 #[derive(clap::Args)]
 pub(super) struct DemInfoArgs {

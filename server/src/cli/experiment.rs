@@ -25,7 +25,7 @@ use planner_core::survey::{SurveyRequest, plan_survey_over};
 use planner_core::terrain::{Dem, DemLimits, read_dem};
 use serde_json::{Value, json};
 
-use super::Failure;
+use super::common::Failure;
 
 const ROI: &str = include_str!("../../experiments/flock/roi.geojson");
 const NO_FLY: &str = include_str!("../../experiments/flock/no_fly.geojson");

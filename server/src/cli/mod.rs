@@ -4,19 +4,15 @@
 //! message names the fault), 1 any other failure.
 //!
 //! This module parses the arguments and dispatches; each subcommand has
-//! its own file, and the helpers they share (reading JSON and DEM files,
-//! listing faults) are here.
+//! its own file, and what they share is in `common`.
 
-use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use planner_core::geo::Issue;
-use planner_core::terrain::{Dem, DemLimits, TerrainError, read_dem};
-use serde_json::Value;
 
 use crate::config::ServeConfig;
 
+mod common;
 mod costmap;
 mod dem_info;
 mod experiment;
@@ -57,27 +53,6 @@ enum Command {
     Experiment(experiment::ExperimentCommand),
 }
 
-/// A failure with its exit status.
-struct Failure {
-    status: u8,
-    message: String,
-}
-
-impl Failure {
-    fn input(message: impl Into<String>) -> Self {
-        Failure {
-            status: 2,
-            message: message.into(),
-        }
-    }
-    fn other(message: impl Into<String>) -> Self {
-        Failure {
-            status: 1,
-            message: message.into(),
-        }
-    }
-}
-
 pub fn run() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(c) => c,
@@ -101,60 +76,5 @@ pub fn run() -> ExitCode {
             eprintln!("error: {}", f.message);
             ExitCode::from(f.status)
         }
-    }
-}
-
-fn read_json(path: &Path, what: &str) -> Result<Value, Failure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Failure::input(format!("cannot read {what} file {}: {e}", path.display())))?;
-    serde_json::from_str(&text).map_err(|e| {
-        Failure::input(format!(
-            "{what} file {} is not valid JSON: {e}",
-            path.display()
-        ))
-    })
-}
-
-/// Read a DEM file as the service reads an upload: (DEM, file name, size).
-/// `crs_flag` names the option that gave `crs`, for messages.
-fn read_dem_file(
-    file: &Path,
-    crs: Option<&str>,
-    crs_flag: &str,
-    limits: DemLimits,
-) -> Result<(Dem, Option<String>, u64), Failure> {
-    let path = file.display();
-    let crs = crs
-        .map(crate::api::dems::parse_epsg)
-        .transpose()
-        .map_err(|m| Failure::input(format!("{crs_flag}: {m}")))?;
-    let bytes = std::fs::read(file)
-        .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
-    let file_name = file.file_name().map(|n| n.to_string_lossy().into_owned());
-    let describe = |e: TerrainError| {
-        Failure::input(match e {
-            TerrainError::UnknownCrs(why) => format!(
-                "{path}: the raster's coordinate reference system cannot be determined ({why}); \
-                 give it with {crs_flag}, e.g. {crs_flag} EPSG:32633"
-            ),
-            TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
-            other => format!("{path}: {other}"),
-        })
-    };
-    let dem = read_dem(&bytes, file_name.as_deref(), crs, &limits).map_err(describe)?;
-    Ok((dem, file_name, bytes.len() as u64))
-}
-
-/// "invalid input: …" with each issue on its own line, its pointer turned
-/// into a place the user knows by `locate`.
-fn list_issues(issues: &[Issue], locate: impl Fn(&str) -> String) -> String {
-    let lines: Vec<String> = planner_core::geo::cap_issues(issues.to_vec())
-        .iter()
-        .map(|i| format!("{}: {}", locate(&i.pointer), i.message))
-        .collect();
-    if lines.len() == 1 {
-        format!("invalid input: {}", lines[0])
-    } else {
-        format!("invalid input:\n  {}", lines.join("\n  "))
     }
 }

@@ -15,7 +15,7 @@ use planner_core::route::{
 use planner_core::terrain::DemLimits;
 use serde_json::{Map, Value, json};
 
-use super::{Failure, read_dem_file, read_json};
+use super::common::{Failure, list_issues, read_dem_file, read_json};
 
 #[derive(clap::Args)]
 pub(super) struct RouteArgs {
@@ -163,9 +163,8 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
     let mut blocked = Vec::new();
     for path in &args.block {
         let doc = read_json(path, "blocked area")?;
-        let parsed = planner_core::geo::parse_polygons(&doc, "").map_err(|issues| {
-            super::list_issues(&issues, |ptr| format!("{}#{ptr}", path.display()))
-        });
+        let parsed = planner_core::geo::parse_polygons(&doc, "")
+            .map_err(|issues| list_issues(&issues, |ptr| format!("{}#{ptr}", path.display())));
         blocked.extend(
             parsed
                 .map_err(Failure::input)?

@@ -1,6 +1,6 @@
 //! `terraplan serve`: the HTTP service on its own async runtime.
 
-use super::Failure;
+use super::common::Failure;
 use crate::config::ServeConfig;
 
 pub(super) fn serve(config: ServeConfig) -> Result<(), Failure> {

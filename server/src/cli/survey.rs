@@ -9,7 +9,7 @@ use planner_core::survey::{DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, 
 use planner_core::terrain::DemLimits;
 use serde_json::{Value, json};
 
-use super::{Failure, list_issues, read_dem_file, read_json};
+use super::common::{Failure, list_issues, read_dem_file, read_json};
 
 #[derive(clap::Args)]
 pub(super) struct SurveyArgs {
