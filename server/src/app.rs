@@ -23,8 +23,7 @@ use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::{cameras, costmaps, dems, health, routes, surveys, vehicles};
 use crate::error::ApiError;
-/// Former home of the state, for code not moved to `crate::state` yet.
-pub use crate::state::{AppState, Work, off_runtime};
+use crate::state::AppState;
 
 #[derive(OpenApi)]
 #[openapi(

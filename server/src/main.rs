@@ -9,12 +9,6 @@ mod config;
 mod conn;
 mod db;
 mod error;
-/// Former home of the costmap jobs (`jobs`) and `now_millis` (`clock`),
-/// for code not moved to them yet.
-mod costmap_jobs {
-    pub use crate::clock::now_millis;
-    pub use crate::jobs::*;
-}
 mod jobs;
 mod linger;
 mod memory;

@@ -12,9 +12,6 @@ pub mod routes;
 pub mod surveys;
 pub mod vehicles;
 
-/// Former home of `rfc3339`, for handlers not moved to `crate::clock` yet.
-pub use crate::clock::rfc3339;
-
 /// The first 8 characters of an id, for download file names.
 pub fn short_id(id: &str) -> &str {
     id.get(..8).unwrap_or(id)

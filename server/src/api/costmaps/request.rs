@@ -5,9 +5,8 @@
 use std::sync::Arc;
 
 use planner_core::costmap::{CostmapOptions, Vehicle, VehicleSpec};
-use planner_core::geo::Issue;
+use planner_core::geo::{Issue, deserialize_at, escape_pointer_token};
 use planner_core::terrain::{Dem, TerrainSampler};
-use serde::de::DeserializeOwned;
 use serde_json::Value;
 
 use crate::api::names::control_character_issue;
@@ -16,33 +15,6 @@ use crate::error::ApiError;
 const NAME_MAX_CHARS: usize = 200;
 /// Fields of `POST /api/v1/costmaps`.
 const FIELDS: [&str; 4] = ["name", "dem_id", "vehicle", "options"];
-
-fn escape_pointer(key: &str) -> String {
-    key.replace('~', "~0").replace('/', "~1")
-}
-
-/// Deserialize `value`, a fault reported at its JSON pointer under `prefix`.
-pub fn deserialize_at<T: DeserializeOwned>(value: &Value, prefix: &str) -> Result<T, Issue> {
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        use serde_path_to_error::Segment;
-        let mut pointer = prefix.to_string();
-        for segment in e.path().iter() {
-            match segment {
-                Segment::Seq { index } => pointer.push_str(&format!("/{index}")),
-                Segment::Map { key } => {
-                    pointer.push('/');
-                    pointer.push_str(&escape_pointer(key));
-                }
-                Segment::Enum { variant } => {
-                    pointer.push('/');
-                    pointer.push_str(&escape_pointer(variant));
-                }
-                Segment::Unknown => {}
-            }
-        }
-        Issue::new(&pointer, &e.into_inner().to_string())
-    })
-}
 
 /// A checked `POST /api/v1/costmaps` body.
 pub(super) struct CostmapRequest {
@@ -66,7 +38,7 @@ pub(super) fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
     let mut issues = Vec::new();
     for key in obj.keys().filter(|k| !FIELDS.contains(&k.as_str())) {
         issues.push(Issue::new(
-            &format!("/{}", escape_pointer(key)),
+            &format!("/{}", escape_pointer_token(key)),
             &format!("unknown field {key:?}: expected name, dem_id, vehicle or options"),
         ));
     }
@@ -185,6 +157,7 @@ pub(super) async fn landcover_crs_fault(
 
 #[cfg(test)]
 mod tests {
+    use planner_core::terrain::Crs;
     use serde_json::json;
 
     use super::*;

@@ -8,7 +8,7 @@ use axum::extract::{Path, Query, State, rejection::QueryRejection};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use geo_types::Coord;
-use planner_core::geo::Issue;
+use planner_core::geo::{Issue, escape_pointer_token};
 use planner_core::terrain::{Dem, TerrainError, TerrainSampler, hillshade_png};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -225,7 +225,7 @@ fn parse_points(doc: &Value) -> Result<Vec<(f64, f64)>, ApiError> {
     let mut issues = Vec::new();
     for key in obj.keys().filter(|k| k.as_str() != "points") {
         issues.push(Issue::new(
-            &format!("/{}", key.replace('~', "~0").replace('/', "~1")),
+            &format!("/{}", escape_pointer_token(key)),
             &format!("unknown field {key:?}: expected \"points\""),
         ));
     }
