@@ -20,6 +20,7 @@ use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+use super::dems::dem_fault;
 use super::json_body::JsonBody;
 use super::paging::{ListQuery, list};
 use super::short_id;
@@ -375,14 +376,12 @@ pub async fn create_survey(
         off_runtime(move || read_document(&mut doc).map(|r| (r, doc))).await??;
     let dem = match &dem_id {
         None => None,
-        Some(id) => Some(state.load_dem(id).await.map_err(|e| match e {
-            // In a survey request an unknown DEM is a fault of the request.
-            ApiError::NotFound(_) => ApiError::Validation(vec![Issue::new(
-                DEM_POINTER,
-                &format!("no DEM with id {id:?}: upload it with POST /api/v1/dems first"),
-            )]),
-            other => other,
-        })?),
+        Some(id) => Some(
+            state
+                .load_dem(id)
+                .await
+                .map_err(|e| dem_fault(e, DEM_POINTER, id))?,
+        ),
     };
     let limits = state.limits.clone();
     let started = std::time::Instant::now();
