@@ -193,9 +193,8 @@ fn cell_extremes_m(dem: &Dem) -> [f64; 2] {
         return [r[0].min(r[1]), r[0].max(r[1])];
     }
     let rows = [0.5, dem.height as f64 / 2.0, dem.height as f64 - 0.5];
-    let sizes = rows.map(|r| {
-        crate::terrain::cell_size_m(&dem.transform, true, dem.width as f64 / 2.0, r)
-    });
+    let sizes =
+        rows.map(|r| crate::terrain::cell_size_m(&dem.transform, true, dem.width as f64 / 2.0, r));
     let lo = sizes
         .iter()
         .flatten()
