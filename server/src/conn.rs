@@ -25,7 +25,7 @@ use std::future::Future;
 use std::io;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll, ready};
 use std::time::Duration;
 
@@ -38,10 +38,11 @@ use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, mpsc, watch};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc, watch};
 use tokio::time::{Instant, Sleep};
 use tower::ServiceExt;
 
+use crate::conn_state::{Activity, Busy, ConnState, lock};
 use crate::error::ApiError;
 use crate::linger::LingeringStream;
 
@@ -98,11 +99,6 @@ pub fn file_limit() -> Option<u64> {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    // The state guarded holds no invariant a panic could break half-way.
-    m.lock().unwrap_or_else(|p| p.into_inner())
-}
-
 /// The open connections, oldest first, and the slots they take.
 struct Registry {
     slots: Arc<Semaphore>,
@@ -114,102 +110,6 @@ struct Registry {
     /// `--body-min-bytes-per-s`: a body behind it may be closed to make
     /// room (it would time out anyway).
     min_rate: u64,
-}
-
-/// What the accept loop and a connection's tasks share about it.
-pub struct ConnState {
-    inner: Mutex<Activity>,
-    evict: Notify,
-    /// Ended by a read timeout: there is little point lingering.
-    timed_out: AtomicBool,
-}
-
-struct Activity {
-    /// Requests whose answers are not yet sent.
-    in_flight: usize,
-    /// When it last had no request in hand.
-    idle_since: Instant,
-    /// The request body being read: when its reading began, and the
-    /// bytes received so far.
-    body: Option<(Instant, u64)>,
-    evicted: bool,
-}
-
-impl Activity {
-    /// Its request body has been read for `grace` at least, and has come
-    /// slower than `min_rate` bytes/s.
-    fn crawling(&self, min_rate: u64, grace: Duration) -> bool {
-        self.body.is_some_and(|(started, received)| {
-            let t = started.elapsed();
-            min_rate > 0
-                && t >= grace
-                && u128::from(received) * 1000 < u128::from(min_rate) * t.as_millis()
-        })
-    }
-}
-
-impl ConnState {
-    fn new() -> ConnState {
-        ConnState {
-            inner: Mutex::new(Activity {
-                in_flight: 0,
-                idle_since: Instant::now(),
-                body: None,
-                evicted: false,
-            }),
-            evict: Notify::new(),
-            timed_out: AtomicBool::new(false),
-        }
-    }
-
-    fn begin_request(self: &Arc<Self>) -> Busy {
-        lock(&self.inner).in_flight += 1;
-        Busy(self.clone())
-    }
-
-    /// Closed to make room for another connection.
-    pub fn is_evicted(&self) -> bool {
-        lock(&self.inner).evicted
-    }
-
-    /// Resolves once the connection is closed to make room.
-    pub async fn evicted(&self) {
-        loop {
-            let notified = self.evict.notified();
-            tokio::pin!(notified);
-            notified.as_mut().enable();
-            if self.is_evicted() {
-                return;
-            }
-            notified.await;
-        }
-    }
-
-    /// A header or body read timed out on it.
-    pub fn timed_out(&self) -> bool {
-        self.timed_out.load(Ordering::Acquire)
-    }
-
-    fn set_timed_out(&self) {
-        self.timed_out.store(true, Ordering::Release);
-    }
-
-    fn set_body(&self, body: Option<(Instant, u64)>) {
-        lock(&self.inner).body = body;
-    }
-}
-
-/// A request in hand, until its answer is sent (or dropped).
-struct Busy(Arc<ConnState>);
-
-impl Drop for Busy {
-    fn drop(&mut self) {
-        let mut a = lock(&self.0.inner);
-        a.in_flight -= 1;
-        if a.in_flight == 0 {
-            a.idle_since = Instant::now();
-        }
-    }
 }
 
 /// A connection's place under the limit, held until its socket closes.
@@ -265,15 +165,14 @@ impl Registry {
         let crawling = |a: &Activity| a.crawling(self.min_rate, self.grace);
         let pick = |rule: &dyn Fn(&Activity) -> bool| {
             open.values().find(|state| {
-                let a = lock(&state.inner);
+                let a = state.activity();
                 !a.evicted && rule(&a)
             })
         };
         let Some(state) = pick(&idle).or_else(|| pick(&crawling)) else {
             return false;
         };
-        lock(&state.inner).evicted = true;
-        state.evict.notify_waiters();
+        state.evict();
         true
     }
 
@@ -402,7 +301,11 @@ async fn serve_connection(
     mut stop: watch::Receiver<bool>,
 ) {
     let state = slot.state().clone();
-    let io = TokioIo::new(ParseErrorAnswers::new(LingeringStream::new(stream, slot)));
+    let io = TokioIo::new(ParseErrorAnswers::new(LingeringStream::new(
+        stream,
+        state.clone(),
+        slot,
+    )));
     let mut builder = hyper::server::conn::http1::Builder::new();
     builder
         .timer(TokioTimer::new())
@@ -437,7 +340,7 @@ async fn serve_connection(
                 // No request in hand (idle, or its head still coming), or
                 // one whose body crawls in: nothing to finish (hyper would
                 // wait for a head begun, a handler for its body).
-                let a = lock(&state.inner);
+                let a = state.activity();
                 if a.in_flight == 0 || a.crawling(min_rate, CRAWL_GRACE) {
                     break;
                 }

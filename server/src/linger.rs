@@ -13,13 +13,14 @@
 
 use std::io;
 use std::pin::Pin;
+use std::sync::Arc;
 use std::task::{Context, Poll};
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, ReadBuf};
 use tokio::net::TcpStream;
 
-use crate::conn::Slot;
+use crate::conn_state::ConnState;
 
 /// Longest a closing connection is read from in all (nginx's
 /// `lingering_time`).
@@ -33,17 +34,22 @@ const TIMED_OUT_LINGER_TOTAL: Duration = Duration::from_secs(2);
 const TIMED_OUT_LINGER_IDLE: Duration = Duration::from_secs(1);
 
 /// A connection that, when dropped, lingers in a task of its own; its
-/// place under the connection limit is held until the socket closes.
+/// place under the connection limit (`slot`, dropped to give it back) is
+/// held until the socket closes.
 pub struct LingeringStream {
     stream: Option<TcpStream>,
-    slot: Option<Slot>,
+    slot: Option<(Arc<ConnState>, Box<dyn Send>)>,
 }
 
 impl LingeringStream {
-    pub fn new(stream: TcpStream, slot: Slot) -> LingeringStream {
+    pub fn new(
+        stream: TcpStream,
+        state: Arc<ConnState>,
+        slot: impl Send + 'static,
+    ) -> LingeringStream {
         LingeringStream {
             stream: Some(stream),
-            slot: Some(slot),
+            slot: Some((state, Box::new(slot))),
         }
     }
 
@@ -96,10 +102,9 @@ impl AsyncWrite for LingeringStream {
 
 impl Drop for LingeringStream {
     fn drop(&mut self) {
-        let (Some(stream), Some(slot)) = (self.stream.take(), self.slot.take()) else {
+        let (Some(stream), Some((state, slot))) = (self.stream.take(), self.slot.take()) else {
             return;
         };
-        let state = slot.state().clone();
         // Closed to make room: at once.
         if state.is_evicted() {
             return;

@@ -7,6 +7,7 @@ mod cli;
 mod clock;
 mod config;
 mod conn;
+mod conn_state;
 mod db;
 mod error;
 mod jobs;
