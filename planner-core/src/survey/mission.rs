@@ -10,7 +10,7 @@ use super::flock_plan::SortieTour;
 use super::homes::FlockSetup;
 use super::request::{Flight, PlanError, SurveyParams};
 use super::result::{SortiePlan, UavPlan, UavStats};
-use super::terrain_flight::fly_tour;
+use super::terrain_flight::{UavTerrain, fly_tour};
 use super::terrain_prep::OverDem;
 use crate::coverage::{self, SurveyGeometry};
 use crate::export::{FencePolygon, GeoPoint, Mission, MissionItem};
@@ -83,7 +83,7 @@ fn fly(
     params: &SurveyParams,
     flight: &Flight,
     proj: &UtmProjection,
-) -> Result<(Mission, f64, Option<super::UavTerrain>), PlanError> {
+) -> Result<(Mission, f64, Option<UavTerrain>), PlanError> {
     let altitude = flight.altitude;
     Ok(match home_amsl {
         None => {
