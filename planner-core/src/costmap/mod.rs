@@ -22,6 +22,7 @@ pub mod grid;
 pub mod inflate;
 pub mod landcover;
 pub mod normals;
+pub mod params;
 pub mod pipeline;
 pub mod preview;
 pub mod progress;
