@@ -258,18 +258,8 @@ impl SurveyParams {
     /// Parse a params JSON value; unknown fields and wrong types are
     /// reported with the pointer of the member at fault.
     pub fn from_json(value: &Value, pointer: &str) -> Result<Self, Vec<Issue>> {
-        let params: SurveyParams = serde_path_to_error::deserialize(value).map_err(|e| {
-            let path = e.path().to_string();
-            let ptr = if path == "." {
-                pointer.to_string()
-            } else {
-                format!(
-                    "{pointer}/{}",
-                    path.replace(['.', '['], "/").replace(']', "")
-                )
-            };
-            vec![Issue::new(&ptr, &e.into_inner().to_string())]
-        })?;
+        let params: SurveyParams =
+            crate::geo::deserialize_at(value, pointer).map_err(|issue| vec![issue])?;
         params.validate(pointer)?;
         Ok(params)
     }
