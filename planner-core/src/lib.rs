@@ -15,6 +15,7 @@ pub mod export;
 pub mod flock;
 pub mod geo;
 pub mod num;
+pub mod overlay;
 pub mod route;
 pub mod survey;
 pub mod terrain;

@@ -4,7 +4,7 @@
 
 use geo::Area;
 
-use crate::geo::overlay::{intersection, unary_union};
+use crate::overlay::{intersection, unary_union};
 use geo_types::{Coord, LineString, MultiPolygon, Polygon};
 
 use super::Lane;

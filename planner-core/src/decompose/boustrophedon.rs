@@ -123,7 +123,7 @@ fn local_rings(free: &MultiPolygon<f64>, frame: &SliceFrame) -> (Vec<Vec<Coord<f
                 .orient(Direction::Default)
         })
         .collect();
-    let local = crate::geo::overlay::union_with_fill_rule(&local, FillRule::NonZero);
+    let local = crate::overlay::union_with_fill_rule(&local, FillRule::NonZero);
     let mut rings = Vec::new();
     let mut area = 0.0;
     for poly in &local {

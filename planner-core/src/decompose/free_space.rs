@@ -2,7 +2,7 @@
 
 use geo::algorithm::bool_ops::FillRule;
 
-use crate::geo::overlay;
+use crate::overlay;
 use geo::orient::Direction;
 use geo::{Area, BoundingRect, CoordsIter, Intersects, Orient};
 use geo_types::{MultiPolygon, Polygon};

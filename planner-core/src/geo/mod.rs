@@ -3,7 +3,6 @@
 
 mod clearance;
 mod geojson_input;
-pub mod overlay;
 mod utm;
 mod validate;
 

@@ -30,7 +30,7 @@ pub(super) fn roi_minus(area: &SurveyArea, zones: &[Polygon<f64>]) -> MultiPolyg
     }
     if area.roi.0.len() > 1 {
         // Overlapping ROI parts must not be surveyed twice.
-        crate::geo::overlay::unary_union(parts.iter())
+        crate::overlay::unary_union(parts.iter())
     } else {
         MultiPolygon(parts)
     }
@@ -38,7 +38,7 @@ pub(super) fn roi_minus(area: &SurveyArea, zones: &[Polygon<f64>]) -> MultiPolyg
 
 /// One pass over all zones: folding pairwise unions is quadratic.
 pub(super) fn nfz_union(no_fly: &[Polygon<f64>]) -> MultiPolygon<f64> {
-    crate::geo::overlay::unary_union(no_fly.iter())
+    crate::overlay::unary_union(no_fly.iter())
 }
 
 /// Cells at one slice angle and the lawnmower plan of each.
