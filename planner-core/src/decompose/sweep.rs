@@ -363,98 +363,18 @@ impl Sweep<'_> {
         let eps = self.eps;
         let cl = &clusters[w.clusters.clone()];
         let old = &self.slots[w.slots.clone()];
-
-        // Right of x, edges through the same vertex are ordered by slope;
-        // edges between clusters keep their (still valid) old order, which the
-        // stable sort preserves. Kept edges are listed before new ones so that
-        // coincident edges keep a stable order too.
-        let rank = |y: f64| -> usize {
-            let i = cl.partition_point(|c| c.yhi + eps < y);
-            if i < cl.len() && y >= cl[i].ylo - eps {
-                2 * i + 1
-            } else {
-                2 * i
-            }
-        };
-        let mut order: Vec<(usize, f64, u32)> = Vec::with_capacity(old.len() + 4);
-        for s in old {
-            let e = self.edge(s.edge);
-            if e.x1 > x {
-                let r = rank(e.y_at(x));
-                order.push((r, if r % 2 == 1 { e.slope } else { 0.0 }, s.edge));
-            }
-        }
-        for c in cl {
-            for &(_, _, id) in &points[c.points.clone()] {
-                if id != NO_EDGE {
-                    let e = self.edge(id);
-                    let r = rank(e.y0);
-                    order.push((r, if r % 2 == 1 { e.slope } else { 0.0 }, id));
-                }
-            }
-        }
-        order.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        let order = self.order_right_of(x, cl, old, points);
 
         let base = match w.slots.start {
             0 => 0,
             a => self.slots[a - 1].wind,
         };
-        let mut new_slots = Vec::with_capacity(order.len());
-        let mut wind = base;
-        for &(_, _, edge) in &order {
-            wind += self.edge(edge).wind;
-            new_slots.push(Slot {
-                edge,
-                wind,
-                cell: NO_CELL,
-            });
-        }
-        let old_top = old.last().map_or(base, |s| s.wind);
-        if wind != old_top {
-            return Err(SweepFailure::Inconsistent);
-        }
+        let mut new_slots = self.wound_slots(&order, old, base)?;
 
         let old_runs = self.runs(old, base, x)?;
         let new_runs = self.runs(&new_slots, base, x)?;
-        // A run whose edges coincide up to the next vertex encloses nothing.
-        let live: Vec<bool> = new_runs
-            .iter()
-            .map(|r| {
-                let (lo, hi) = (
-                    self.edge(new_slots[r.lower].edge),
-                    self.edge(new_slots[r.upper].edge),
-                );
-                let xr = lo.x1.min(hi.x1);
-                r.yhi - r.ylo > eps || hi.y_at(xr) - lo.y_at(xr) > eps
-            })
-            .collect();
-
-        // Neighbours across x: runs whose extents on the line overlap by more
-        // than eps. Both lists are sorted and disjoint, so a merge walk finds
-        // all pairs.
-        let mut right: Vec<(u32, usize)> = vec![(0, 0); old_runs.len()];
-        let mut left: Vec<(u32, usize)> = vec![(0, 0); new_runs.len()];
-        let (mut i, mut j) = (0, 0);
-        while i < old_runs.len() && j < new_runs.len() {
-            let (o, n) = (&old_runs[i], &new_runs[j]);
-            if o.cell == NO_CELL {
-                i += 1;
-                continue;
-            }
-            if !live[j] {
-                j += 1;
-                continue;
-            }
-            if o.yhi.min(n.yhi) - o.ylo.max(n.ylo) > eps {
-                right[i] = (right[i].0 + 1, j);
-                left[j] = (left[j].0 + 1, i);
-            }
-            if o.yhi < n.yhi {
-                i += 1;
-            } else {
-                j += 1;
-            }
-        }
+        let live = self.live_runs(&new_runs, &new_slots);
+        let (right, left) = neighbours(&old_runs, &new_runs, &live, eps);
 
         for (i, o) in old_runs.iter().enumerate() {
             if o.cell == NO_CELL {
@@ -488,6 +408,92 @@ impl Sweep<'_> {
             }
         }
         Ok(new_slots)
+    }
+
+    /// The edges of a window right of `x` in their new order: kept edges
+    /// (still crossing past `x`) and the edges starting at the clusters'
+    /// vertices, as (rank, slope, edge id).
+    fn order_right_of(
+        &self,
+        x: f64,
+        cl: &[Cluster],
+        old: &[Slot],
+        points: &[(f64, i32, u32)],
+    ) -> Vec<(usize, f64, u32)> {
+        let eps = self.eps;
+        // Right of x, edges through the same vertex are ordered by slope;
+        // edges between clusters keep their (still valid) old order, which the
+        // stable sort preserves. Kept edges are listed before new ones so that
+        // coincident edges keep a stable order too.
+        let rank = |y: f64| -> usize {
+            let i = cl.partition_point(|c| c.yhi + eps < y);
+            if i < cl.len() && y >= cl[i].ylo - eps {
+                2 * i + 1
+            } else {
+                2 * i
+            }
+        };
+        let mut order: Vec<(usize, f64, u32)> = Vec::with_capacity(old.len() + 4);
+        for s in old {
+            let e = self.edge(s.edge);
+            if e.x1 > x {
+                let r = rank(e.y_at(x));
+                order.push((r, if r % 2 == 1 { e.slope } else { 0.0 }, s.edge));
+            }
+        }
+        for c in cl {
+            for &(_, _, id) in &points[c.points.clone()] {
+                if id != NO_EDGE {
+                    let e = self.edge(id);
+                    let r = rank(e.y0);
+                    order.push((r, if r % 2 == 1 { e.slope } else { 0.0 }, id));
+                }
+            }
+        }
+        order.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        order
+    }
+
+    /// The window's new slots in `order`, with their windings counted up
+    /// from `base`; the winding above the window must be unchanged.
+    fn wound_slots(
+        &self,
+        order: &[(usize, f64, u32)],
+        old: &[Slot],
+        base: i32,
+    ) -> Result<Vec<Slot>, SweepFailure> {
+        let mut new_slots = Vec::with_capacity(order.len());
+        let mut wind = base;
+        for &(_, _, edge) in order {
+            wind += self.edge(edge).wind;
+            new_slots.push(Slot {
+                edge,
+                wind,
+                cell: NO_CELL,
+            });
+        }
+        let old_top = old.last().map_or(base, |s| s.wind);
+        if wind != old_top {
+            return Err(SweepFailure::Inconsistent);
+        }
+        Ok(new_slots)
+    }
+
+    /// Which new runs enclose something: a run whose edges coincide up to
+    /// the next vertex encloses nothing.
+    fn live_runs(&self, new_runs: &[Run], new_slots: &[Slot]) -> Vec<bool> {
+        let eps = self.eps;
+        new_runs
+            .iter()
+            .map(|r| {
+                let (lo, hi) = (
+                    self.edge(new_slots[r.lower].edge),
+                    self.edge(new_slots[r.upper].edge),
+                );
+                let xr = lo.x1.min(hi.x1);
+                r.yhi - r.ylo > eps || hi.y_at(xr) - lo.y_at(xr) > eps
+            })
+            .collect()
     }
 
     /// The free runs (winding > 0) of a window's slots, with their extent on
@@ -537,6 +543,40 @@ impl Sweep<'_> {
         }
         Ok(())
     }
+}
+
+/// Per run: how many runs across x it overlaps, and the last of them.
+type Links = Vec<(u32, usize)>;
+
+/// Neighbours across x: runs whose extents on the line overlap by more than
+/// eps. For each old run (`right`) and each live new run (`left`), how many
+/// runs on the other side it touches and the last of them. Both lists are
+/// sorted and disjoint, so a merge walk finds all pairs.
+fn neighbours(old_runs: &[Run], new_runs: &[Run], live: &[bool], eps: f64) -> (Links, Links) {
+    let mut right: Links = vec![(0, 0); old_runs.len()];
+    let mut left: Links = vec![(0, 0); new_runs.len()];
+    let (mut i, mut j) = (0, 0);
+    while i < old_runs.len() && j < new_runs.len() {
+        let (o, n) = (&old_runs[i], &new_runs[j]);
+        if o.cell == NO_CELL {
+            i += 1;
+            continue;
+        }
+        if !live[j] {
+            j += 1;
+            continue;
+        }
+        if o.yhi.min(n.yhi) - o.ylo.max(n.ylo) > eps {
+            right[i] = (right[i].0 + 1, j);
+            left[j] = (left[j].0 + 1, i);
+        }
+        if o.yhi < n.yhi {
+            i += 1;
+        } else {
+            j += 1;
+        }
+    }
+    (right, left)
 }
 
 /// Appends the points of a boundary on the slice line `x` going from `from`

@@ -8,7 +8,7 @@ use serde_json::{Map, Value, json};
 
 use super::geojson::{line_feature, mm};
 use super::mission::{AltitudeFrame, GeoPoint, Mission, MissionItem};
-use crate::route::on_map::MapRoute;
+use crate::route::MapRoute;
 
 /// The route as a GeoJSON Feature: a LineString through the waypoints,
 /// `[lon, lat, height above the WGS 84 ellipsoid]` when every waypoint's
@@ -100,7 +100,7 @@ mod tests {
     use crate::export::geoid::egm96_undulation_m;
     use crate::export::geojson::{ELLIPSOIDAL_HEIGHTS, NO_HEIGHTS};
     use crate::export::write_waypoints;
-    use crate::route::on_map::RoutePoint;
+    use crate::route::RoutePoint;
 
     fn sample_route(heights: bool) -> MapRoute {
         let point = |i: usize| RoutePoint {

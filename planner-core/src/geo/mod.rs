@@ -158,6 +158,65 @@ pub fn prepare_area(
     no_fly_pointer: &str,
     limits: &Limits,
 ) -> Result<SurveyArea, GeoError> {
+    let mut issues = limit_issues(roi, no_fly, roi_pointer, no_fly_pointer, limits);
+    if !issues.is_empty() {
+        return Err(GeoError::Invalid(issues));
+    }
+    issues.extend(polygon_issues_all(roi, no_fly)?);
+    if !issues.is_empty() {
+        return Err(GeoError::Invalid(issues));
+    }
+
+    let roi_wgs84 = MultiPolygon(
+        roi.iter()
+            .map(|p| p.polygon.orient(Direction::Default))
+            .collect::<Vec<_>>(),
+    );
+    let no_fly_wgs84: Vec<Polygon<f64>> = no_fly
+        .iter()
+        .map(|p| p.polygon.orient(Direction::Default))
+        .collect();
+    let centroid = roi_wgs84
+        .centroid()
+        .ok_or_else(|| GeoError::Invalid(vec![Issue::new(roi_pointer, "the ROI has no area")]))?;
+    let projection = UtmProjection::for_lonlat(centroid.0)?;
+
+    issues.extend(zone_width_issues(roi, &projection));
+    if !issues.is_empty() {
+        return Err(GeoError::Invalid(issues));
+    }
+
+    let roi_utm = MultiPolygon(
+        roi_wgs84
+            .0
+            .iter()
+            .map(|p| projection.polygon_to_utm(p))
+            .collect::<Result<Vec<_>, _>>()?,
+    );
+    let no_fly_utm = no_fly_wgs84
+        .iter()
+        .map(|p| projection.polygon_to_utm(p))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    check_area(&roi_utm, roi_pointer, limits)?;
+    Ok(SurveyArea {
+        projection,
+        roi_wgs84,
+        no_fly_wgs84,
+        roi: roi_utm,
+        no_fly: no_fly_utm,
+    })
+}
+
+/// The request-size limits: an ROI polygon at all, the number of no-fly
+/// zones and the vertex count.
+fn limit_issues(
+    roi: &[ParsedPolygon],
+    no_fly: &[ParsedPolygon],
+    roi_pointer: &str,
+    no_fly_pointer: &str,
+    limits: &Limits,
+) -> Vec<Issue> {
     let mut issues = Vec::new();
     if roi.is_empty() {
         issues.push(Issue::new(
@@ -189,32 +248,28 @@ pub fn prepare_area(
             ),
         ));
     }
-    if !issues.is_empty() {
-        return Err(GeoError::Invalid(issues));
-    }
+    issues
+}
+
+/// The faults of every ROI and no-fly polygon, checking for cancellation
+/// before each polygon and after the last.
+fn polygon_issues_all(
+    roi: &[ParsedPolygon],
+    no_fly: &[ParsedPolygon],
+) -> Result<Vec<Issue>, GeoError> {
+    let mut issues = Vec::new();
     for p in roi.iter().chain(no_fly) {
         crate::cancel::check()?;
         issues.extend(polygon_issues(&p.polygon, &p.pointer));
     }
     crate::cancel::check()?;
-    if !issues.is_empty() {
-        return Err(GeoError::Invalid(issues));
-    }
+    Ok(issues)
+}
 
-    let roi_wgs84 = MultiPolygon(
-        roi.iter()
-            .map(|p| p.polygon.orient(Direction::Default))
-            .collect::<Vec<_>>(),
-    );
-    let no_fly_wgs84: Vec<Polygon<f64>> = no_fly
-        .iter()
-        .map(|p| p.polygon.orient(Direction::Default))
-        .collect();
-    let centroid = roi_wgs84
-        .centroid()
-        .ok_or_else(|| GeoError::Invalid(vec![Issue::new(roi_pointer, "the ROI has no area")]))?;
-    let projection = UtmProjection::for_lonlat(centroid.0)?;
-
+/// ROI vertices too far from the central meridian of `projection` for one
+/// UTM zone, one issue per polygon.
+fn zone_width_issues(roi: &[ParsedPolygon], projection: &UtmProjection) -> Vec<Issue> {
+    let mut issues = Vec::new();
     let cm = projection.central_meridian();
     for p in roi {
         if let Some(c) = p.polygon.exterior().0.iter().find(|c| {
@@ -238,22 +293,15 @@ pub fn prepare_area(
             ));
         }
     }
-    if !issues.is_empty() {
-        return Err(GeoError::Invalid(issues));
-    }
+    issues
+}
 
-    let roi_utm = MultiPolygon(
-        roi_wgs84
-            .0
-            .iter()
-            .map(|p| projection.polygon_to_utm(p))
-            .collect::<Result<Vec<_>, _>>()?,
-    );
-    let no_fly_utm = no_fly_wgs84
-        .iter()
-        .map(|p| projection.polygon_to_utm(p))
-        .collect::<Result<Vec<_>, _>>()?;
-
+/// The projected ROI's area must be positive and within the limit.
+fn check_area(
+    roi_utm: &MultiPolygon<f64>,
+    roi_pointer: &str,
+    limits: &Limits,
+) -> Result<(), GeoError> {
     let area_km2 = roi_utm.unsigned_area() / 1e6;
     if area_km2 > limits.max_roi_area_km2 {
         return Err(GeoError::Invalid(vec![Issue::new(
@@ -270,13 +318,7 @@ pub fn prepare_area(
             "the ROI has no area",
         )]));
     }
-    Ok(SurveyArea {
-        projection,
-        roi_wgs84,
-        no_fly_wgs84,
-        roi: roi_utm,
-        no_fly: no_fly_utm,
-    })
+    Ok(())
 }
 
 #[cfg(test)]

@@ -37,6 +37,7 @@ mod bucket_queue;
 pub mod changes;
 mod dist_array;
 pub mod dstar_lite;
+pub mod map_route;
 mod neighbourhood;
 pub mod on_map;
 mod quaternary_heap;
@@ -48,7 +49,8 @@ mod tiles;
 pub use astar::astar;
 pub use changes::{BlockedEnd, CellChanges, ChangeError, ChangedArea};
 pub use dstar_lite::DStarLite;
-pub use on_map::{Endpoint, MapRoute, MapRouteError, Position, RouteMap, RoutePoint};
+pub use map_route::{MapRoute, RoutePoint};
+pub use on_map::{Endpoint, MapRouteError, Position, RouteMap};
 pub use smooth::{SegmentCost, polyline_cost, segment_cost, smooth_path, turning_points};
 
 use serde::{Deserialize, Serialize};
