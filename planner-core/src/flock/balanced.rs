@@ -148,18 +148,6 @@ fn best_move(
     let mut order: Vec<usize> = (0..m).collect();
     order.sort_by(|&a, &b| times[b].total_cmp(&times[a]));
     order.truncate(3);
-    let score_with = |v: usize, new_c: f64, new_v: f64| -> Score {
-        let rest = order
-            .iter()
-            .find(|&&k| k != c && k != v)
-            .map_or(0.0, |&k| times[k]);
-        Score {
-            makespan: rest.max(new_c).max(new_v),
-            sum_sq: current.sum_sq - times[c] * times[c] - times[v] * times[v]
-                + new_c * new_c
-                + new_v * new_v,
-        }
-    };
     // Single-flight times: with a battery, the sorties only add to them, so
     // bounds built on these still bound the time with sorties.
     let mut plain = times.to_vec();
@@ -168,7 +156,15 @@ fn best_move(
             plain[u] = flock.flight_time(u, route)?;
         }
     }
-    let mut best: Option<(Score, Move)> = None;
+    let mut search = MoveSearch {
+        routes,
+        times,
+        c,
+        current,
+        order,
+        plain,
+        best: None,
+    };
     let rc = &routes[c];
     for p in 0..rc.len() {
         let x = rc[p];
@@ -186,108 +182,196 @@ fn best_move(
         } else {
             Some(times[c] - with_x + flock.leg_time_of(c, bp, ap)?)
         };
+        let taken = Taken {
+            p,
+            x,
+            bp,
+            ap,
+            with_x,
+        };
         for v in (0..m).filter(|&v| v != c) {
-            let rv = &routes[v];
             if let Some(new_c) = c_without {
-                for at in 0..=rv.len() {
-                    let prev = before(v, rv, at);
-                    let next = if at < rv.len() {
-                        Stop::entry_of(rv[at])
-                    } else {
-                        Stop::Home(v)
-                    };
-                    let base = if rv.is_empty() {
-                        plain[v]
-                    } else {
-                        plain[v] - flock.leg_time_of(v, prev, next)?
-                    };
-                    for way in 0..2 {
-                        let xv = Visit::new(x.job, way);
-                        let (entry, exit) = (Stop::entry_of(xv), Stop::exit_of(xv));
-                        let job = flock.job_time(v, x.job);
-                        let lower = base
-                            + flock.leg_time_lower(v, prev, entry)
-                            + job
-                            + flock.leg_time_lower(v, exit, next);
-                        let bar = best.as_ref().map_or(current, |b| b.0);
-                        if !score_with(v, new_c, lower).beats(&bar) {
-                            continue;
-                        }
-                        let new_v = if flock.has_battery(v) {
-                            let mut r = rv.clone();
-                            r.insert(at, xv);
-                            flock.route_time(v, &r)?
-                        } else {
-                            base + flock.leg_time_of(v, prev, entry)?
-                                + job
-                                + flock.leg_time_of(v, exit, next)?
-                        };
-                        let s = score_with(v, new_c, new_v);
-                        if s.beats(&bar) {
-                            best = Some((
-                                s,
-                                Move::Relocate {
-                                    from: p,
-                                    v,
-                                    at,
-                                    visit: xv,
-                                },
-                            ));
-                        }
-                    }
-                }
+                search.relocations(flock, &taken, new_c, v)?;
             }
-            for q in 0..rv.len() {
-                let y = rv[q];
-                let (bq, aq) = (before(v, rv, q), after(v, rv, q));
-                let with_y = flock.leg_time_of(v, bq, Stop::entry_of(y))?
-                    + flock.job_time(v, y.job)
-                    + flock.leg_time_of(v, Stop::exit_of(y), aq)?;
-                // Lower bounds over both ways, then exact values.
-                let lower_in = |f: &Flock, u: usize, job: usize, b: Stop, a: Stop| -> f64 {
-                    (0..2)
-                        .map(|w| {
-                            let vis = Visit::new(job, w);
-                            f.leg_time_lower(u, b, Stop::entry_of(vis))
-                                + f.leg_time_lower(u, Stop::exit_of(vis), a)
-                        })
-                        .fold(f64::INFINITY, f64::min)
-                        + f.job_time(u, job)
-                };
-                let bar = best.as_ref().map_or(current, |b| b.0);
-                let batteries = flock.has_battery(c) || flock.has_battery(v);
-                let new_c_lower = plain[c] - with_x + lower_in(flock, c, y.job, bp, ap);
-                let new_v_lower = plain[v] - with_y + lower_in(flock, v, x.job, bq, aq);
-                if !score_with(v, new_c_lower, new_v_lower).beats(&bar) {
+            search.swaps(flock, &taken, v)?;
+        }
+    }
+    Ok(search.best.map(|(_, mv)| mv))
+}
+
+/// Visit `x` at position `p` of the longest route, between stops `bp` and
+/// `ap`; `with_x` is what its legs and job cost there.
+struct Taken {
+    p: usize,
+    x: Visit,
+    bp: Stop,
+    ap: Stop,
+    with_x: f64,
+}
+
+/// State of one [`best_move`] search: what candidate moves are scored
+/// against, and the best move so far.
+struct MoveSearch<'r> {
+    routes: &'r Routes,
+    times: &'r [f64],
+    /// The UAV whose work is moved or swapped.
+    c: usize,
+    current: Score,
+    /// The three longest UAVs, longest first.
+    order: Vec<usize>,
+    /// Times without sorties (see [`best_move`]).
+    plain: Vec<f64>,
+    best: Option<(Score, Move)>,
+}
+
+impl MoveSearch<'_> {
+    /// The score if `c` and `v` took `new_c` and `new_v`.
+    fn score_with(&self, v: usize, new_c: f64, new_v: f64) -> Score {
+        let (c, times) = (self.c, self.times);
+        let rest = self
+            .order
+            .iter()
+            .find(|&&k| k != c && k != v)
+            .map_or(0.0, |&k| times[k]);
+        Score {
+            makespan: rest.max(new_c).max(new_v),
+            sum_sq: self.current.sum_sq - times[c] * times[c] - times[v] * times[v]
+                + new_c * new_c
+                + new_v * new_v,
+        }
+    }
+
+    /// The score a move must beat.
+    fn bar(&self) -> Score {
+        self.best.as_ref().map_or(self.current, |b| b.0)
+    }
+
+    /// Relocations of `taken` into every position and way of `v`'s route,
+    /// `c` taking `new_c` without it.
+    fn relocations(
+        &mut self,
+        flock: &mut Flock,
+        taken: &Taken,
+        new_c: f64,
+        v: usize,
+    ) -> Result<(), TransitError> {
+        let Taken { p, x, .. } = *taken;
+        let routes = self.routes;
+        let rv = &routes[v];
+        for at in 0..=rv.len() {
+            let prev = before(v, rv, at);
+            let next = if at < rv.len() {
+                Stop::entry_of(rv[at])
+            } else {
+                Stop::Home(v)
+            };
+            let base = if rv.is_empty() {
+                self.plain[v]
+            } else {
+                self.plain[v] - flock.leg_time_of(v, prev, next)?
+            };
+            for way in 0..2 {
+                let xv = Visit::new(x.job, way);
+                let (entry, exit) = (Stop::entry_of(xv), Stop::exit_of(xv));
+                let job = flock.job_time(v, x.job);
+                let lower = base
+                    + flock.leg_time_lower(v, prev, entry)
+                    + job
+                    + flock.leg_time_lower(v, exit, next);
+                let bar = self.bar();
+                if !self.score_with(v, new_c, lower).beats(&bar) {
                     continue;
                 }
-                let (into_c, in_c) = best_way(flock, c, y.job, bp, ap)?;
-                let (into_v, in_v) = best_way(flock, v, x.job, bq, aq)?;
-                let (new_c, new_v) = if batteries {
-                    let (mut r_c, mut r_v) = (rc.clone(), rv.clone());
-                    r_c[p] = into_c;
-                    r_v[q] = into_v;
-                    (flock.route_time(c, &r_c)?, flock.route_time(v, &r_v)?)
+                let new_v = if flock.has_battery(v) {
+                    let mut r = rv.clone();
+                    r.insert(at, xv);
+                    flock.route_time(v, &r)?
                 } else {
-                    (times[c] - with_x + in_c, times[v] - with_y + in_v)
+                    base + flock.leg_time_of(v, prev, entry)?
+                        + job
+                        + flock.leg_time_of(v, exit, next)?
                 };
-                let s = score_with(v, new_c, new_v);
+                let s = self.score_with(v, new_c, new_v);
                 if s.beats(&bar) {
-                    best = Some((
+                    self.best = Some((
                         s,
-                        Move::Swap {
-                            p,
+                        Move::Relocate {
+                            from: p,
                             v,
-                            q,
-                            into_c,
-                            into_v,
+                            at,
+                            visit: xv,
                         },
                     ));
                 }
             }
         }
+        Ok(())
     }
-    Ok(best.map(|(_, mv)| mv))
+
+    /// Swaps of `taken` with every visit of `v`'s route, each flown the way
+    /// that suits its new route best.
+    fn swaps(&mut self, flock: &mut Flock, taken: &Taken, v: usize) -> Result<(), TransitError> {
+        let Taken {
+            p,
+            x,
+            bp,
+            ap,
+            with_x,
+        } = *taken;
+        let (c, times, routes) = (self.c, self.times, self.routes);
+        let (rc, rv) = (&routes[c], &routes[v]);
+        for q in 0..rv.len() {
+            let y = rv[q];
+            let (bq, aq) = (before(v, rv, q), after(v, rv, q));
+            let with_y = flock.leg_time_of(v, bq, Stop::entry_of(y))?
+                + flock.job_time(v, y.job)
+                + flock.leg_time_of(v, Stop::exit_of(y), aq)?;
+            // Lower bounds over both ways, then exact values.
+            let bar = self.bar();
+            let batteries = flock.has_battery(c) || flock.has_battery(v);
+            let new_c_lower = self.plain[c] - with_x + lower_in(flock, c, y.job, bp, ap);
+            let new_v_lower = self.plain[v] - with_y + lower_in(flock, v, x.job, bq, aq);
+            if !self.score_with(v, new_c_lower, new_v_lower).beats(&bar) {
+                continue;
+            }
+            let (into_c, in_c) = best_way(flock, c, y.job, bp, ap)?;
+            let (into_v, in_v) = best_way(flock, v, x.job, bq, aq)?;
+            let (new_c, new_v) = if batteries {
+                let (mut r_c, mut r_v) = (rc.clone(), rv.clone());
+                r_c[p] = into_c;
+                r_v[q] = into_v;
+                (flock.route_time(c, &r_c)?, flock.route_time(v, &r_v)?)
+            } else {
+                (times[c] - with_x + in_c, times[v] - with_y + in_v)
+            };
+            let s = self.score_with(v, new_c, new_v);
+            if s.beats(&bar) {
+                self.best = Some((
+                    s,
+                    Move::Swap {
+                        p,
+                        v,
+                        q,
+                        into_c,
+                        into_v,
+                    },
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A lower bound of what UAV `u` spends on `job` between stops `b` and `a`,
+/// over both ways.
+fn lower_in(f: &Flock, u: usize, job: usize, b: Stop, a: Stop) -> f64 {
+    (0..2)
+        .map(|w| {
+            let vis = Visit::new(job, w);
+            f.leg_time_lower(u, b, Stop::entry_of(vis)) + f.leg_time_lower(u, Stop::exit_of(vis), a)
+        })
+        .fold(f64::INFINITY, f64::min)
+        + f.job_time(u, job)
 }
 
 /// The way of flying `job` between stops `b` and `a` that costs UAV `u`
