@@ -1,0 +1,107 @@
+//! DEMs: their metadata, and their files stored as chunks.
+
+use super::files::StoredFile;
+use super::{CHUNK_BYTES, Db};
+
+/// A stored DEM's metadata (everything but the file).
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct DemMetaRow {
+    pub id: String,
+    pub name: Option<String>,
+    pub created_at: i64,
+    pub file_name: Option<String>,
+    pub crs_override: Option<i64>,
+    /// `DemInfo` as JSON.
+    pub info: String,
+    pub size_bytes: i64,
+    /// Memory reading the file again takes, estimated from its header at
+    /// upload; `None` for DEMs stored before it was kept.
+    pub read_bytes: Option<i64>,
+}
+
+/// What is needed to parse a stored DEM again.
+#[derive(Debug, Clone)]
+pub struct DemDataRow {
+    pub file_name: Option<String>,
+    pub crs_override: Option<i64>,
+    pub data: Vec<u8>,
+}
+
+impl Db {
+    /// Store a DEM and its file (`meta.size_bytes` must be its length),
+    /// a chunk at a time, in one transaction.
+    pub async fn insert_dem(&self, meta: &DemMetaRow, data: &[u8]) -> Result<(), sqlx::Error> {
+        const SQL: &str = "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, \
+                           size_bytes, read_bytes) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
+        const CHUNK: &str = "INSERT INTO dem_chunks (dem_id, seq, data) VALUES ($1, $2, $3)";
+        on_pool!(self, pool => {
+            let mut tx = pool.begin().await?;
+            sqlx::query(SQL)
+                .bind(&meta.id)
+                .bind(&meta.name)
+                .bind(meta.created_at)
+                .bind(&meta.file_name)
+                .bind(meta.crs_override)
+                .bind(&meta.info)
+                .bind(meta.size_bytes)
+                .bind(meta.read_bytes)
+                .execute(&mut *tx)
+                .await?;
+            for (seq, chunk) in data.chunks(CHUNK_BYTES).enumerate() {
+                sqlx::query(CHUNK)
+                    .bind(&meta.id)
+                    .bind(seq as i64)
+                    .bind(chunk)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
+    }
+
+    pub async fn get_dem_meta(&self, id: &str) -> Result<Option<DemMetaRow>, sqlx::Error> {
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
+                           read_bytes FROM dems WHERE id = $1";
+        on_pool!(self, pool => sqlx::query_as::<_, DemMetaRow>(SQL).bind(id).fetch_optional(pool).await)
+    }
+
+    /// A stored DEM's file, read whole (a chunk at a time into one buffer).
+    pub async fn get_dem_data(&self, id: &str) -> Result<Option<DemDataRow>, sqlx::Error> {
+        const SQL: &str = "SELECT file_name, crs_override, size_bytes FROM dems WHERE id = $1";
+        let row: Option<(Option<String>, Option<i64>, i64)> = on_pool!(self, pool =>
+            sqlx::query_as(SQL).bind(id).fetch_optional(pool).await)?;
+        let Some((file_name, crs_override, size)) = row else {
+            return Ok(None);
+        };
+        let data = self
+            .read_file(&StoredFile::Dem(id.to_string()), size)
+            .await?;
+        Ok(Some(DemDataRow {
+            file_name,
+            crs_override,
+            data,
+        }))
+    }
+
+    /// Newest first, without the files.
+    pub async fn list_dems(
+        &self,
+        limit: i64,
+        offset: i64,
+    ) -> Result<(Vec<DemMetaRow>, i64), sqlx::Error> {
+        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
+                           read_bytes FROM dems ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
+        const COUNT: &str = "SELECT COUNT(*) FROM dems";
+        on_pool!(self, pool => {
+            let rows = sqlx::query_as::<_, DemMetaRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
+            let (total,): (i64,) = sqlx::query_as(COUNT).fetch_one(pool).await?;
+            Ok((rows, total))
+        })
+    }
+
+    /// True when a DEM was deleted.
+    pub async fn delete_dem(&self, id: &str) -> Result<bool, sqlx::Error> {
+        const SQL: &str = "DELETE FROM dems WHERE id = $1";
+        on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|r| r.rows_affected() > 0))
+    }
+}
