@@ -8,6 +8,32 @@
 //! is parsed, before any work.
 
 use planner_core::geo::Issue;
+use serde_json::Value;
+
+/// Longest name a client may give a stored resource, in characters.
+pub const NAME_MAX_CHARS: usize = 200;
+
+/// The optional `name` member of a request body: absent or null is no
+/// name; otherwise a string of at most [`NAME_MAX_CHARS`] characters
+/// without control characters, or the fault at `/name`.
+pub fn read_name(value: Option<&Value>) -> Result<Option<String>, Issue> {
+    match value {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s)) => {
+            if let Some(issue) = control_character_issue("/name", "the name", s) {
+                Err(issue)
+            } else if s.chars().count() <= NAME_MAX_CHARS {
+                Ok(Some(s.clone()))
+            } else {
+                Err(Issue::new(
+                    "/name",
+                    &format!("the name is longer than {NAME_MAX_CHARS} characters"),
+                ))
+            }
+        }
+        Some(_) => Err(Issue::new("/name", "the name must be a string")),
+    }
+}
 
 /// The first control character of `text` (Unicode category Cc: U+0000 to
 /// U+001F, U+007F to U+009F), and its position counted in characters

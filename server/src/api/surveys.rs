@@ -22,6 +22,7 @@ use utoipa_axum::routes;
 
 use super::dems::dem_fault;
 use super::json_body::JsonBody;
+use super::names::{NAME_MAX_CHARS, read_name};
 use super::paging::{ListQuery, list};
 use super::short_id;
 use crate::clock::{now_millis, rfc3339};
@@ -31,8 +32,6 @@ use crate::state::{AppState, Work, off_runtime};
 
 mod request;
 pub use request::read_document;
-
-const NAME_MAX_CHARS: usize = 200;
 
 /// Body of `POST /api/v1/surveys`: the area, the no-fly zones and the
 /// planning parameters (the fields of the CLI's params file) in one object.
@@ -316,24 +315,7 @@ fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
             "the request body must be a JSON object",
         )]));
     };
-    match obj.remove("name") {
-        None | Some(Value::Null) => Ok(None),
-        Some(Value::String(s))
-            if let Some(issue) =
-                crate::api::names::control_character_issue("/name", "the name", &s) =>
-        {
-            Err(ApiError::Validation(vec![issue]))
-        }
-        Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Ok(Some(s)),
-        Some(Value::String(_)) => Err(ApiError::Validation(vec![Issue::new(
-            "/name",
-            &format!("the name is longer than {NAME_MAX_CHARS} characters"),
-        )])),
-        Some(_) => Err(ApiError::Validation(vec![Issue::new(
-            "/name",
-            "the name must be a string",
-        )])),
-    }
+    read_name(obj.remove("name").as_ref()).map_err(|issue| ApiError::Validation(vec![issue]))
 }
 
 /// How a survey that could not be planned is answered; one that ran out

@@ -9,10 +9,9 @@ use planner_core::geo::{Issue, deserialize_at, escape_pointer_token};
 use planner_core::terrain::{Dem, TerrainSampler};
 use serde_json::Value;
 
-use crate::api::names::control_character_issue;
+use crate::api::names::{control_character_issue, read_name};
 use crate::error::ApiError;
 
-const NAME_MAX_CHARS: usize = 200;
 /// Fields of `POST /api/v1/costmaps`.
 const FIELDS: [&str; 4] = ["name", "dem_id", "vehicle", "options"];
 
@@ -42,27 +41,10 @@ pub(super) fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
             &format!("unknown field {key:?}: expected name, dem_id, vehicle or options"),
         ));
     }
-    let name = match obj.get("name") {
-        None | Some(Value::Null) => None,
-        Some(Value::String(s))
-            if let Some(issue) = control_character_issue("/name", "the name", s) =>
-        {
-            issues.push(issue);
-            None
-        }
-        Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Some(s.clone()),
-        Some(Value::String(_)) => {
-            issues.push(Issue::new(
-                "/name",
-                &format!("the name is longer than {NAME_MAX_CHARS} characters"),
-            ));
-            None
-        }
-        Some(_) => {
-            issues.push(Issue::new("/name", "the name must be a string"));
-            None
-        }
-    };
+    let name = read_name(obj.get("name")).unwrap_or_else(|issue| {
+        issues.push(issue);
+        None
+    });
     let dem_id = match obj.get("dem_id") {
         Some(Value::String(s))
             if let Some(issue) = control_character_issue("/dem_id", "the DEM id", s) =>

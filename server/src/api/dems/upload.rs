@@ -30,14 +30,13 @@ use utoipa::{IntoParams, ToSchema};
 use super::header::{self as dem_header, Declared};
 use super::model::{BinaryFile, DemResponse, parse_epsg, response};
 use crate::api::json_body::media_type;
-use crate::api::names::control_character_issue;
+use crate::api::names::{NAME_MAX_CHARS, control_character_issue};
 use crate::clock::now_millis;
 use crate::db::{CHUNK_BYTES, DemMetaRow};
 use crate::error::{ApiError, Problem};
 use crate::memory::{Reservation, dem_read_bytes, mib};
 use crate::state::{AppState, Work};
 
-const NAME_MAX_CHARS: usize = 200;
 const FILE_NAME_MAX_CHARS: usize = 255;
 
 /// Media types taken as the raw DEM file.

@@ -11,9 +11,9 @@ use planner_core::route::{ArcCost, Position};
 use serde_json::{Map, Value, json};
 
 use super::model::{Changes, SearchOptions};
+use crate::api::names::read_name;
 use crate::error::ApiError;
 
-const NAME_MAX_CHARS: usize = 200;
 /// Fields of `POST /api/v1/costmaps/{id}/routes`.
 const CREATE_FIELDS: [&str; 7] = [
     "name",
@@ -48,28 +48,10 @@ fn unknown_fields(
 }
 
 fn parse_name(obj: &Map<String, Value>, issues: &mut Vec<Issue>) -> Option<String> {
-    match obj.get("name") {
-        None | Some(Value::Null) => None,
-        Some(Value::String(s))
-            if let Some(issue) =
-                crate::api::names::control_character_issue("/name", "the name", s) =>
-        {
-            issues.push(issue);
-            None
-        }
-        Some(Value::String(s)) if s.chars().count() <= NAME_MAX_CHARS => Some(s.clone()),
-        Some(Value::String(_)) => {
-            issues.push(Issue::new(
-                "/name",
-                &format!("the name is longer than {NAME_MAX_CHARS} characters"),
-            ));
-            None
-        }
-        Some(_) => {
-            issues.push(Issue::new("/name", "the name must be a string"));
-            None
-        }
-    }
+    read_name(obj.get("name")).unwrap_or_else(|issue| {
+        issues.push(issue);
+        None
+    })
 }
 
 /// An optional number; a fault when it is there but not a number.
