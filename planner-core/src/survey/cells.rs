@@ -46,8 +46,6 @@ pub(super) struct Decomposition {
     pub slice_angle_deg: f64,
     pub cells: Vec<Polygon<f64>>,
     pub plans: Vec<CellPlan>,
-    turns: usize,
-    length_m: f64,
 }
 
 /// The cells of one slice angle, their lane layouts and the turns these
@@ -120,7 +118,9 @@ pub(super) fn decompose_and_cover(
             }
         }
     }
-    let mut best: Option<Decomposition> = None;
+    // The contenders all need the fewest turns: the shortest flight wins,
+    // the first in candidate order on a tie.
+    let mut best: Option<(f64, Decomposition)> = None;
     // Index the free space once for every cell of every contending angle.
     let free_space = coverage::FreeSpace::new(free);
     for Laid {
@@ -136,22 +136,19 @@ pub(super) fn decompose_and_cover(
             .filter_map(|(l, c)| token.scope(|| l.as_ref()?.best_plan(c, &free_space)))
             .collect();
         crate::cancel::check()?;
-        let turns: usize = plans.iter().map(CellPlan::turns).sum();
         let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();
-        let better = best
-            .as_ref()
-            .is_none_or(|b| turns < b.turns || (turns == b.turns && length_m < b.length_m - 1e-6));
-        if better {
-            best = Some(Decomposition {
-                slice_angle_deg: a,
-                cells,
-                plans,
-                turns,
+        if best.as_ref().is_none_or(|(b, _)| length_m < b - 1e-6) {
+            best = Some((
                 length_m,
-            });
+                Decomposition {
+                    slice_angle_deg: a,
+                    cells,
+                    plans,
+                },
+            ));
         }
     }
-    let best = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
+    let (_, best) = best.ok_or_else(|| PlanError::Internal("no slice angle tried".into()))?;
     if best.plans.is_empty() {
         return Err(PlanError::Invalid(vec![Issue::new(
             ROI_POINTER,
