@@ -15,7 +15,8 @@ import readline from 'node:readline';
 export const ROOT = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '../..');
 export const DTM = path.resolve(ROOT, '../shared/data/dems/opengeos_data__elevation_dtm.tif');
 export const SCREENSHOTS = path.join(ROOT, 'target/browser-screenshots');
-const BINARY = path.join(ROOT, 'target/debug/terraplan');
+// `TERRAPLAN_BIN=/path/to/terraplan` tests another build (e.g. one from before accounts).
+const BINARY = process.env.TERRAPLAN_BIN ?? path.join(ROOT, 'target/debug/terraplan');
 const WEB_DIR = path.join(ROOT, 'web-ui/dist');
 const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
 
@@ -30,10 +31,36 @@ export function checkPrerequisites() {
   if (!existsSync(CHROMIUM)) throw new Error(`${CHROMIUM} is missing: \`apt-get install -y chromium\``);
 }
 
-/** Starts `terraplan serve --port 0`; resolves with its base URL once it prints where it listens. */
-export async function startServer() {
+/** Whether this terraplan has accounts (`terraplan user …`); servers from before answer without credentials. */
+export function serverHasAccounts() {
+  return spawnSync(BINARY, ['user', '--help'], { encoding: 'utf8' }).status === 0;
+}
+
+/** Makes a user with `terraplan user create` on the data dir (before `serve`); its API token is stdout's last line. */
+function createUser(dataDir, name, password) {
+  const r = spawnSync(BINARY, ['user', 'create', name, '--data-dir', dataDir, '--password-stdin'], { input: `${password}\n`, encoding: 'utf8' });
+  if (r.status !== 0) throw new Error(`terraplan user create ${name} failed (${r.status}): ${r.stderr}`);
+  const token = r.stdout.trim().split('\n').pop().trim();
+  if (!token.startsWith('tp_')) throw new Error(`terraplan user create ${name}: the last line is not a token: ${r.stdout}`);
+  return { name, password, token };
+}
+
+/** The servers started here, by URL: the page signs in as their first user. */
+const SERVERS = new Map();
+
+/**
+ * Starts `terraplan serve --port 0`; resolves once it prints where it
+ * listens. On a terraplan with accounts it first makes `users` (the first
+ * one is the tests' default user: `server.fetch` calls the API as it, and
+ * `openPage` signs the page in as it). `server.users[name]` has each one's
+ * `password` and `token`.
+ */
+export async function startServer({ users = ['tester'] } = {}) {
   checkPrerequisites();
   const dataDir = mkdtempSync(path.join(tmpdir(), 'terraplan-browser-'));
+  const accounts = serverHasAccounts();
+  const made = {};
+  if (accounts) for (const name of users) made[name] = createUser(dataDir, name, `${name}-browser-password`);
   const proc = spawn(BINARY, ['serve', '--port', '0', '--data-dir', dataDir, '--web-dir', WEB_DIR], {
     cwd: ROOT,
     stdio: ['ignore', 'pipe', 'pipe'],
@@ -51,15 +78,27 @@ export async function startServer() {
     });
     proc.once('exit', (code) => reject(new Error(`terraplan exited (${code}):\n${stderr}`)));
   });
-  return {
+  const server = {
     url,
     dataDir,
+    accounts,
+    users: made,
+    defaultUser: accounts ? made[users[0]] : null,
+    /** The API as a user (default: the first), with its token (none on a server without accounts). */
+    fetch(apiPath, init = {}, as = users[0]) {
+      const headers = { ...(init.headers ?? {}) };
+      if (accounts) headers.Authorization = `Bearer ${made[as].token}`;
+      return fetch(`${url}${apiPath}`, { ...init, headers });
+    },
     async stop() {
       proc.kill('SIGTERM');
       await new Promise((r) => (proc.exitCode !== null ? r() : proc.once('exit', r)));
+      SERVERS.delete(url);
       rmSync(dataDir, { recursive: true, force: true });
     },
   };
+  SERVERS.set(url, server);
+  return server;
 }
 
 /**
@@ -67,10 +106,10 @@ export async function startServer() {
  * them (node:test hooks of the calling file). Read `env.server` and
  * `env.browser` inside the tests.
  */
-export function withServerAndBrowser() {
+export function withServerAndBrowser(options) {
   const env = {};
   before(async () => {
-    env.server = await startServer();
+    env.server = await startServer(options);
     env.browser = await launchBrowser();
   });
   after(async () => {
@@ -84,20 +123,37 @@ export async function launchBrowser() {
   return chromium.launch({ executablePath: CHROMIUM, headless: true, args: ['--no-sandbox', '--disable-gpu'] });
 }
 
-/** Opens the page and waits until its lists are loaded and the map has drawn. */
-export async function openPage(browser, url, viewport = { width: 1280, height: 800 }) {
+/**
+ * Opens the page and waits until its lists are loaded and the map has drawn.
+ * On a server with accounts the page is signed in first, as `signIn` (a
+ * user of the server; default its first), through the API: the browser
+ * keeps the session cookie. `signIn: null`: not signed in, the page waits
+ * at its sign-in form.
+ */
+export async function openPage(browser, url, viewport = { width: 1280, height: 800 }, { signIn } = {}) {
   const context = await browser.newContext({ viewport, acceptDownloads: true });
+  const server = SERVERS.get(url);
+  const user = signIn === undefined ? server?.defaultUser : signIn;
+  if (server?.accounts && user) {
+    const res = await context.request.post(`${url}/api/v1/session`, { data: { user: user.name, password: user.password } });
+    if (res.status() !== 201) throw new Error(`signing in as ${user.name}: ${res.status()} ${await res.text()}`);
+  }
   const page = await context.newPage();
   const problems = [];
   page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
-  page.on('console', (m) => m.type() === 'error' && problems.push(`console: ${m.text()}`));
+  page.on('console', (m) => {
+    if (m.type() !== 'error') return;
+    // A server from before accounts answers the page's session check with 404: the page then goes on without.
+    if (!server?.accounts && m.location().url.endsWith('/api/v1/session')) return;
+    problems.push(`console: ${m.text()}`);
+  });
   // No request may leave the local server (the page must work offline).
   const outside = [];
   page.on('request', (r) => {
     if (!r.url().startsWith(url) && !r.url().startsWith('data:') && !r.url().startsWith('blob:')) outside.push(r.url());
   });
   await page.goto(url);
-  await page.waitForSelector('body[data-ready="true"]');
+  await page.waitForSelector(server?.accounts && !user ? '#signin-form' : 'body[data-ready="true"]');
   return { page, context, problems, outside };
 }
 

@@ -31,8 +31,8 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   assert.ok(await page.locator('#costmap-view').isVisible());
   assert.ok(await page.locator('#costmap-legend').evaluate((img) => img.complete && img.naturalWidth > 0), 'legend shown');
   // The costlier-area hint gives this costmap's own cost range (its statistics).
-  const costmaps = await (await fetch(`${env.server.url}/api/v1/costmaps`)).json();
-  const built = await (await fetch(`${env.server.url}/api/v1/costmaps/${costmaps.items[0].id}`)).json();
+  const costmaps = await (await env.server.fetch(`/api/v1/costmaps`)).json();
+  const built = await (await env.server.fetch(`/api/v1/costmaps/${costmaps.items[0].id}`)).json();
   assert.match(await page.textContent('#cost-hint'), new RegExp(`cells cost ${built.stats.cost_min.toFixed(1)} to ${built.stats.cost_max.toFixed(1)}\\)`));
 
   // After the costmap, the map waits for the start, then the goal.
@@ -54,7 +54,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   await screenshot(page, 'route-planned');
 
   // Block a square across the middle of the route (its waypoints from the API), replan from the start.
-  const routes = await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json();
+  const routes = await (await env.server.fetch(`/api/v1/routes?limit=1`)).json();
   const wps = routes.items[0].waypoints;
   const mid = wps[Math.floor(wps.length / 2)];
   const d = 0.00012; // about 10 m
@@ -75,7 +75,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
 
   // A costlier area across the detour: the cost is checked before drawing, sent with the replan
   // (only the new area: the earlier blocked square stays with the route), and shown on the map.
-  const detour = (await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  const detour = (await (await env.server.fetch(`/api/v1/routes?limit=1`)).json()).items[0];
   assert.equal(detour.blocked.length, 1);
   assert.equal(detour.cost_changes.length, 0);
   assert.match(await page.textContent('#block-status'), /1 area blocked by earlier replans/);
@@ -103,7 +103,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   assert.equal(sent.cost_changes[0].cost, 15);
   assert.equal(sent.cost_changes[0].area.type, 'Polygon');
   await page.waitForFunction((old) => document.querySelector('#route-stats').textContent !== old, beforeCostlier, { timeout: 60_000 });
-  const costlier = (await (await fetch(`${env.server.url}/api/v1/routes?limit=1`)).json()).items[0];
+  const costlier = (await (await env.server.fetch(`/api/v1/routes?limit=1`)).json()).items[0];
   assert.equal(costlier.parent_id, detour.id);
   assert.equal(costlier.cost_changes.length, 1, 'the new route carries the cost change');
   assert.equal(costlier.cost_changes[0].cost, 15);
@@ -122,12 +122,12 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
   assert.match(await page.textContent('#costlier-status'), /^No costlier area\./);
 
   // "Plan route" now would start from the costmap as built: the page asks before dropping the replans' areas.
-  const routesBefore = (await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items.length;
+  const routesBefore = (await (await env.server.fetch(`/api/v1/routes`)).json()).items.length;
   const dialog = new Promise((resolve) => page.once('dialog', async (d) => { resolve(d.message()); await d.dismiss(); }));
   await page.click('#plan-route');
   assert.match(await dialog, /does not keep the 2 blocked or costlier areas of the replans/);
   await page.waitForTimeout(300);
-  assert.equal((await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items.length, routesBefore, 'declined: nothing planned');
+  assert.equal((await (await env.server.fetch(`/api/v1/routes`)).json()).items.length, routesBefore, 'declined: nothing planned');
   assert.match(await page.textContent('#block-status'), /1 area blocked by earlier replans/);
 
   // The rover mission loads in pymavlink.
@@ -145,8 +145,8 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
 test('ends in one cell, ends forgotten with the DEM, and a route whose DEM was deleted', async () => {
   // The first test left a DEM, its costmap and routes on the server.
   const { page, context, problems } = await openPage(env.browser, env.server.url);
-  const dems = (await (await fetch(`${env.server.url}/api/v1/dems`)).json()).items;
-  const costmaps = (await (await fetch(`${env.server.url}/api/v1/costmaps`)).json()).items;
+  const dems = (await (await env.server.fetch(`/api/v1/dems`)).json()).items;
+  const costmaps = (await (await env.server.fetch(`/api/v1/costmaps`)).json()).items;
   await page.selectOption('#dem-select', dems[0].id);
   await page.click('#tab-route');
   await page.selectOption('#costmap-select', costmaps[0].id);
@@ -164,9 +164,9 @@ test('ends in one cell, ends forgotten with the DEM, and a route whose DEM was d
   assert.equal(await page.inputValue('#route-goal'), '');
 
   // Delete the DEM behind the page's back, then reopen a route made on it from Saved work.
-  const routes = (await (await fetch(`${env.server.url}/api/v1/routes`)).json()).items;
+  const routes = (await (await env.server.fetch(`/api/v1/routes`)).json()).items;
   const longest = routes.reduce((a, b) => (b.length_2d_m > a.length_2d_m ? b : a));
-  assert.equal((await fetch(`${env.server.url}/api/v1/dems/${dems[0].id}`, { method: 'DELETE' })).status, 204);
+  assert.equal((await env.server.fetch(`/api/v1/dems/${dems[0].id}`, { method: 'DELETE' })).status, 204);
   await page.click('#tab-saved');
   await page.click('#saved-refresh');
   await page.waitForFunction(() => document.querySelector('#saved-status').textContent === '');

@@ -9,7 +9,7 @@ import { withServerAndBrowser, openPage, screenshot, DTM } from './helpers.mjs';
 const env = withServerAndBrowser();
 
 async function post(path, body, type = 'application/json') {
-  const res = await fetch(`${env.server.url}${path}`, { method: 'POST', headers: { 'Content-Type': type }, body });
+  const res = await env.server.fetch(path, { method: 'POST', headers: { 'Content-Type': type }, body });
   assert.ok(res.ok, `${path}: ${res.status} ${await res.clone().text()}`);
   return res.json();
 }
@@ -27,7 +27,7 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   let costmap = await post('/api/v1/costmaps', JSON.stringify({ name: 'u-go map', dem_id: dem.id }));
   for (let i = 0; i < 100 && costmap.status !== 'done'; i++) {
     await new Promise((r) => setTimeout(r, 200));
-    costmap = await (await fetch(`${env.server.url}/api/v1/costmaps/${costmap.id}`)).json();
+    costmap = await (await env.server.fetch(`/api/v1/costmaps/${costmap.id}`)).json();
   }
   assert.equal(costmap.status, 'done');
   await post(`/api/v1/costmaps/${costmap.id}/routes`, JSON.stringify({ name: 'to the gate', start: [-77.0543, 38.81068], goal: [-77.05512, 38.80874] }));
@@ -95,8 +95,8 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   await page.fill('#survey-name', 'saved field v2');
   await page.click('#plan-survey');
   await page.waitForFunction(() => document.querySelector('#results-heading').textContent === 'Plan: saved field v2', null, { timeout: 30_000 });
-  const surveys = await (await fetch(`${env.server.url}/api/v1/surveys`)).json();
-  const again = await (await fetch(`${env.server.url}/api/v1/surveys/${surveys.items.find((s) => s.name === 'saved field v2').id}`)).json();
+  const surveys = await (await env.server.fetch(`/api/v1/surveys`)).json();
+  const again = await (await env.server.fetch(`/api/v1/surveys/${surveys.items.find((s) => s.name === 'saved field v2').id}`)).json();
   const moved = again.request.roi.coordinates[0].find((p) => p[0] < -77.0551);
   assert.ok(moved && Math.abs(moved[0] + 77.0553) < 2e-5 && Math.abs(moved[1] - 38.8117) < 2e-5, `moved corner: ${moved}`);
   assert.equal(again.request.no_fly_zones.length, 1);
@@ -133,7 +133,7 @@ test('list, reopen and delete saved surveys, costmaps and routes', async () => {
   await page.waitForFunction(() => document.querySelector('#saved-surveys li')?.textContent === 'None yet.');
   await page.click('button[aria-label="Delete u-go map"]');
   await page.waitForFunction(() => document.querySelector('#saved-routes li')?.textContent === 'None yet.');
-  assert.equal((await (await fetch(`${env.server.url}/api/v1/surveys/${survey.id}`)).status), 404);
+  assert.equal((await (await env.server.fetch(`/api/v1/surveys/${survey.id}`)).status), 404);
   await screenshot(page, 'saved-after-delete');
 
   // After a reload the DEM chosen last is the base map again.

@@ -75,7 +75,7 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   const plannedHa = /^Area([\d.]+) ha/.exec(totals)[1];
   assert.equal(drawnHa, plannedHa);
   // What the planner chose and derived, beside the totals (the API's numbers).
-  const planStats = (await (await fetch(`${env.server.url}/api/v1/surveys/${(await (await fetch(`${env.server.url}/api/v1/surveys?limit=1`)).json()).items[0].id}`)).json()).stats;
+  const planStats = (await (await env.server.fetch(`/api/v1/surveys/${(await (await env.server.fetch(`/api/v1/surveys?limit=1`)).json()).items[0].id}`)).json()).stats;
   assert.match(totals, new RegExp(`Slice angle${planStats.slice_angle_deg.toFixed(1)}°`));
   assert.match(totals, new RegExp(`Lane spacing${planStats.line_spacing_m.toFixed(1)} m`));
   assert.match(totals, new RegExp(`Photo spacing${planStats.trigger_distance_m.toFixed(1)} m`));
@@ -119,8 +119,8 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
   assert.equal(await page.locator('#profile-chart svg path.terrain').count(), 1);
   assert.equal(await page.locator('#profile-chart svg path.flown').count(), 1);
   // The sortie chooser shows only for a UAV flying several sorties.
-  const newest = (await (await fetch(`${env.server.url}/api/v1/surveys?limit=1`)).json()).items[0];
-  const planned = await (await fetch(`${env.server.url}/api/v1/surveys/${newest.id}`)).json();
+  const newest = (await (await env.server.fetch(`/api/v1/surveys?limit=1`)).json()).items[0];
+  const planned = await (await env.server.fetch(`/api/v1/surveys/${newest.id}`)).json();
   const charted = await page.inputValue('#profile-uav');
   const sorties = planned.uavs.find((u) => u.id === charted).sorties.length;
   assert.equal(await page.locator('#profile-sortie-field').isVisible(), sorties > 1, `${sorties} sortie(s)`);
@@ -211,8 +211,8 @@ test('a battery limit splits a UAV’s mission into sorties, each charted and do
   await page.waitForFunction(() => document.querySelector('#survey-busy').textContent === 'Planned.', null, { timeout: 60_000 });
   assert.equal(await page.locator('#survey-battery-error').isVisible(), false);
 
-  const newest = (await (await fetch(`${env.server.url}/api/v1/surveys?limit=1`)).json()).items[0];
-  const planned = await (await fetch(`${env.server.url}/api/v1/surveys/${newest.id}`)).json();
+  const newest = (await (await env.server.fetch(`/api/v1/surveys?limit=1`)).json()).items[0];
+  const planned = await (await env.server.fetch(`/api/v1/surveys/${newest.id}`)).json();
   assert.equal(planned.request.uavs[0].max_flight_time_s, 90);
   const sorties = planned.uavs[0].sorties;
   assert.ok(sorties.length >= 2, `${sorties.length} sorties`);

@@ -37,6 +37,8 @@ export interface Page<T> {
 
 export interface Dem {
   id: string;
+  /** The project it belongs to (absent from servers without accounts). */
+  project_id?: string | null;
   name: string | null;
   file_name: string | null;
   created_at: string;
@@ -131,6 +133,8 @@ export interface CameraPreset {
 
 export interface Survey {
   id: string;
+  /** The project it belongs to (absent from servers without accounts). */
+  project_id?: string | null;
   name: string | null;
   created_at: string;
   altitude_frame: string;
@@ -145,6 +149,8 @@ export interface Survey {
 }
 export interface SurveySummary {
   id: string;
+  /** The project it belongs to (absent from servers without accounts). */
+  project_id?: string | null;
   name: string | null;
   created_at: string;
   uav_count: number;
@@ -164,6 +170,8 @@ export interface Vehicle {
 export type JobStatus = 'queued' | 'running' | 'done' | 'failed';
 export interface Costmap {
   id: string;
+  /** The project it belongs to (absent from servers without accounts). */
+  project_id?: string | null;
   name: string | null;
   dem_id: string;
   created_at: string;
@@ -194,6 +202,8 @@ export interface JobEvent {
 export type Position = LonLat | { utm: [number, number] };
 export interface Route {
   id: string;
+  /** The project it belongs to (absent from servers without accounts). */
+  project_id?: string | null;
   name: string | null;
   costmap_id: string;
   parent_id: string | null;
@@ -221,18 +231,50 @@ export interface Route {
   urls: { geojson: string; csv: string; waypoints: string; replan: string };
 }
 
-async function request<T>(method: string, url: string, body?: unknown): Promise<T> {
+/**
+ * What every request carries besides its own data: the session's CSRF token
+ * (sent on writes: the server refuses cookie-authenticated writes without
+ * it), the chosen project (sent on creates, filtering lists) and what to do
+ * when the server answers 401 (sign in again). Null members: a server without
+ * accounts, or nothing chosen yet.
+ */
+export const apiContext: {
+  csrfToken: string | null;
+  projectId: string | null;
+  onUnauthorized: ((problem: Problem) => void) | null;
+} = { csrfToken: null, projectId: null, onUnauthorized: null };
+
+/** The headers of a request: its body type and, on a write, the CSRF token. */
+export function requestHeaders(method: string, hasJsonBody: boolean): Record<string, string> {
+  const headers: Record<string, string> = hasJsonBody ? { 'Content-Type': 'application/json' } : {};
+  if (method !== 'GET' && method !== 'HEAD' && apiContext.csrfToken) headers['X-CSRF-Token'] = apiContext.csrfToken;
+  return headers;
+}
+
+/** A create request's body with the chosen project (when there is one and the body names none). */
+export function inProject(body: unknown): unknown {
+  if (!apiContext.projectId || typeof body !== 'object' || body === null || Array.isArray(body)) return body;
+  const b = body as Record<string, unknown>;
+  return 'project_id' in b ? b : { ...b, project_id: apiContext.projectId };
+}
+
+/** `quiet`: a 401 is the answer asked about (the session check, signing in), not a lost session. */
+export async function request<T>(method: string, url: string, body?: unknown, quiet = false): Promise<T> {
   let res: Response;
   try {
     res = await fetch(url, {
       method,
-      headers: body === undefined ? {} : { 'Content-Type': 'application/json' },
+      headers: requestHeaders(method, body !== undefined),
       body: body === undefined ? undefined : JSON.stringify(body),
     });
   } catch {
     throw new ApiError({ status: 0, detail: 'The terraplan server cannot be reached.' });
   }
-  if (!res.ok) throw new ApiError(await problemOf(res));
+  if (!res.ok) {
+    const problem = await problemOf(res);
+    if (res.status === 401 && !quiet) apiContext.onUnauthorized?.(problem);
+    throw new ApiError(problem);
+  }
   if (res.status === 204) return undefined as T;
   return (await res.json()) as T;
 }
@@ -248,46 +290,59 @@ async function problemOf(res: Response): Promise<Problem> {
   return { status: res.status, detail: text || res.statusText || `HTTP ${res.status}` };
 }
 
-const list = <T>(path: string, limit = 50) => request<Page<T>>('GET', `${path}?limit=${limit}&offset=0`);
+/**
+ * A list's URL: the first page, of the chosen project (`allProjects`: of
+ * every project the caller may see).
+ */
+export function listUrl(path: string, limit = 50, allProjects = false): string {
+  const params = new URLSearchParams({ limit: String(limit), offset: '0' });
+  if (apiContext.projectId && !allProjects) params.set('project_id', apiContext.projectId);
+  return `${path}?${params}`;
+}
+
+const list = <T>(path: string, allProjects = false) => request<Page<T>>('GET', listUrl(path, 50, allProjects));
 
 export const api = {
-  listDems: () => list<Dem>('/api/v1/dems'),
+  listDems: (allProjects = false) => list<Dem>('/api/v1/dems', allProjects),
   getDem: (id: string) => request<Dem>('GET', `/api/v1/dems/${id}`),
   deleteDem: (id: string) => request<void>('DELETE', `/api/v1/dems/${id}`),
 
   listCameras: () => request<{ items: CameraPreset[] }>('GET', '/api/v1/cameras'),
-  createSurvey: (body: unknown) => request<Survey>('POST', '/api/v1/surveys', body),
-  listSurveys: () => list<SurveySummary>('/api/v1/surveys'),
+  createSurvey: (body: unknown) => request<Survey>('POST', '/api/v1/surveys', inProject(body)),
+  listSurveys: (allProjects = false) => list<SurveySummary>('/api/v1/surveys', allProjects),
   getSurvey: (id: string) => request<Survey>('GET', `/api/v1/surveys/${id}`),
   deleteSurvey: (id: string) => request<void>('DELETE', `/api/v1/surveys/${id}`),
 
   listVehicles: () => request<{ items: Vehicle[] }>('GET', '/api/v1/vehicles'),
-  createCostmap: (body: unknown) => request<Costmap>('POST', '/api/v1/costmaps', body),
-  listCostmaps: () => list<Costmap>('/api/v1/costmaps'),
+  createCostmap: (body: unknown) => request<Costmap>('POST', '/api/v1/costmaps', inProject(body)),
+  listCostmaps: (allProjects = false) => list<Costmap>('/api/v1/costmaps', allProjects),
   getCostmap: (id: string) => request<Costmap>('GET', `/api/v1/costmaps/${id}`),
   deleteCostmap: (id: string) => request<void>('DELETE', `/api/v1/costmaps/${id}`),
 
+  // A route belongs to its costmap's project: no project_id.
   createRoute: (costmapId: string, body: unknown) =>
     request<Route>('POST', `/api/v1/costmaps/${costmapId}/routes`, body),
   replanRoute: (routeId: string, body: unknown) => request<Route>('POST', `/api/v1/routes/${routeId}/replan`, body),
-  listRoutes: () => list<Route>('/api/v1/routes'),
+  listRoutes: (allProjects = false) => list<Route>('/api/v1/routes', allProjects),
   getRoute: (id: string) => request<Route>('GET', `/api/v1/routes/${id}`),
   deleteRoute: (id: string) => request<void>('DELETE', `/api/v1/routes/${id}`),
 };
 
 /**
- * Uploads a DEM file as the raw body. XMLHttpRequest rather than fetch
- * because only XHR reports upload progress.
+ * Uploads a DEM file as the raw body into the chosen project; `crs`
+ * ("EPSG:32633") for a file that does not give its own. XMLHttpRequest
+ * rather than fetch because only XHR reports upload progress.
  */
-/** Uploads a DEM; `crs` ("EPSG:32633") for a file that does not give its own. */
 export function uploadDem(file: File, name: string, crs: string | null, onProgress: (fraction: number) => void): Promise<Dem> {
   return new Promise((resolve, reject) => {
     const xhr = new XMLHttpRequest();
     const params = new URLSearchParams({ name, file_name: file.name });
     if (crs) params.set('crs', crs);
+    if (apiContext.projectId) params.set('project_id', apiContext.projectId);
     xhr.open('POST', `/api/v1/dems?${params}`);
     const type = /\.(tif|tiff)$/i.test(file.name) ? 'image/tiff' : /\.asc$/i.test(file.name) ? 'text/plain' : 'application/octet-stream';
     xhr.setRequestHeader('Content-Type', type);
+    for (const [k, v] of Object.entries(requestHeaders('POST', false))) xhr.setRequestHeader(k, v);
     xhr.upload.onprogress = (e) => {
       if (e.lengthComputable) onProgress(e.loaded / e.total);
     };
@@ -303,6 +358,7 @@ export function uploadDem(file: File, name: string, crs: string | null, onProgre
       } catch {
         /* keep the text */
       }
+      if (xhr.status === 401) apiContext.onUnauthorized?.(problem);
       reject(new ApiError(problem));
     };
     xhr.onerror = () => reject(new ApiError({ status: 0, detail: 'The upload failed: the server cannot be reached.' }));

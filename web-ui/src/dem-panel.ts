@@ -33,6 +33,9 @@ export class DemPanel {
       return;
     }
     const current = this.select.value;
+    // The DEM on the map stays choosable after another project is chosen (it is still the caller's to see).
+    const shown = this.selection.current;
+    if (shown && shown.id === current && !this.has(shown.id)) this.dems.unshift(shown);
     this.select.replaceChildren(h('option', { value: '' }, 'None (flat, no terrain)'));
     for (const d of this.dems) this.select.append(h('option', { value: d.id }, demLabel(d)));
     this.select.value = this.dems.some((d) => d.id === current) ? current : '';

@@ -3,11 +3,15 @@
 import 'ol/ol.css';
 import './style.css';
 import { api } from './api';
+import type { Session } from './account-api';
 import { DemPanel } from './dem-panel';
 import { byId } from './dom';
 import { MapView } from './map';
+import { MembersDialog } from './members-dialog';
+import { ProjectSwitcher } from './projects';
 import { RoutePanel } from './route-panel';
 import { SavedPanel } from './saved-panel';
+import { SessionUi } from './session';
 import { DemSelection } from './state';
 import { SurveyPanel } from './survey-panel';
 
@@ -67,6 +71,23 @@ const saved = new SavedPanel({
   },
 });
 
+// ---- accounts: session, project switcher, members ----
+/** The lists that depend on who is signed in and on the chosen project. */
+async function refreshLists(): Promise<void> {
+  await Promise.all([dems.refresh(), route.refreshCostmaps(), byId('saved-panel').hidden ? Promise.resolve() : saved.refresh()]);
+}
+const projects = new ProjectSwitcher(() => void refreshLists());
+const members = new MembersDialog();
+byId('members-open').addEventListener('click', () => {
+  if (projects.current) void members.open(projects.current);
+});
+const session = new SessionUi({
+  signedInAgain: (now: Session, before: Session | null) => {
+    // The same user: the page goes on where it was. Someone else: their projects and work.
+    if (before?.user.id !== now.user.id) void projects.load(now).then(refreshLists);
+  },
+});
+
 // ---- tabs (WAI-ARIA tabs: arrow keys move between them) ----
 const TABS = ['survey', 'route', 'saved'] as const;
 type Tab = (typeof TABS)[number];
@@ -118,7 +139,14 @@ map.map.once('rendercomplete', () => performance.mark('terraplan:map-rendered'))
 const LAST_DEM = 'terraplan.dem';
 selection.onChange((d) => (d ? localStorage.setItem(LAST_DEM, d.id) : localStorage.removeItem(LAST_DEM)));
 
-void Promise.all([dems.refresh(), route.loadVehicles(), survey.loadCameras()]).then(async () => {
+// The static catalogues need no account; the rest waits for the session (and a project).
+const catalogues = Promise.all([route.loadVehicles(), survey.loadCameras()]);
+void session.start().then(async (signedIn) => {
+  if (signedIn) {
+    await projects.load(signedIn);
+    saved.useProjects(projects);
+  }
+  await Promise.all([dems.refresh(), catalogues]);
   const last = localStorage.getItem(LAST_DEM);
   if (last && dems.has(last)) await dems.choose(last);
   document.body.dataset.ready = 'true';

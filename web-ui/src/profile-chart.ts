@@ -203,7 +203,15 @@ export function renderProfileChart(
   container.append(svg);
   const legend = document.createElement('p');
   legend.className = 'chart-legend';
-  legend.innerHTML = `<span class="swatch" style="background:${opts.colour}"></span> ${opts.altitudeLabel}` +
-    (terrainPath ? ' <span class="swatch terrain-swatch"></span> terrain (DEM)' : '');
+  // Built as nodes, not markup: the page sets no HTML from strings.
+  const swatch = document.createElement('span');
+  swatch.className = 'swatch';
+  swatch.style.background = opts.colour;
+  legend.append(swatch, ` ${opts.altitudeLabel}`);
+  if (terrainPath) {
+    const terrain = document.createElement('span');
+    terrain.className = 'swatch terrain-swatch';
+    legend.append(' ', terrain, ' terrain (DEM)');
+  }
   container.append(legend);
 }

@@ -97,6 +97,11 @@ export class RoutePanel {
     this.showPoints();
   }
 
+  /** Lists the costmaps again (another project was chosen). */
+  refreshCostmaps(): Promise<void> {
+    return this.listCostmaps(this.dem.current);
+  }
+
   /** Fills the costmap chooser with the finished costmaps of this DEM. */
   private async listCostmaps(dem: Dem | null): Promise<void> {
     const select = byId<HTMLSelectElement>('costmap-select');

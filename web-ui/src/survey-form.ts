@@ -279,9 +279,12 @@ export const FORM_DEFAULTS = {
   assignment: 'balanced',
 } as const satisfies Partial<SurveyFormValues>;
 
-/** Request members the form has controls for (the rest are kept as `extra`). */
+/**
+ * Request members the form has controls for (the rest are kept as `extra`).
+ * `project_id` too: a plan made again goes to the project chosen now.
+ */
 const FORM_MEMBERS = new Set([
-  'name', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
+  'name', 'project_id', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
   'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'nfz_clearance_m', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
 ]);
 

@@ -276,6 +276,13 @@ describe('formFromRequest', () => {
     expect(values).toEqual(values_({ name: 'field 7', camera: 'dji_phantom4_pro', gsdCmPx: 1.5 }));
   });
 
+  it('does not keep the saved survey’s project: a plan made again goes to the project chosen now', () => {
+    const { values, notes } = formFromRequest({ roi: { type: 'Polygon', coordinates: square }, project_id: 'p-old' }, 'field 7', base);
+    expect(notes).toEqual([]);
+    expect(values.extra).toEqual({});
+    expect(buildSurveyRequest(values).body).not.toHaveProperty('project_id');
+  });
+
   it('round-trips what the form sends, and keeps members it has no control for', () => {
     const request = {
       roi: { type: 'Feature', properties: {}, geometry: { type: 'Polygon', coordinates: square } },
