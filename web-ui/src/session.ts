@@ -6,7 +6,7 @@
 
 import { ApiError, apiContext } from './api';
 import { accounts, type Credentials, type Session } from './account-api';
-import { byId } from './dom';
+import { byId, h } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { closeOverlay, openOverlay } from './overlay';
 
@@ -131,7 +131,8 @@ export class SessionUi {
   private use(session: Session): void {
     this.session = session;
     apiContext.csrfToken = session.csrf_token;
-    byId('signed-in-as').textContent = `Signed in as ${session.user.name}`;
+    // "Signed in as" for screen readers; the bar shows the name (as text: it is the user's own).
+    byId('signed-in-as').replaceChildren(h('span', { class: 'visually-hidden' }, 'Signed in as '), session.user.name);
   }
 
   private async signOut(): Promise<void> {
