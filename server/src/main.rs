@@ -3,6 +3,7 @@
 
 mod api;
 mod app;
+mod auth;
 mod cli;
 mod clock;
 mod config;

@@ -80,22 +80,180 @@ pub struct Server {
     child: Option<std::process::Child>,
     pub base: String,
     pub data_dir: PathBuf,
+    /// The admin user the harness made for this server (`terraplan user
+    /// create … --admin`), empty for [`Server::start_without_user`].
+    pub user: String,
+    /// An API token of [`Server::user`], which the free request functions
+    /// send to this server unless told otherwise (see [`Auth`]).
+    pub token: String,
     /// The lines it logs, when started by [`Server::start_logging`].
     log: Option<std::sync::mpsc::Receiver<String>>,
+    /// The lines it prints on stdout after `listening on …`.
+    stdout: std::sync::mpsc::Receiver<String>,
+}
+
+/// The harness users, by data directory: a server started again on the
+/// same directory gets a new token of the same user, so that it sees what
+/// the first one made.
+fn harness_users() -> &'static std::sync::Mutex<std::collections::HashMap<PathBuf, String>> {
+    static USERS: std::sync::OnceLock<
+        std::sync::Mutex<std::collections::HashMap<PathBuf, String>>,
+    > = std::sync::OnceLock::new();
+    USERS.get_or_init(Default::default)
+}
+
+/// The token of each running test server, by its authority (`host:port`).
+fn server_tokens() -> &'static std::sync::Mutex<std::collections::HashMap<String, String>> {
+    static TOKENS: std::sync::OnceLock<
+        std::sync::Mutex<std::collections::HashMap<String, String>>,
+    > = std::sync::OnceLock::new();
+    TOKENS.get_or_init(Default::default)
+}
+
+/// The `host:port` of an `http://` URL.
+fn authority(url: &str) -> &str {
+    let rest = url.strip_prefix("http://").unwrap_or(url);
+    rest.split(['/', '?']).next().unwrap_or(rest)
+}
+
+/// Send `token` to the server at `url` (its base URL or authority) from
+/// now on, as for a server started by [`Server::start`].
+pub fn remember_token(url: &str, token: &str) {
+    server_tokens()
+        .lock()
+        .unwrap()
+        .insert(authority(url).to_string(), token.to_string());
+}
+
+/// The credential header lines (`Authorization: Bearer …\r\n`, or none)
+/// of the test server `url` names, for a request written by hand.
+pub fn credential_lines(url: &str) -> String {
+    token_for(url)
+        .map(|t| format!("Authorization: Bearer {t}\r\n"))
+        .unwrap_or_default()
+}
+
+/// The token of the test server `url` names, if this process started it.
+pub fn token_for(url: &str) -> Option<String> {
+    server_tokens().lock().unwrap().get(authority(url)).cloned()
+}
+
+/// A user name no other test server (of this or another process, on a
+/// shared PostgreSQL database) has.
+pub fn unique_user_name(prefix: &str) -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    format!(
+        "{prefix}-{}-{}-{nanos}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// `terraplan user ARGS…` on the database of `data_dir` (or
+/// `TERRAPLAN_TEST_DATABASE_URL`), with `stdin` as its input.
+pub fn user_command(data_dir: &Path, args: &[&str], stdin: Option<&str>) -> Output {
+    let mut cmd = Command::new(terraplan_bin());
+    cmd.arg("user")
+        .args(args)
+        .arg("--data-dir")
+        .arg(data_dir)
+        .env_remove("DATABASE_URL")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    if let Ok(url) = std::env::var("TERRAPLAN_TEST_DATABASE_URL") {
+        cmd.env("DATABASE_URL", url);
+    }
+    let mut child = cmd.spawn().expect("run terraplan user");
+    let mut input = child.stdin.take().unwrap();
+    let feed = stdin.unwrap_or("").to_string();
+    let writer = std::thread::spawn(move || {
+        let _ = input.write_all(feed.as_bytes());
+    });
+    let out = child.wait_with_output().expect("terraplan user");
+    writer.join().unwrap();
+    out
+}
+
+/// The last line of a command's stdout (where `terraplan user create` and
+/// `user token` print the new token).
+pub fn last_line(out: &Output) -> String {
+    text(&out.stdout)
+        .lines()
+        .last()
+        .unwrap_or_default()
+        .trim()
+        .to_string()
+}
+
+/// The harness's admin for `data_dir` and a new token of it: made by
+/// `terraplan user create` the first time, by `user token` after.
+/// [`Server::start`] calls it; tests that start `terraplan serve`
+/// themselves call it first and then [`remember_token`].
+pub fn harness_user(data_dir: &Path) -> (String, String) {
+    let known = harness_users().lock().unwrap().get(data_dir).cloned();
+    let (name, out) = match known {
+        Some(name) => {
+            let out = user_command(data_dir, &["token", &name], None);
+            (name, out)
+        }
+        None => {
+            let name = unique_user_name("e2e");
+            let out = user_command(data_dir, &["create", &name, "--admin"], None);
+            (name, out)
+        }
+    };
+    assert!(
+        out.status.success(),
+        "terraplan user on {}: {}{}",
+        data_dir.display(),
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    harness_users()
+        .lock()
+        .unwrap()
+        .insert(data_dir.to_path_buf(), name.clone());
+    (name, last_line(&out))
 }
 
 impl Server {
     /// Start on `data_dir`. With `TERRAPLAN_TEST_DATABASE_URL` set (the
     /// test command sets it for the PostgreSQL run) the server uses that
     /// database instead of the embedded SQLite.
+    ///
+    /// A user (an admin, its name unique) is made first on the same data
+    /// directory / database, and its token sent by the free request
+    /// functions to this server.
     pub fn start(data_dir: &Path, extra_args: &[&str]) -> Server {
-        Server::spawn(data_dir, extra_args, None)
+        Server::spawn(data_dir, extra_args, None, true)
+    }
+
+    /// [`Server::start`] without making a user first (a first start).
+    pub fn start_without_user(data_dir: &Path, extra_args: &[&str]) -> Server {
+        Server::spawn(data_dir, extra_args, None, false)
+    }
+
+    /// The next line the server prints on stdout after `listening on …`,
+    /// if one comes within `timeout`.
+    pub fn stdout_line(&self, timeout: std::time::Duration) -> Option<String> {
+        self.stdout.recv_timeout(timeout).ok()
+    }
+
+    /// `Authorization: Bearer …\r\n`, the header line of this server's
+    /// token, for tests that write requests by hand.
+    pub fn auth_line(&self) -> String {
+        format!("Authorization: Bearer {}\r\n", self.token)
     }
 
     /// [`Server::start`] with the log filter `filter` (`TERRAPLAN_LOG`),
     /// its lines kept for [`Server::wait_for_log`] (and still shown).
     pub fn start_logging(data_dir: &Path, extra_args: &[&str], filter: &str) -> Server {
-        Server::spawn(data_dir, extra_args, Some(filter))
+        Server::spawn(data_dir, extra_args, Some(filter), true)
     }
 
     /// Wait until the server logs a line holding every one of `needles`
@@ -116,8 +274,18 @@ impl Server {
         }
     }
 
-    fn spawn(data_dir: &Path, extra_args: &[&str], log_filter: Option<&str>) -> Server {
+    fn spawn(
+        data_dir: &Path,
+        extra_args: &[&str],
+        log_filter: Option<&str>,
+        with_user: bool,
+    ) -> Server {
         use std::io::{BufRead, BufReader};
+        let (user, token) = if with_user {
+            harness_user(data_dir)
+        } else {
+            Default::default()
+        };
         let mut cmd = Command::new(terraplan_bin());
         cmd.args(["serve", "--host", "127.0.0.1", "--port", "0", "--data-dir"])
             .arg(data_dir)
@@ -143,21 +311,36 @@ impl Server {
             });
             rx
         });
-        let stdout = child.stdout.take().expect("stdout");
+        let mut stdout = BufReader::new(child.stdout.take().expect("stdout"));
         let mut line = String::new();
-        BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("read address");
+        stdout.read_line(&mut line).expect("read address");
         let base = line
             .trim()
             .strip_prefix("listening on ")
             .unwrap_or_else(|| panic!("unexpected first line from terraplan serve: {line:?}"))
             .to_string();
+        // Keep reading, so that what the server prints later never meets a
+        // closed pipe.
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in stdout.lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        if with_user {
+            server_tokens()
+                .lock()
+                .unwrap()
+                .insert(authority(&base).to_string(), token.clone());
+        }
         Server {
             child: Some(child),
             base,
             data_dir: data_dir.to_path_buf(),
+            user,
+            token,
             log,
+            stdout: rx,
         }
     }
 
@@ -206,7 +389,64 @@ impl Server {
 impl Drop for Server {
     fn drop(&mut self) {
         self.terminate();
+        server_tokens()
+            .lock()
+            .unwrap()
+            .remove(authority(&self.base));
     }
+}
+
+/// The credentials of a request.
+#[derive(Clone, Debug, Default)]
+pub enum Auth {
+    /// The token of the test server the URL names (none for other URLs),
+    /// unless the request's own headers carry `Authorization` or `Cookie`:
+    /// what the free request functions send.
+    #[default]
+    Server,
+    /// No credentials at all.
+    None,
+    /// `Authorization: Bearer TOKEN`.
+    Bearer(String),
+    /// The session cookie, and `X-CSRF-Token` when `csrf` is given.
+    Cookie {
+        session: String,
+        csrf: Option<String>,
+    },
+}
+
+impl Auth {
+    /// The header fields this sends to `url`, given the request's own.
+    pub fn headers(&self, url: &str, own: &[(&str, &str)]) -> Vec<(String, String)> {
+        match self {
+            Auth::Server => {
+                let has = |name: &str| own.iter().any(|(k, _)| k.eq_ignore_ascii_case(name));
+                if has("authorization") || has("cookie") {
+                    return Vec::new();
+                }
+                token_for(url)
+                    .map(|t| vec![("Authorization".to_string(), format!("Bearer {t}"))])
+                    .unwrap_or_default()
+            }
+            Auth::None => Vec::new(),
+            Auth::Bearer(t) => vec![("Authorization".to_string(), format!("Bearer {t}"))],
+            Auth::Cookie { session, csrf } => {
+                let mut h = vec![("Cookie".to_string(), format!("terraplan_session={session}"))];
+                if let Some(c) = csrf {
+                    h.push(("X-CSRF-Token".to_string(), c.clone()));
+                }
+                h
+            }
+        }
+    }
+}
+
+/// `req` with the credentials [`Auth::Server`] gives `url`.
+fn authorize<B>(mut req: ureq::RequestBuilder<B>, url: &str) -> ureq::RequestBuilder<B> {
+    for (k, v) in Auth::Server.headers(url, &[]) {
+        req = req.header(k, v);
+    }
+    req
 }
 
 /// An HTTP response read whole.
@@ -267,7 +507,7 @@ pub fn get_with_timeout(url: &str, timeout: std::time::Duration) -> Reply {
         .timeout_global(Some(timeout))
         .build()
         .into();
-    reply(agent.get(url).call())
+    reply(authorize(agent.get(url), url).call())
 }
 
 /// The events of a `text/event-stream` body: (event name, data parsed as
@@ -295,11 +535,33 @@ pub fn sse_events(body: &str) -> Vec<(String, serde_json::Value)> {
 }
 
 pub fn get(url: &str) -> Reply {
-    reply(agent().get(url).call())
+    reply(authorize(agent().get(url), url).call())
 }
 
 pub fn delete(url: &str) -> Reply {
-    reply(agent().delete(url).call())
+    reply(authorize(agent().delete(url), url).call())
+}
+
+/// GET with the credentials `auth`.
+pub fn get_as(auth: &Auth, url: &str) -> Reply {
+    send_as(auth, "GET", url, &[], &[], Framing::Length)
+}
+
+/// DELETE with the credentials `auth`.
+pub fn delete_as(auth: &Auth, url: &str) -> Reply {
+    send_as(auth, "DELETE", url, &[], &[], Framing::Length)
+}
+
+/// POST JSON with the credentials `auth`.
+pub fn post_json_as(auth: &Auth, url: &str, body: &serde_json::Value) -> Reply {
+    send_as(
+        auth,
+        "POST",
+        url,
+        &[("Content-Type", "application/json")],
+        body.to_string().as_bytes(),
+        Framing::Length,
+    )
 }
 
 /// POST `body` as `content_type` (see [`send`]: an answer given before the
@@ -336,6 +598,8 @@ pub const REPLY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30
 /// after which writing the rest fails with EPIPE or ECONNRESET. That
 /// failure is no error when a complete answer arrived; ureq, used for the
 /// other methods, gives up at the failed write instead.
+///
+/// The credentials are [`Auth::Server`]'s; [`send_as`] chooses others.
 pub fn send(
     method: &str,
     url: &str,
@@ -343,7 +607,22 @@ pub fn send(
     body: &[u8],
     framing: Framing,
 ) -> Reply {
-    let (reply, written, received) = exchange(method, url, headers, body, framing);
+    send_as(&Auth::Server, method, url, headers, body, framing)
+}
+
+/// [`send`] with the credentials `auth`.
+pub fn send_as(
+    auth: &Auth,
+    method: &str,
+    url: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+    framing: Framing,
+) -> Reply {
+    let extra = auth.headers(url, headers);
+    let mut all: Vec<(&str, &str)> = headers.to_vec();
+    all.extend(extra.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+    let (reply, written, received) = exchange(method, url, &all, body, framing);
     reply.unwrap_or_else(|e| {
         panic!(
             "{method} {url}: {e} (writing the request: {written:?}); received {:?}",
@@ -427,9 +706,14 @@ pub fn get_streaming(url: &str, timeout: std::time::Duration) -> Streaming {
     let mut stream = std::net::TcpStream::connect(authority)
         .unwrap_or_else(|e| panic!("connect to {authority}: {e}"));
     stream.set_read_timeout(Some(timeout)).unwrap();
+    let credentials: String = Auth::Server
+        .headers(url, &[])
+        .iter()
+        .map(|(k, v)| format!("{k}: {v}\r\n"))
+        .collect();
     write!(
         stream,
-        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
+        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n{credentials}\r\n"
     )
     .unwrap_or_else(|e| panic!("GET {url}: {e}"));
     let mut received = Vec::new();
@@ -592,10 +876,14 @@ fn dechunk(mut data: &[u8]) -> Option<Vec<u8>> {
 }
 
 /// GET with extra request headers.
+/// (The server's token unless they carry `Authorization` or `Cookie`.)
 pub fn get_with_headers(url: &str, headers: &[(&str, &str)]) -> Reply {
     let mut req = agent().get(url);
     for (k, v) in headers {
         req = req.header(*k, *v);
+    }
+    for (k, v) in Auth::Server.headers(url, headers) {
+        req = req.header(k, v);
     }
     reply(req.call())
 }

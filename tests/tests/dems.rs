@@ -1040,8 +1040,9 @@ fn early_refusals_reach_clients_still_sending() {
     write!(
         s,
         "POST /api/v1/dems HTTP/1.1\r\nHost: {addr}\r\nContent-Type: image/png\r\n\
-         Content-Length: {}\r\n\r\n",
-        small.len()
+         Content-Length: {}\r\n{}\r\n",
+        small.len(),
+        server.auth_line()
     )
     .unwrap();
     s.write_all(&small).unwrap();
@@ -1067,8 +1068,9 @@ fn post_then_read(
     let written = write!(
         s,
         "POST /api/v1/dems HTTP/1.1\r\nHost: {addr}\r\nContent-Type: {content_type}\r\n\
-         Content-Length: {}\r\n\r\n",
-        body.len()
+         Content-Length: {}\r\n{}\r\n",
+        body.len(),
+        server.auth_line()
     )
     .and_then(|()| s.write_all(body));
     (written, read_answer(&mut s))
@@ -1082,8 +1084,12 @@ fn curl_post(
     data_arg: &str,
     extra: &[&str],
 ) -> std::process::Output {
+    let credentials = terraplan_e2e::token_for(url)
+        .map(|t| format!("Authorization: Bearer {t}"))
+        .unwrap_or_default();
     std::process::Command::new("curl")
         .args(["-sS", "--max-time", "300", "-H", content_type])
+        .args(["-H", &credentials])
         .args(extra)
         .args(["--data-binary", data_arg, "-w", "\n%{http_code}", url])
         .output()

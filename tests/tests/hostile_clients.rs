@@ -29,9 +29,10 @@ fn timed_get(authority: &str, path: &str) -> (u16, Duration) {
     let t = Instant::now();
     let mut s = TcpStream::connect(authority).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let credentials = terraplan_e2e::credential_lines(authority);
     write!(
         s,
-        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"
+        "GET {path} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n{credentials}\r\n"
     )
     .unwrap();
     let r = read_answer(&mut s);
@@ -52,10 +53,11 @@ impl Slow {
         let mut stream = TcpStream::connect(authority).unwrap();
         let opened = Instant::now();
         if trickles {
+            let credentials = terraplan_e2e::credential_lines(authority);
             write!(
                 stream,
                 "POST /api/v1/surveys HTTP/1.1\r\nHost: {authority}\r\nContent-Type: \
-                 application/json\r\nContent-Length: 100000\r\n\r\n{{"
+                 application/json\r\nContent-Length: 100000\r\n{credentials}\r\n{{"
             )
             .unwrap();
         } else {
@@ -221,8 +223,9 @@ fn a_slow_but_steady_body_is_read() {
     write!(
         s,
         "POST /api/v1/surveys HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: \
-         application/json\r\nContent-Length: {}\r\n\r\n",
-        body.len()
+         application/json\r\nContent-Length: {}\r\n{}\r\n",
+        body.len(),
+        server.auth_line()
     )
     .unwrap();
     let t = Instant::now();
@@ -238,6 +241,7 @@ fn a_slow_but_steady_body_is_read() {
 /// `terraplan serve` under a file limit of `nofile` (prlimit), on the
 /// test database as [`Server::start`]; its address and the process.
 fn serve_with_file_limit(dir: &Path, nofile: u32, args: &[&str]) -> (String, Child) {
+    let (_, token) = terraplan_e2e::harness_user(dir);
     let mut cmd = Command::new("prlimit");
     cmd.arg(format!("--nofile={nofile}:{nofile}"))
         .arg(terraplan_bin())
@@ -262,6 +266,7 @@ fn serve_with_file_limit(dir: &Path, nofile: u32, args: &[&str]) -> (String, Chi
         .strip_prefix("listening on ")
         .unwrap_or_else(|| panic!("{line:?}"))
         .to_string();
+    terraplan_e2e::remember_token(&base, &token);
     (authority(&base), child)
 }
 

@@ -93,8 +93,9 @@ fn post_and_leave(server: &Server, path: &str, body: &Value) -> TcpStream {
     write!(
         stream,
         "POST {path} HTTP/1.1\r\nHost: {authority}\r\nContent-Type: application/json\r\n\
-         Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
-        body.len()
+         Content-Length: {}\r\nConnection: close\r\n{}\r\n{body}",
+        body.len(),
+        server.auth_line()
     )
     .unwrap();
     stream.flush().unwrap();

@@ -394,7 +394,7 @@ fn bad_input_is_a_problem_naming_the_fault() {
     s.set_read_timeout(Some(std::time::Duration::from_secs(30)))
         .unwrap();
     let len = 100 * 1024 * 1024;
-    write!(s, "POST /api/v1/surveys HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n").unwrap();
+    write!(s, "POST /api/v1/surveys HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\nContent-Length: {len}\r\nConnection: close\r\n{}\r\n", server.auth_line()).unwrap();
     let _ = s.write_all(&vec![b' '; 1024 * 1024]);
     let mut resp = Vec::new();
     let _ = s.read_to_end(&mut resp);

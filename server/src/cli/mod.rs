@@ -1,6 +1,6 @@
 //! Command-line interface: `terraplan survey`, `terraplan costmap` and
 //! `terraplan route` run the same planners as the service on files; `terraplan dem-info` reads a
-//! DEM as the service does. Exit status: 0 success, 2 invalid input (the
+//! DEM as the service does; `terraplan user` manages the service's users. Exit status: 0 success, 2 invalid input (the
 //! message names the fault), 1 any other failure.
 //!
 //! This module parses the arguments and dispatches; each subcommand has
@@ -19,6 +19,7 @@ mod experiment;
 mod route;
 mod serve;
 mod survey;
+mod user;
 
 #[derive(Parser)]
 #[command(
@@ -48,6 +49,10 @@ enum Command {
     /// GeoTIFF and write route.json, route.geojson, route.csv and an
     /// ArduPilot Rover mission.waypoints.
     Route(route::RouteArgs),
+    /// Manage the service's users and their API tokens (on the database
+    /// of `serve`'s `--data-dir` / `DATABASE_URL`).
+    #[command(subcommand)]
+    User(user::UserCommand),
     /// Reproducible experiments on embedded real data.
     #[command(subcommand)]
     Experiment(experiment::ExperimentCommand),
@@ -69,6 +74,7 @@ pub fn run() -> ExitCode {
         Command::Costmap(args) => costmap::costmap(&args),
         Command::Route(args) => route::route(&args),
         Command::Experiment(command) => experiment::experiment(&command),
+        Command::User(command) => user::user(command),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
