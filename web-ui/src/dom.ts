@@ -18,15 +18,29 @@ export function setValue(id: string, value: string | number): void {
   byId<HTMLInputElement | HTMLSelectElement>(id).value = String(value);
 }
 
-/** Creates an element with text and attributes. */
+/**
+ * Creates an element with text and attributes. Strings are text, never
+ * markup. No `style` attribute: the server's Content-Security-Policy refuses
+ * inline style attributes (set styles through `el.style`, as `swatch` does).
+ */
 export function h<K extends keyof HTMLElementTagNameMap>(
   tag: K,
   attrs: Record<string, string> = {},
   ...children: (Node | string)[]
 ): HTMLElementTagNameMap[K] {
   const el = document.createElement(tag);
-  for (const [k, v] of Object.entries(attrs)) el.setAttribute(k, v);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === 'style') throw new Error(`h(${tag}): a style attribute is refused by the page's CSP; set el.style instead`);
+    el.setAttribute(k, v);
+  }
   el.append(...children);
+  return el;
+}
+
+/** A small square of a colour (the UAV colours in lists and legends). */
+export function swatch(colour: string, className = 'swatch'): HTMLSpanElement {
+  const el = h('span', { class: className });
+  el.style.background = colour;
   return el;
 }
 

@@ -2,6 +2,7 @@
 // chart (a chart library would weigh more than the rest of the page).
 
 import type { ProfilePoint, Uav } from './api';
+import { h, swatch } from './dom';
 
 export interface ChartBox {
   width: number;
@@ -203,15 +204,8 @@ export function renderProfileChart(
   container.append(svg);
   const legend = document.createElement('p');
   legend.className = 'chart-legend';
-  // Built as nodes, not markup: the page sets no HTML from strings.
-  const swatch = document.createElement('span');
-  swatch.className = 'swatch';
-  swatch.style.background = opts.colour;
-  legend.append(swatch, ` ${opts.altitudeLabel}`);
-  if (terrainPath) {
-    const terrain = document.createElement('span');
-    terrain.className = 'swatch terrain-swatch';
-    legend.append(' ', terrain, ' terrain (DEM)');
-  }
+  // Built as nodes, not markup: the page sets no HTML from strings (and the CSP takes no style attributes).
+  legend.append(swatch(opts.colour), ` ${opts.altitudeLabel}`);
+  if (terrainPath) legend.append(' ', h('span', { class: 'swatch terrain-swatch' }), ' terrain (DEM)');
   container.append(legend);
 }

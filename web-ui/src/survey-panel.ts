@@ -3,7 +3,7 @@
 // profile, downloads).
 
 import { api, type CameraPreset, type LonLat, type Survey } from './api';
-import { byId, formatLonLat, h, numberValue, parseLonLat, setValue } from './dom';
+import { byId, formatLonLat, h, numberValue, parseLonLat, setValue, swatch } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
 import { ImportError, parsePolygons, ringCrossesItself, utmArea, type PolygonRings } from './geo-import';
@@ -263,7 +263,7 @@ export class SurveyPanel {
         });
         const remove = h('button', { type: 'button', 'aria-label': `Remove ${u.id}` }, 'Remove');
         remove.addEventListener('click', () => this.setUavs(this.uavs.filter((_, j) => j !== i)));
-        return h('li', {}, h('span', { class: 'swatch', style: `background:${uavColour(i)}` }), h('label', { for: input.id }, `${u.id} start`), input, remove);
+        return h('li', {}, swatch(uavColour(i)), h('label', { for: input.id }, `${u.id} start`), input, remove);
       }),
     );
   }
@@ -470,12 +470,11 @@ export class SurveyPanel {
     byId('survey-totals').replaceChildren(...totals.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
     byId('survey-warnings').replaceChildren(...survey.warnings.map((w) => h('li', {}, w)));
 
-    const swatch = (i: number) => h('span', { class: 'swatch', style: `background:${uavColour(i)}` });
     const rows = survey.uavs.map((u, i) =>
       h(
         'tr',
         { 'data-uav': u.id },
-        h('th', { scope: 'row' }, swatch(i), this.uavButton(u.id)),
+        h('th', { scope: 'row' }, swatch(uavColour(i)), this.uavButton(u.id)),
         h('td', {}, formatLength(u.stats.length_3d_m ?? u.stats.length_m)),
         h('td', {}, formatDuration(u.stats.flight_time_s)),
         h('td', {}, formatNumber(u.stats.photos)),
@@ -494,7 +493,7 @@ export class SurveyPanel {
         return h(
           'li',
           {},
-          swatch(i),
+          swatch(uavColour(i)),
           h('strong', {}, `${u.id}${shown}: `),
           link(so.files.waypoints, '.waypoints', `${u.id} mission waypoints${tag}`),
           link(so.files.plan, '.plan', `${u.id} QGroundControl plan${tag}`),

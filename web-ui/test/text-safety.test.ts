@@ -5,6 +5,7 @@ import { readdirSync, readFileSync } from 'node:fs';
 import path from 'node:path';
 import { describe, expect, it, vi } from 'vitest';
 import { ApiError } from '../src/api';
+import { h, swatch } from '../src/dom';
 import { ErrorSlots } from '../src/errors-ui';
 import { renderMembers } from '../src/members-dialog';
 import { savedItem } from '../src/saved-panel';
@@ -54,11 +55,15 @@ describe('names render as text', () => {
     expect(document.getElementById('members-form-error')!.textContent).toBe(`needs the owner role in project ${EVIL}`);
   });
 
-  it('because the page never sets markup from strings', () => {
+  it('because the page never sets markup from strings, nor style attributes (the CSP refuses those)', () => {
     const src = path.resolve(process.cwd(), 'src');
     const offenders = readdirSync(src)
       .filter((f) => f.endsWith('.ts'))
-      .filter((f) => /\.(innerHTML|outerHTML)\s*=|insertAdjacentHTML|document\.write/.test(readFileSync(path.join(src, f), 'utf8')));
+      .filter((f) => /\.(innerHTML|outerHTML)\s*=|insertAdjacentHTML|document\.write|setAttribute\(\s*['"]style['"]|\bstyle:\s*`/.test(readFileSync(path.join(src, f), 'utf8')));
     expect(offenders).toEqual([]);
+    expect(() => h('span', { style: 'color: red' })).toThrow(/CSP/);
+    const s = swatch('#d7191c');
+    expect(s.getAttribute('class')).toBe('swatch');
+    expect(s.style.background).toMatch(/rgb\(215, 25, 28\)|#d7191c/);
   });
 });
