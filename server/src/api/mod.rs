@@ -1,5 +1,6 @@
 //! HTTP API, one module per resource.
 
+pub mod access;
 pub mod cameras;
 pub mod costmaps;
 pub mod dems;

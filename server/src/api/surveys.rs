@@ -20,14 +20,18 @@ use utoipa::ToSchema;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-use super::dems::dem_fault;
+use super::access::{
+    PROJECT_POINTER, ProjectFilter, answered_project, list_visible, read_project_id, visible,
+};
+use super::dems::{dem_fault, visible_dem};
 use super::json_body::JsonBody;
 use super::names::{NAME_MAX_CHARS, read_name};
-use super::paging::{ListQuery, list};
+use super::paging::ListQuery;
 use super::short_id;
+use crate::auth::{Caller, Role, new_resource_project};
 use crate::clock::{now_millis, rfc3339};
 use crate::db::{SurveyRow, SurveySummaryRow};
-use crate::error::{ApiError, Problem, deleted, found};
+use crate::error::{ApiError, Problem, deleted};
 use crate::state::{AppState, Work, off_runtime};
 
 mod request;
@@ -37,14 +41,16 @@ pub use request::read_document;
 /// planning parameters (the fields of the CLI's params file) in one object.
 /// The handler reads the body as JSON so that every fault is reported by
 /// pointer; this type only carries its OpenAPI schema: the
-/// [`SurveyParams`] object with `name`, `roi`, `no_fly_zones` and `dem_id`
-/// added.
+/// [`SurveyParams`] object with `name`, `project_id`, `roi`,
+/// `no_fly_zones` and `dem_id` added.
 pub struct CreateSurvey;
 
 impl utoipa::PartialSchema for CreateSurvey {
     fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
         use utoipa::openapi::RefOr;
-        use utoipa::openapi::schema::{ArrayBuilder, Object, ObjectBuilder, Schema, Type};
+        use utoipa::openapi::schema::{
+            ArrayBuilder, Object, ObjectBuilder, Schema, SchemaType, Type,
+        };
         let mut body = match SurveyParams::schema() {
             RefOr::T(Schema::Object(o)) => o,
             _ => Object::new(),
@@ -62,6 +68,16 @@ impl utoipa::PartialSchema for CreateSurvey {
                 .schema_type(Type::String)
                 .max_length(Some(NAME_MAX_CHARS))
                 .description(Some("A label for the survey."))
+                .into(),
+        );
+        body.properties.insert(
+            "project_id".into(),
+            ObjectBuilder::new()
+                .schema_type(SchemaType::from_iter([Type::String, Type::Null]))
+                .description(Some(
+                    "The project to store the survey in (the caller must be an editor there); \
+                     the caller's personal project by default.",
+                ))
                 .into(),
         );
         body.properties.insert(
@@ -178,6 +194,8 @@ pub struct SurveyFiles {
 pub struct SurveyResponse {
     id: String,
     name: Option<String>,
+    /// The project it belongs to.
+    project_id: String,
     /// Creation time, RFC 3339 (UTC).
     created_at: String,
     /// The UTM zone the plan was made in.
@@ -192,8 +210,8 @@ pub struct SurveyResponse {
     fences: Vec<FencePolygon>,
     warnings: Vec<String>,
     files: SurveyFiles,
-    /// The request as it was made, without `name` (roi, no_fly_zones,
-    /// dem_id and the parameters), so a client can reopen and edit it.
+    /// The request as it was made, without `name` and `project_id` (roi,
+    /// no_fly_zones, dem_id and the parameters), so a client can reopen and edit it.
     #[schema(value_type = Object)]
     request: Value,
 }
@@ -202,6 +220,8 @@ pub struct SurveyResponse {
 pub struct SurveySummary {
     id: String,
     name: Option<String>,
+    /// The project it belongs to.
+    project_id: String,
     created_at: String,
     cell_count: u64,
     uav_count: u64,
@@ -292,6 +312,7 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
     SurveyResponse {
         id: row.id.clone(),
         name: row.name.clone(),
+        project_id: answered_project(&row.project_id),
         created_at: rfc3339(row.created_at),
         utm_epsg: plan.utm_epsg,
         altitude_frame: plan.altitude_frame,
@@ -307,15 +328,23 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
     }
 }
 
-/// Take `name` out of the request document, checking it.
-fn take_name(doc: &mut Value) -> Result<Option<String>, ApiError> {
+/// Take `name` and `project_id` out of the request document, checking
+/// them.
+fn take_labels(doc: &mut Value) -> Result<(Option<String>, Option<String>), ApiError> {
     let Some(obj) = doc.as_object_mut() else {
         return Err(ApiError::Validation(vec![Issue::new(
             "",
             "the request body must be a JSON object",
         )]));
     };
-    read_name(obj.remove("name").as_ref()).map_err(|issue| ApiError::Validation(vec![issue]))
+    let name = read_name(obj.remove("name").as_ref());
+    let project = read_project_id(obj.remove("project_id").as_ref());
+    match (name, project) {
+        (Ok(name), Ok(project)) => Ok((name, project)),
+        (name, project) => Err(ApiError::Validation(
+            [name.err(), project.err()].into_iter().flatten().collect(),
+        )),
+    }
 }
 
 /// How a survey that could not be planned is answered; one that ran out
@@ -342,28 +371,39 @@ fn survey_fault(e: PlanError) -> ApiError {
         (status = 201, description = "Planned and stored", body = SurveyResponse,
             headers(("Location" = String, description = "URL of the new survey"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The caller is a viewer of the project `project_id`", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request: `errors` names each fault by JSON pointer (`/project_id` when there is no such project of the caller's, `/dem_id` when there is no such DEM the caller can see)", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The planner is busy, or the survey took longer than `--survey-timeout-s`", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn create_survey(
     State(state): State<AppState>,
+    caller: Caller,
     JsonBody(mut doc): JsonBody,
 ) -> Result<Response, ApiError> {
-    let name = take_name(&mut doc)?;
+    let (name, project_id) = take_labels(&mut doc)?;
+    let project_id =
+        new_resource_project(&state.db, &caller, project_id.as_deref(), PROJECT_POINTER).await?;
     // Reading the request checks every member: off the runtime threads.
     let ((req, dem_id), doc) =
         off_runtime(move || read_document(&mut doc).map(|r| (r, doc))).await??;
     let dem = match &dem_id {
         None => None,
-        Some(id) => Some(
-            state
-                .load_dem(id)
+        Some(id) => {
+            // A DEM the caller cannot see is one that is not there, and
+            // is checked before the DEM cache (keyed by id alone) is asked.
+            visible_dem(&state, &caller, id, Role::Viewer)
                 .await
-                .map_err(|e| dem_fault(e, DEM_POINTER, id))?,
-        ),
+                .map_err(|e| dem_fault(e, DEM_POINTER, id))?;
+            Some(
+                state
+                    .load_dem(id)
+                    .await
+                    .map_err(|e| dem_fault(e, DEM_POINTER, id))?,
+            )
+        }
     };
     let limits = state.limits.clone();
     let started = std::time::Instant::now();
@@ -384,6 +424,7 @@ pub async fn create_survey(
         created_at: now_millis(),
         request,
         plan: stored_plan,
+        project_id: Some(project_id),
     };
     state.db.insert_survey(&row).await?;
     let body = response(&row, plan);
@@ -416,9 +457,10 @@ pub async fn create_survey(
 )]
 pub async fn get_survey(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<SurveyResponse>, ApiError> {
-    let row = found(state.db.get_survey(&id).await?, "survey", &id)?;
+    let row = visible_survey(&state, &caller, &id, Role::Viewer).await?;
     let plan = parse_plan(&row.plan)?;
     Ok(Json(response(&row, plan)))
 }
@@ -428,19 +470,29 @@ pub async fn get_survey(
     get,
     path = "/api/v1/surveys",
     tag = "surveys",
-    params(ListQuery),
+    params(ListQuery, ProjectFilter),
     responses(
-        (status = 200, description = "A page of surveys", body = SurveyList),
+        (status = 200, description = "A page of the surveys of the caller's projects", body = SurveyList),
         (status = 400, description = "Bad paging parameters", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No project `project_id` (of the caller's)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn list_surveys(
     State(state): State<AppState>,
+    caller: Caller,
     query: Result<Query<ListQuery>, QueryRejection>,
+    filter: Result<Query<ProjectFilter>, QueryRejection>,
 ) -> Result<Json<SurveyList>, ApiError> {
-    let page = list(
+    let (db, user) = (&state.db, caller.user_id.as_str());
+    let page = list_visible(
+        db,
+        &caller,
         query,
-        |limit, offset| state.db.list_surveys(limit, offset),
+        filter,
+        |project, limit, offset| async move {
+            db.list_surveys(user, project.as_deref(), limit, offset)
+                .await
+        },
         summary,
     )
     .await?;
@@ -454,6 +506,7 @@ fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
     Ok(SurveySummary {
         id: row.id.clone(),
         name: row.name.clone(),
+        project_id: answered_project(&row.project_id),
         created_at: rfc3339(row.created_at),
         cell_count: stats["cell_count"].as_u64().unwrap_or(0),
         uav_count: plan["uavs"].as_array().map_or(0, |a| a.len() as u64),
@@ -468,6 +521,18 @@ fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
     })
 }
 
+/// The stored survey `id` when the caller has at least `need` in its
+/// project; one of another project is the 404 of a missing one.
+async fn visible_survey(
+    state: &AppState,
+    caller: &Caller,
+    id: &str,
+    need: Role,
+) -> Result<SurveyRow, ApiError> {
+    let row = state.db.get_survey(id).await?;
+    visible(&state.db, caller, row, "survey", id, need).await
+}
+
 /// Delete a survey and its files.
 #[utoipa::path(
     delete,
@@ -476,13 +541,16 @@ fn summary(row: &SurveySummaryRow) -> Result<SurveySummary, ApiError> {
     params(("id" = String, Path, description = "Survey id")),
     responses(
         (status = 204, description = "Deleted"),
+        (status = 403, description = "The caller is a viewer of the survey's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such survey", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn delete_survey(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
+    visible_survey(&state, &caller, &id, Role::Editor).await?;
     deleted(state.db.delete_survey(&id).await?, "survey", &id)
 }
 
@@ -490,12 +558,13 @@ pub async fn delete_survey(
 /// `missing` describes what is absent when the survey exists but the file does not.
 async fn download(
     state: &AppState,
+    caller: &Caller,
     id: &str,
     file_name: &str,
     download_name: &str,
     missing: impl FnOnce() -> String,
 ) -> Result<Response, ApiError> {
-    let row = found(state.db.get_survey(id).await?, "survey", id)?;
+    let row = visible_survey(state, caller, id, Role::Viewer).await?;
     // Rendering a big mission is work: off the runtime threads.
     let name = file_name.to_string();
     let file = off_runtime(move || parse_plan(&row.plan).map(|plan| plan.file(&name)))
@@ -551,6 +620,7 @@ pub struct SortieQuery {
 )]
 pub async fn uav_file(
     State(state): State<AppState>,
+    caller: Caller,
     Path((id, uav, file)): Path<(String, String, String)>,
     query: Result<Query<SortieQuery>, QueryRejection>,
 ) -> Result<Response, ApiError> {
@@ -594,6 +664,7 @@ pub async fn uav_file(
     let download_name = format!("terraplan-{}-{stem}.{ext}", short_id(&id));
     download(
         &state,
+        &caller,
         &id,
         &format!("{stem}.{suffix}"),
         &download_name,
@@ -627,10 +698,11 @@ pub async fn uav_file(
 )]
 pub async fn cells_file(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     let name = format!("terraplan-{}-cells.geojson", short_id(&id));
-    download(&state, &id, "cells.geojson", &name, || {
+    download(&state, &caller, &id, "cells.geojson", &name, || {
         format!("survey {id} has no cells file")
     })
     .await

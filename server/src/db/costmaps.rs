@@ -26,6 +26,9 @@ pub struct CostmapRow {
     pub error: Option<String>,
     /// Runs started.
     pub attempts: i64,
+    /// The project it belongs to (`None`: made before accounts, visible
+    /// to no one).
+    pub project_id: Option<String>,
 }
 
 /// One file of a finished costmap.
@@ -47,7 +50,7 @@ pub struct CostmapFileMeta {
 macro_rules! costmap_columns {
     () => {
         "id, name, dem_id, created_at, updated_at, request, vehicle, status, progress, stage, \
-         result, error, attempts"
+         result, error, attempts, project_id"
     };
 }
 
@@ -59,9 +62,12 @@ impl Db {
         owner: &str,
         lease_until: i64,
     ) -> Result<(), sqlx::Error> {
-        const SQL: &str = "INSERT INTO costmaps (id, name, dem_id, created_at, updated_at, request, \
-                           vehicle, status, progress, stage, result, error, attempts, owner, lease_until) \
-                           VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15)";
+        const SQL: &str = concat!(
+            "INSERT INTO costmaps (",
+            costmap_columns!(),
+            ", owner, lease_until) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16)"
+        );
         on_pool!(self, pool => sqlx::query(SQL)
             .bind(&row.id)
             .bind(&row.name)
@@ -76,6 +82,7 @@ impl Db {
             .bind(&row.result)
             .bind(&row.error)
             .bind(row.attempts)
+            .bind(&row.project_id)
             .bind(owner)
             .bind(lease_until)
             .execute(pool)
@@ -92,21 +99,36 @@ impl Db {
         on_pool!(self, pool => sqlx::query_as::<_, CostmapRow>(SQL).bind(id).fetch_optional(pool).await)
     }
 
-    /// Newest first, without the files.
+    /// Newest first, without the files: those of the projects `user_id`
+    /// is a member of (of `project_id` only, when given).
     pub async fn list_costmaps(
         &self,
+        user_id: &str,
+        project_id: Option<&str>,
         limit: i64,
         offset: i64,
     ) -> Result<(Vec<CostmapRow>, i64), sqlx::Error> {
         const SQL: &str = concat!(
             "SELECT ",
             costmap_columns!(),
-            " FROM costmaps ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2"
+            " FROM costmaps WHERE ",
+            visible_to_member!(),
+            " ORDER BY created_at DESC, id DESC LIMIT $3 OFFSET $4"
         );
-        const COUNT: &str = "SELECT COUNT(*) FROM costmaps";
+        const COUNT: &str = concat!("SELECT COUNT(*) FROM costmaps WHERE ", visible_to_member!());
         on_pool!(self, pool => {
-            let rows = sqlx::query_as::<_, CostmapRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
-            let (total,): (i64,) = sqlx::query_as(COUNT).fetch_one(pool).await?;
+            let rows = sqlx::query_as::<_, CostmapRow>(SQL)
+                .bind(user_id)
+                .bind(project_id)
+                .bind(limit)
+                .bind(offset)
+                .fetch_all(pool)
+                .await?;
+            let (total,): (i64,) = sqlx::query_as(COUNT)
+                .bind(user_id)
+                .bind(project_id)
+                .fetch_one(pool)
+                .await?;
             Ok((rows, total))
         })
     }

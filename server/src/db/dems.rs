@@ -17,6 +17,9 @@ pub struct DemMetaRow {
     /// Memory reading the file again takes, estimated from its header at
     /// upload; `None` for DEMs stored before it was kept.
     pub read_bytes: Option<i64>,
+    /// The project it belongs to; `None` for DEMs stored before accounts
+    /// and not yet adopted (visible to no one).
+    pub project_id: Option<String>,
 }
 
 /// What is needed to parse a stored DEM again.
@@ -32,7 +35,8 @@ impl Db {
     /// a chunk at a time, in one transaction.
     pub async fn insert_dem(&self, meta: &DemMetaRow, data: &[u8]) -> Result<(), sqlx::Error> {
         const SQL: &str = "INSERT INTO dems (id, name, created_at, file_name, crs_override, info, \
-                           size_bytes, read_bytes) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
+                           size_bytes, read_bytes, project_id) \
+                           VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)";
         const CHUNK: &str = "INSERT INTO dem_chunks (dem_id, seq, data) VALUES ($1, $2, $3)";
         on_pool!(self, pool => {
             let mut tx = pool.begin().await?;
@@ -45,6 +49,7 @@ impl Db {
                 .bind(&meta.info)
                 .bind(meta.size_bytes)
                 .bind(meta.read_bytes)
+                .bind(&meta.project_id)
                 .execute(&mut *tx)
                 .await?;
             for (seq, chunk) in data.chunks(CHUNK_BYTES).enumerate() {
@@ -61,7 +66,7 @@ impl Db {
 
     pub async fn get_dem_meta(&self, id: &str) -> Result<Option<DemMetaRow>, sqlx::Error> {
         const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
-                           read_bytes FROM dems WHERE id = $1";
+                           read_bytes, project_id FROM dems WHERE id = $1";
         on_pool!(self, pool => sqlx::query_as::<_, DemMetaRow>(SQL).bind(id).fetch_optional(pool).await)
     }
 
@@ -83,18 +88,35 @@ impl Db {
         }))
     }
 
-    /// Newest first, without the files.
+    /// Newest first, without the files: those of the projects `user_id`
+    /// is a member of (of `project_id` only, when given).
     pub async fn list_dems(
         &self,
+        user_id: &str,
+        project_id: Option<&str>,
         limit: i64,
         offset: i64,
     ) -> Result<(Vec<DemMetaRow>, i64), sqlx::Error> {
-        const SQL: &str = "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, \
-                           read_bytes FROM dems ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
-        const COUNT: &str = "SELECT COUNT(*) FROM dems";
+        const SQL: &str = concat!(
+            "SELECT id, name, created_at, file_name, crs_override, info, size_bytes, read_bytes, \
+             project_id FROM dems WHERE ",
+            visible_to_member!(),
+            " ORDER BY created_at DESC, id DESC LIMIT $3 OFFSET $4"
+        );
+        const COUNT: &str = concat!("SELECT COUNT(*) FROM dems WHERE ", visible_to_member!());
         on_pool!(self, pool => {
-            let rows = sqlx::query_as::<_, DemMetaRow>(SQL).bind(limit).bind(offset).fetch_all(pool).await?;
-            let (total,): (i64,) = sqlx::query_as(COUNT).fetch_one(pool).await?;
+            let rows = sqlx::query_as::<_, DemMetaRow>(SQL)
+                .bind(user_id)
+                .bind(project_id)
+                .bind(limit)
+                .bind(offset)
+                .fetch_all(pool)
+                .await?;
+            let (total,): (i64,) = sqlx::query_as(COUNT)
+                .bind(user_id)
+                .bind(project_id)
+                .fetch_one(pool)
+                .await?;
             Ok((rows, total))
         })
     }

@@ -35,7 +35,18 @@ macro_rules! on_pool {
     };
 }
 
-// After `on_pool!`: a macro is only visible to modules declared below it.
+/// The condition of a listing that keeps the rows of the projects user
+/// `$1` is a member of, and only those of project `$2` unless it is NULL.
+/// Rows of no project are visible to no one.
+macro_rules! visible_to_member {
+    () => {
+        "project_id IN (SELECT project_id FROM project_members WHERE user_id = $1) \
+         AND ($2 IS NULL OR project_id = $2)"
+    };
+}
+
+// After `on_pool!` and `visible_to_member!`: a macro is only visible to
+// modules declared below it.
 mod costmaps;
 mod dems;
 mod files;
@@ -138,6 +149,7 @@ mod tests {
             info: "{}".into(),
             size_bytes: size as i64,
             read_bytes: Some(7),
+            project_id: None,
         }
     }
 

@@ -18,12 +18,25 @@ pub struct RouteRow {
     pub changes: String,
     /// The planned route, JSON.
     pub result: String,
+    /// Its costmap's project (`None`: made before accounts, visible to no
+    /// one).
+    pub project_id: Option<String>,
+}
+
+/// The columns of [`RouteRow`], for `concat!` (SQL must be static).
+macro_rules! route_columns {
+    () => {
+        "id, name, costmap_id, parent_id, created_at, request, changes, result, project_id"
+    };
 }
 
 impl Db {
     pub async fn insert_route(&self, row: &RouteRow) -> Result<(), sqlx::Error> {
-        const SQL: &str = "INSERT INTO routes (id, name, costmap_id, parent_id, created_at, request, \
-                           changes, result) VALUES ($1, $2, $3, $4, $5, $6, $7, $8)";
+        const SQL: &str = concat!(
+            "INSERT INTO routes (",
+            route_columns!(),
+            ") VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)"
+        );
         on_pool!(self, pool => sqlx::query(SQL)
             .bind(&row.id)
             .bind(&row.name)
@@ -33,42 +46,56 @@ impl Db {
             .bind(&row.request)
             .bind(&row.changes)
             .bind(&row.result)
+            .bind(&row.project_id)
             .execute(pool)
             .await
             .map(|_| ()))
     }
 
     pub async fn get_route(&self, id: &str) -> Result<Option<RouteRow>, sqlx::Error> {
-        const SQL: &str = "SELECT id, name, costmap_id, parent_id, created_at, request, changes, \
-                           result FROM routes WHERE id = $1";
+        const SQL: &str = concat!("SELECT ", route_columns!(), " FROM routes WHERE id = $1");
         on_pool!(self, pool => sqlx::query_as::<_, RouteRow>(SQL).bind(id).fetch_optional(pool).await)
     }
 
-    /// Newest first; only the routes on `costmap_id` when given.
+    /// Newest first: those of the projects `user_id` is a member of (of
+    /// `project_id` only, when given), and only those on `costmap_id` when
+    /// given.
     pub async fn list_routes(
         &self,
+        user_id: &str,
+        project_id: Option<&str>,
         costmap_id: Option<&str>,
         limit: i64,
         offset: i64,
     ) -> Result<(Vec<RouteRow>, i64), sqlx::Error> {
-        const ALL: &str = "SELECT id, name, costmap_id, parent_id, created_at, request, changes, \
-                           result FROM routes ORDER BY created_at DESC, id DESC LIMIT $1 OFFSET $2";
-        const COUNT_ALL: &str = "SELECT COUNT(*) FROM routes";
-        const OF: &str = "SELECT id, name, costmap_id, parent_id, created_at, request, changes, \
-                          result FROM routes WHERE costmap_id = $1 \
-                          ORDER BY created_at DESC, id DESC LIMIT $2 OFFSET $3";
-        const COUNT_OF: &str = "SELECT COUNT(*) FROM routes WHERE costmap_id = $1";
+        const SQL: &str = concat!(
+            "SELECT ",
+            route_columns!(),
+            " FROM routes WHERE ",
+            visible_to_member!(),
+            " AND ($3 IS NULL OR costmap_id = $3) \
+             ORDER BY created_at DESC, id DESC LIMIT $4 OFFSET $5"
+        );
+        const COUNT: &str = concat!(
+            "SELECT COUNT(*) FROM routes WHERE ",
+            visible_to_member!(),
+            " AND ($3 IS NULL OR costmap_id = $3)"
+        );
         on_pool!(self, pool => {
-            let (rows, (total,)): (Vec<RouteRow>, (i64,)) = match costmap_id {
-                None => (
-                    sqlx::query_as(ALL).bind(limit).bind(offset).fetch_all(pool).await?,
-                    sqlx::query_as(COUNT_ALL).fetch_one(pool).await?,
-                ),
-                Some(c) => (
-                    sqlx::query_as(OF).bind(c).bind(limit).bind(offset).fetch_all(pool).await?,
-                    sqlx::query_as(COUNT_OF).bind(c).fetch_one(pool).await?,
-                ),
-            };
+            let rows = sqlx::query_as::<_, RouteRow>(SQL)
+                .bind(user_id)
+                .bind(project_id)
+                .bind(costmap_id)
+                .bind(limit)
+                .bind(offset)
+                .fetch_all(pool)
+                .await?;
+            let (total,): (i64,) = sqlx::query_as(COUNT)
+                .bind(user_id)
+                .bind(project_id)
+                .bind(costmap_id)
+                .fetch_one(pool)
+                .await?;
             Ok((rows, total))
         })
     }

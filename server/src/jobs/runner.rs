@@ -535,6 +535,7 @@ mod tests {
                 info: r#"{"width": 40, "height": 40}"#.into(),
                 size_bytes: asc.len() as i64,
                 read_bytes: None,
+                project_id: None,
             };
             self.db.insert_dem(&meta, asc.as_bytes()).await.unwrap();
             id
@@ -563,6 +564,7 @@ mod tests {
                 result: None,
                 error: None,
                 attempts: 0,
+                project_id: None,
             };
             self.db
                 .insert_costmap(&row, self.jobs().instance(), now + LEASE_MS)

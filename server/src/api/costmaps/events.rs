@@ -9,8 +9,10 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
 use tokio::sync::mpsc;
 
+use super::handlers::visible_costmap;
 use super::model::{JobEvent, JobState, job_state};
-use crate::error::{ApiError, Problem, not_found};
+use crate::auth::{Caller, Role};
+use crate::error::{ApiError, Problem};
 use crate::jobs::JobStatus;
 use crate::state::AppState;
 
@@ -127,11 +129,12 @@ async fn follow(state: AppState, id: String, tx: mpsc::Sender<Event>) {
 )]
 pub async fn costmap_events(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    if state.db.get_costmap(&id).await?.is_none() {
-        return Err(not_found("costmap", &id));
-    }
+    // Checked once: a costmap never changes project, and a deleted one
+    // ends the stream.
+    visible_costmap(&state, &caller, &id, Role::Viewer).await?;
     let (tx, rx) = mpsc::channel(16);
     tokio::spawn(follow(state, id, tx));
     let stream = futures_util::stream::unfold(rx, |mut rx| async move {

@@ -6,12 +6,14 @@ use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::costmap::Layer;
 
+use super::handlers::visible_costmap;
 use super::model::{JobState, internal, job_state, ordered_layers};
 use crate::api::dems::BinaryFile;
 use crate::api::immutable::Immutable;
 use crate::api::short_id;
+use crate::auth::{Caller, Role};
 use crate::db::{CostmapRow, StoredFile};
-use crate::error::{ApiError, Problem, found};
+use crate::error::{ApiError, Problem};
 use crate::jobs::{
     COSTMAP_TIF, CostmapResult, JobStatus, LEGEND_SVG, PREVIEW_PNG, StoredRequest, layer_file,
     stage_name,
@@ -40,9 +42,10 @@ fn not_ready(state: &JobState, error: Option<&str>) -> ApiError {
     })
 }
 
-/// The stored job `id`: 404 when there is none.
-async fn stored(state: &AppState, id: &str) -> Result<CostmapRow, ApiError> {
-    found(state.db.get_costmap(id).await?, "costmap", id)
+/// The stored job `id`: 404 when there is none, or when the caller is
+/// no member of its project.
+async fn stored(state: &AppState, caller: &Caller, id: &str) -> Result<CostmapRow, ApiError> {
+    visible_costmap(state, caller, id, Role::Viewer).await
 }
 
 /// Serve a stored file of a finished costmap; 409 while it is not done.
@@ -111,10 +114,11 @@ async fn download(
 )]
 pub async fn costmap_tif(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let row = stored(&state, &id).await?;
+    let row = stored(&state, &caller, &id).await?;
     let name = format!("terraplan-{}-costmap.tif", short_id(&id));
     download(&state, &row, COSTMAP_TIF, Some(name), &headers).await
 }
@@ -135,10 +139,11 @@ pub async fn costmap_tif(
 )]
 pub async fn preview(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let row = stored(&state, &id).await?;
+    let row = stored(&state, &caller, &id).await?;
     download(&state, &row, PREVIEW_PNG, None, &headers).await
 }
 
@@ -157,10 +162,11 @@ pub async fn preview(
 )]
 pub async fn legend(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let row = stored(&state, &id).await?;
+    let row = stored(&state, &caller, &id).await?;
     download(&state, &row, LEGEND_SVG, None, &headers).await
 }
 
@@ -184,10 +190,11 @@ pub async fn legend(
 )]
 pub async fn layer(
     State(state): State<AppState>,
+    caller: Caller,
     Path((id, file)): Path<(String, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let row = stored(&state, &id).await?;
+    let row = stored(&state, &caller, &id).await?;
     let kept: Vec<Layer> = match row.result.as_deref() {
         Some(r) => {
             serde_json::from_str::<CostmapResult>(r)

@@ -11,12 +11,14 @@ use serde::Serialize;
 
 use super::model::{CostmapList, CostmapResponse, CreateCostmap, response};
 use super::request::{landcover_crs_fault, parse_request};
-use crate::api::dems::dem_fault;
+use crate::api::access::{PROJECT_POINTER, ProjectFilter, list_visible, visible};
+use crate::api::dems::{dem_fault, visible_dem};
 use crate::api::json_body::JsonBody;
-use crate::api::paging::{ListQuery, list};
+use crate::api::paging::ListQuery;
+use crate::auth::{Caller, Role, new_resource_project};
 use crate::clock::now_millis;
 use crate::db::CostmapRow;
-use crate::error::{ApiError, Problem, deleted, found};
+use crate::error::{ApiError, Problem, deleted};
 use crate::jobs::{JobStatus, LEASE_MS, StoredRequest};
 use crate::memory::costmap_build_bytes;
 use crate::state::AppState;
@@ -40,17 +42,31 @@ fn to_json<T: Serialize>(value: &T) -> Result<String, ApiError> {
         (status = 202, description = "Accepted and queued", body = CostmapResponse,
             headers(("Location" = String, description = "URL of the new costmap"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The caller is a viewer of the project `project_id`", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid request (unknown DEM, vehicle or options out of range, options that do not fit the DEM, a build needing more than the memory budget): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid request (no project `project_id` the caller may add to, unknown DEM, vehicle or options out of range, options that do not fit the DEM, a build needing more than the memory budget): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The DEM (or land-cover raster) had to be read again from storage and no planner thread became free in time, or the service is shutting down; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn create_costmap(
     State(state): State<AppState>,
+    caller: Caller,
     JsonBody(doc): JsonBody,
 ) -> Result<Response, ApiError> {
     let req = parse_request(&doc)?;
+    let project_id = new_resource_project(
+        &state.db,
+        &caller,
+        req.project_id.as_deref(),
+        PROJECT_POINTER,
+    )
+    .await?;
+    // A DEM the caller cannot see is one that is not there, and is
+    // checked before the DEM cache (keyed by id alone) is asked.
+    visible_dem(&state, &caller, &req.dem_id, Role::Viewer)
+        .await
+        .map_err(|e| dem_fault(e, "/dem_id", &req.dem_id))?;
     let dem = state
         .load_dem(&req.dem_id)
         .await
@@ -59,7 +75,11 @@ pub async fn create_costmap(
     if let Some(l) = &req.options.landcover {
         // Loaded (and cached for the job) to check its CRS against the
         // DEM's now rather than fail the job later.
-        match state.load_dem(&l.source).await {
+        let loaded = match visible_dem(&state, &caller, &l.source, Role::Viewer).await {
+            Ok(_) => state.load_dem(&l.source).await,
+            Err(e) => Err(e),
+        };
+        match loaded {
             Ok(landcover) => issues.extend(landcover_crs_fault(&dem, landcover).await?),
             Err(ApiError::NotFound(_)) => issues.push(Issue::new(
                 "/options/landcover/source",
@@ -113,6 +133,7 @@ pub async fn create_costmap(
         result: None,
         error: None,
         attempts: 0,
+        project_id: Some(project_id),
     };
     let jobs = &state.costmaps;
     state
@@ -128,24 +149,47 @@ pub async fn create_costmap(
     Ok((StatusCode::ACCEPTED, headers, Json(body)).into_response())
 }
 
+/// The stored costmap `id` when the caller has at least `need` in its
+/// project; one of another project is the 404 of a missing one.
+pub async fn visible_costmap(
+    state: &AppState,
+    caller: &Caller,
+    id: &str,
+    need: Role,
+) -> Result<CostmapRow, ApiError> {
+    let row = state.db.get_costmap(id).await?;
+    visible(&state.db, caller, row, "costmap", id, need).await
+}
+
 /// Costmaps, newest first, a page at a time.
 #[utoipa::path(
     get,
     path = "/api/v1/costmaps",
     tag = "costmaps",
-    params(ListQuery),
+    params(ListQuery, ProjectFilter),
     responses(
-        (status = 200, description = "A page of costmaps", body = CostmapList),
+        (status = 200, description = "A page of the costmaps of the caller's projects", body = CostmapList),
         (status = 400, description = "Bad paging parameters", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No project `project_id` (of the caller's)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn list_costmaps(
     State(state): State<AppState>,
+    caller: Caller,
     query: Result<Query<ListQuery>, QueryRejection>,
+    filter: Result<Query<ProjectFilter>, QueryRejection>,
 ) -> Result<Json<CostmapList>, ApiError> {
-    let page = list(
+    let db = &state.db;
+    let user = caller.user_id.as_str();
+    let page = list_visible(
+        db,
+        &caller,
         query,
-        |limit, offset| state.db.list_costmaps(limit, offset),
+        filter,
+        |project, limit, offset| async move {
+            db.list_costmaps(user, project.as_deref(), limit, offset)
+                .await
+        },
         |r| response(r, state.costmaps.live(&r.id)),
     )
     .await?;
@@ -166,9 +210,10 @@ pub async fn list_costmaps(
 )]
 pub async fn get_costmap(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<CostmapResponse>, ApiError> {
-    let row = found(state.db.get_costmap(&id).await?, "costmap", &id)?;
+    let row = visible_costmap(&state, &caller, &id, Role::Viewer).await?;
     Ok(Json(response(&row, state.costmaps.live(&id))?))
 }
 
@@ -180,13 +225,16 @@ pub async fn get_costmap(
     params(("id" = String, Path, description = "Costmap id")),
     responses(
         (status = 204, description = "Deleted (and cancelled if unfinished)"),
+        (status = 403, description = "The caller is a viewer of the costmap's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such costmap", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn delete_costmap(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
+    visible_costmap(&state, &caller, &id, Role::Editor).await?;
     let gone = state.db.delete_costmap(&id).await?;
     // A run elsewhere (another server on the same database) notices the
     // row is gone at its next stage and stops.

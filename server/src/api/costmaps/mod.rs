@@ -14,6 +14,7 @@ mod request;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
+pub use self::handlers::visible_costmap;
 pub use self::model::costmap_url;
 use crate::state::AppState;
 

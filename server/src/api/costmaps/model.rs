@@ -10,6 +10,7 @@ use planner_core::terrain::Crs;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use crate::api::access::answered_project;
 use crate::clock::rfc3339;
 use crate::db::CostmapRow;
 use crate::error::ApiError;
@@ -25,7 +26,10 @@ pub struct CreateCostmap {
     /// A label for the costmap.
     #[schema(max_length = 200)]
     name: Option<String>,
-    /// The id of an uploaded DEM (`POST /api/v1/dems`).
+    /// The project to store the costmap in (the caller must be an editor
+    /// there); the caller's personal project by default.
+    project_id: Option<String>,
+    /// The id of an uploaded DEM (`POST /api/v1/dems`) the caller can see.
     dem_id: String,
     /// The ground vehicle: a preset (default `u-go`, the thesis robot:
     /// max step 0.15 m, max slope 25°, w_infl 10, w_slope 1) with any
@@ -63,6 +67,8 @@ pub struct CostmapUrls {
 pub struct CostmapResponse {
     id: String,
     name: Option<String>,
+    /// The project it belongs to.
+    project_id: String,
     /// The DEM it is built from.
     dem_id: String,
     /// Creation time, RFC 3339 (UTC).
@@ -224,6 +230,7 @@ pub(super) fn response(row: &CostmapRow, live: Option<Live>) -> Result<CostmapRe
     Ok(CostmapResponse {
         id: id.clone(),
         name: row.name.clone(),
+        project_id: answered_project(&row.project_id),
         dem_id: row.dem_id.clone(),
         created_at: rfc3339(row.created_at),
         updated_at: rfc3339(row.updated_at),

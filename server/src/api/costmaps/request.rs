@@ -9,15 +9,18 @@ use planner_core::geo::{Issue, deserialize_at, escape_pointer_token};
 use planner_core::terrain::{Dem, TerrainSampler};
 use serde_json::Value;
 
+use crate::api::access::read_project_id;
 use crate::api::names::{control_character_issue, read_name};
 use crate::error::ApiError;
 
 /// Fields of `POST /api/v1/costmaps`.
-const FIELDS: [&str; 4] = ["name", "dem_id", "vehicle", "options"];
+const FIELDS: [&str; 5] = ["name", "project_id", "dem_id", "vehicle", "options"];
 
 /// A checked `POST /api/v1/costmaps` body.
 pub(super) struct CostmapRequest {
     pub(super) name: Option<String>,
+    /// The project asked for; the caller's personal one when `None`.
+    pub(super) project_id: Option<String>,
     pub(super) dem_id: String,
     /// The vehicle as given (`null` for the default).
     pub(super) vehicle_spec: Value,
@@ -38,10 +41,16 @@ pub(super) fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
     for key in obj.keys().filter(|k| !FIELDS.contains(&k.as_str())) {
         issues.push(Issue::new(
             &format!("/{}", escape_pointer_token(key)),
-            &format!("unknown field {key:?}: expected name, dem_id, vehicle or options"),
+            &format!(
+                "unknown field {key:?}: expected name, project_id, dem_id, vehicle or options"
+            ),
         ));
     }
     let name = read_name(obj.get("name")).unwrap_or_else(|issue| {
+        issues.push(issue);
+        None
+    });
+    let project_id = read_project_id(obj.get("project_id")).unwrap_or_else(|issue| {
         issues.push(issue);
         None
     });
@@ -99,6 +108,7 @@ pub(super) fn parse_request(doc: &Value) -> Result<CostmapRequest, ApiError> {
     match (vehicle, options) {
         (Some(vehicle), Some(options)) if issues.is_empty() => Ok(CostmapRequest {
             name,
+            project_id,
             dem_id,
             vehicle_spec,
             vehicle,

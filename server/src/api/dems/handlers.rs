@@ -14,11 +14,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
 
-use super::model::{BinaryFile, DemList, DemResponse, response, stored_info};
+use super::model::{BinaryFile, DemList, DemResponse, response, stored_info, visible_dem};
+use crate::api::access::{ProjectFilter, list_visible};
 use crate::api::immutable::Immutable;
 use crate::api::json_body::JsonBody;
-use crate::api::paging::{ListQuery, list};
-use crate::error::{ApiError, Problem, deleted, found};
+use crate::api::paging::ListQuery;
+use crate::auth::{Caller, Role};
+use crate::error::{ApiError, Problem, deleted};
 use crate::memory::hillshade_bytes;
 use crate::state::{AppState, Work};
 
@@ -33,19 +35,29 @@ const HILLSHADE_MAX_SIDE: i64 = 4096;
     get,
     path = "/api/v1/dems",
     tag = "dems",
-    params(ListQuery),
+    params(ListQuery, ProjectFilter),
     responses(
-        (status = 200, description = "A page of DEMs", body = DemList),
+        (status = 200, description = "A page of the DEMs of the caller's projects", body = DemList),
         (status = 400, description = "Bad paging parameters", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No project `project_id` (of the caller's)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn list_dems(
     State(state): State<AppState>,
+    caller: Caller,
     query: Result<Query<ListQuery>, QueryRejection>,
+    filter: Result<Query<ProjectFilter>, QueryRejection>,
 ) -> Result<Json<DemList>, ApiError> {
-    let page = list(
+    let db = &state.db;
+    let user = caller.user_id.as_str();
+    let page = list_visible(
+        db,
+        &caller,
         query,
-        |limit, offset| state.db.list_dems(limit, offset),
+        filter,
+        |project, limit, offset| async move {
+            db.list_dems(user, project.as_deref(), limit, offset).await
+        },
         |r| Ok(response(r, stored_info(r)?)),
     )
     .await?;
@@ -65,9 +77,10 @@ pub async fn list_dems(
 )]
 pub async fn get_dem(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<DemResponse>, ApiError> {
-    let row = found(state.db.get_dem_meta(&id).await?, "DEM", &id)?;
+    let row = visible_dem(&state, &caller, &id, Role::Viewer).await?;
     let info = stored_info(&row)?;
     Ok(Json(response(&row, info)))
 }
@@ -80,13 +93,16 @@ pub async fn get_dem(
     params(("id" = String, Path, description = "DEM id")),
     responses(
         (status = 204, description = "Deleted"),
+        (status = 403, description = "The caller is a viewer of the DEM's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such DEM", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn delete_dem(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
+    visible_dem(&state, &caller, &id, Role::Editor).await?;
     let gone = state.db.delete_dem(&id).await?;
     state.dems.cache.evict(&id);
     deleted(gone, "DEM", &id)
@@ -114,6 +130,7 @@ pub async fn delete_dem(
 )]
 pub async fn hillshade(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     query: Result<Query<HillshadeQuery>, QueryRejection>,
     request_headers: HeaderMap,
@@ -128,7 +145,7 @@ pub async fn hillshade(
     }
     let answer = Immutable::new(format!("\"{id}-hillshade-{max_side}\""));
     // 404 or 304 without reading the DEM.
-    found(state.db.get_dem_meta(&id).await?, "DEM", &id)?;
+    visible_dem(&state, &caller, &id, Role::Viewer).await?;
     if answer.matches(&request_headers) {
         return Ok(answer.not_modified());
     }
@@ -200,12 +217,15 @@ async fn heights(
 )]
 pub async fn elevation(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     query: Result<Query<PointQuery>, QueryRejection>,
 ) -> Result<Json<Elevation>, ApiError> {
     let Query(q) =
         query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
     check_lon_lat(q.lon, q.lat).map_err(ApiError::BadRequest)?;
+    // Checked before the DEM cache is asked: it is keyed by id alone.
+    visible_dem(&state, &caller, &id, Role::Viewer).await?;
     let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
     let h = heights(&state, dem, vec![(q.lon, q.lat)]).await?;
     Ok(Json(Elevation {
@@ -301,10 +321,12 @@ fn parse_points(doc: &Value) -> Result<Vec<(f64, f64)>, ApiError> {
 )]
 pub async fn elevations(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     JsonBody(doc): JsonBody,
 ) -> Result<Json<Elevations>, ApiError> {
     let points = parse_points(&doc)?;
+    visible_dem(&state, &caller, &id, Role::Viewer).await?;
     let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
     let elevations = heights(&state, dem, points).await?;
     Ok(Json(Elevations { elevations }))

@@ -11,7 +11,7 @@ use axum::extract::DefaultBodyLimit;
 use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 
-pub use self::model::{BinaryFile, dem_fault, parse_epsg};
+pub use self::model::{BinaryFile, dem_fault, parse_epsg, visible_dem};
 use crate::state::AppState;
 
 /// The DEM endpoints; uploads have their own body limit, `max_dem_bytes`.

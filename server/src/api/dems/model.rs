@@ -6,9 +6,12 @@ use planner_core::terrain::DemInfo;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use crate::api::access::{answered_project, visible};
+use crate::auth::{Caller, Role};
 use crate::clock::rfc3339;
 use crate::db::DemMetaRow;
 use crate::error::ApiError;
+use crate::state::AppState;
 
 /// A stored DEM: who it is and what the raster holds.
 #[derive(Serialize, Deserialize, ToSchema)]
@@ -27,6 +30,8 @@ pub struct DemResponse {
     pub(super) url: String,
     /// URL of its hillshade preview (PNG).
     hillshade: String,
+    /// The project it belongs to.
+    project_id: String,
 }
 
 /// A page of DEMs, newest first.
@@ -84,10 +89,23 @@ pub(super) fn response(row: &DemMetaRow, info: DemInfo) -> DemResponse {
         info,
         hillshade: format!("{url}/hillshade.png"),
         url,
+        project_id: answered_project(&row.project_id),
     }
 }
 
 crate::api::paging::listing!(DemList, DemResponse);
+
+/// The stored DEM `id` when the caller has at least `need` in its
+/// project; one of another project is the 404 of a missing one.
+pub async fn visible_dem(
+    state: &AppState,
+    caller: &Caller,
+    id: &str,
+    need: Role,
+) -> Result<DemMetaRow, ApiError> {
+    let row = state.db.get_dem_meta(id).await?;
+    visible(&state.db, caller, row, "DEM", id, need).await
+}
 
 /// In a request naming a DEM (a costmap's, a survey's), an unknown DEM
 /// is a fault of the request, at `pointer`.
@@ -134,6 +152,7 @@ mod tests {
                 .into(),
             size_bytes: 1,
             read_bytes: None,
+            project_id: None,
         };
         let info = stored_info(&row).unwrap();
         assert!(

@@ -31,6 +31,7 @@ use super::header::{self as dem_header, Declared};
 use super::model::{BinaryFile, DemResponse, parse_epsg, response};
 use crate::api::json_body::media_type;
 use crate::api::names::{NAME_MAX_CHARS, control_character_issue};
+use crate::auth::{Caller, new_resource_project};
 use crate::clock::now_millis;
 use crate::db::{CHUNK_BYTES, DemMetaRow};
 use crate::error::{ApiError, Problem};
@@ -247,12 +248,13 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
         (status = 400, description = "Empty body, malformed form or query", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "File over the size limit, raster over the pixel limit, or a raster whose declared size needs more than the memory budget to read", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported Content-Type", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Not a readable DEM, or its CRS is unknown (give `crs`)", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Not a readable DEM, its CRS is unknown (give `crs`), or no project `project_id` the caller may add to", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn upload_dem(
     State(state): State<AppState>,
+    caller: Caller,
     query: Result<Query<UploadQuery>, QueryRejection>,
     req: Request,
 ) -> Result<Response, ApiError> {
@@ -260,16 +262,8 @@ pub async fn upload_dem(
         query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
     let limit = state.dems.max_upload_bytes;
     let (content_type, essence) = media_type(req.headers());
-    let upload = if essence == "multipart/form-data" {
-        read_multipart(req, &state, limit).await?
-    } else if RAW_TYPES.contains(&essence.as_str()) {
-        Upload {
-            file: Some(spool_body(req, &state.dems.spool_dir, limit).await?),
-            file_name: None,
-            name: None,
-            crs: None,
-        }
-    } else {
+    let multipart = essence == "multipart/form-data";
+    if !multipart && !RAW_TYPES.contains(&essence.as_str()) {
         let accepted = "send the file as image/tiff, application/octet-stream or text/plain, \
                         or as the part \"file\" of multipart/form-data";
         return Err(ApiError::UnsupportedMediaType(if content_type.is_empty() {
@@ -277,6 +271,20 @@ pub async fn upload_dem(
         } else {
             format!("Content-Type {content_type:?} is not supported: {accepted}")
         }));
+    }
+    // Before the body is read: nothing is taken in for a project the
+    // caller may not add to.
+    let project_id =
+        new_resource_project(&state.db, &caller, q.project_id.as_deref(), "/project_id").await?;
+    let upload = if multipart {
+        read_multipart(req, &state, limit).await?
+    } else {
+        Upload {
+            file: Some(spool_body(req, &state.dems.spool_dir, limit).await?),
+            file_name: None,
+            name: None,
+            crs: None,
+        }
     };
     let (labels, spool) = labels(q, upload)?;
 
@@ -301,6 +309,7 @@ pub async fn upload_dem(
         info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
         size_bytes: data.len() as i64,
         read_bytes: i64::try_from(need).ok(),
+        project_id: Some(project_id),
     };
     state.db.insert_dem(&row, &data).await?;
     state.dems.cache.insert(&row.id, Arc::new(dem), None);
@@ -479,6 +488,9 @@ pub struct UploadQuery {
     /// an SRTM `.hgt` file's extent is in its name, e.g. `N45E006.hgt`.
     #[param(max_length = 255, example = "N45E006.hgt")]
     file_name: Option<String>,
+    /// The project to store the DEM in (the caller must be an editor
+    /// there); the caller's personal project by default.
+    project_id: Option<String>,
 }
 
 /// The last component of a client's file name (browsers may send a path).

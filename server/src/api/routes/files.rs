@@ -8,21 +8,24 @@ use planner_core::export::ground_route::{route_csv, route_geojson, rover_mission
 use planner_core::export::write_waypoints;
 use serde_json::{Map, json};
 
+use super::handlers::visible_route;
 use super::model::{StoredRequest, StoredResult, stored, to_json};
 use crate::api::short_id;
+use crate::auth::{Caller, Role};
 use crate::db::RouteRow;
-use crate::error::{ApiError, Problem, found};
+use crate::error::{ApiError, Problem};
 use crate::state::AppState;
 
 /// A file rendered from a stored route, as an attachment.
 async fn route_file(
     state: &AppState,
+    caller: &Caller,
     id: &str,
     extension: &str,
     content_type: &'static str,
     render: impl FnOnce(&RouteRow, &StoredRequest, &StoredResult) -> Result<String, ApiError>,
 ) -> Result<Response, ApiError> {
-    let row = found(state.db.get_route(id).await?, "route", id)?;
+    let row = visible_route(state, caller, id, Role::Viewer).await?;
     let request: StoredRequest = stored(id, "request", &row.request)?;
     let result: StoredResult = stored(id, "result", &row.result)?;
     let body = render(&row, &request, &result)?;
@@ -55,10 +58,12 @@ async fn route_file(
 )]
 pub async fn route_geojson_file(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     route_file(
         &state,
+        &caller,
         &id,
         "geojson",
         "application/geo+json",
@@ -89,10 +94,12 @@ pub async fn route_geojson_file(
 )]
 pub async fn route_csv_file(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     route_file(
         &state,
+        &caller,
         &id,
         "csv",
         "text/csv; charset=utf-8",
@@ -116,10 +123,12 @@ pub async fn route_csv_file(
 )]
 pub async fn mission_waypoints(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
     route_file(
         &state,
+        &caller,
         &id,
         "waypoints",
         "text/plain; charset=utf-8",

@@ -13,8 +13,11 @@ use super::model::{
 };
 use super::request::{Earlier, parse_create, parse_replan, polygon_geojson};
 use super::search::{Planned, ReplanInput, map_source, plan_route, replan, warm_search};
+use crate::api::access::{ProjectFilter, list_visible, visible};
+use crate::api::costmaps::visible_costmap;
 use crate::api::json_body::JsonBody;
-use crate::api::paging::{ListQuery, list, page};
+use crate::api::paging::{ListQuery, page};
+use crate::auth::{Caller, Role};
 use crate::clock::now_millis;
 use crate::db::{CostmapRow, RouteRow};
 use crate::error::{ApiError, Problem, deleted, found};
@@ -65,6 +68,8 @@ async fn insert(state: &AppState, row: &RouteRow) -> Result<(), ApiError> {
 struct NewRoute {
     name: Option<String>,
     costmap_id: String,
+    /// The costmap's project.
+    project_id: Option<String>,
     parent_id: Option<String>,
     request: StoredRequest,
     changes: Changes,
@@ -86,6 +91,7 @@ async fn store(state: &AppState, new: NewRoute, planned: Planned) -> Result<Rout
             reused_search: planned.reused_search,
             route: planned.route,
         })?,
+        project_id: new.project_id,
     };
     insert(state, &row).await?;
     if let Some(search) = planned.search {
@@ -119,6 +125,7 @@ fn created(row: &RouteRow) -> Result<Response, ApiError> {
         (status = 201, description = "Planned", body = RouteResponse,
             headers(("Location" = String, description = "URL of the new route"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The caller is a viewer of the costmap's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such costmap", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The costmap is not done (queued, running or failed)", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
@@ -129,14 +136,12 @@ fn created(row: &RouteRow) -> Result<Response, ApiError> {
 )]
 pub async fn create_route(
     State(state): State<AppState>,
+    caller: Caller,
     Path(costmap_id): Path<String>,
     JsonBody(doc): JsonBody,
 ) -> Result<Response, ApiError> {
-    let costmap = found(
-        state.db.get_costmap(&costmap_id).await?,
-        "costmap",
-        &costmap_id,
-    )?;
+    // A route goes into its costmap's project: editors there plan them.
+    let costmap = visible_costmap(&state, &caller, &costmap_id, Role::Editor).await?;
     ready(&state, &costmap)?;
     let req = parse_create(&doc)?;
     let src = Arc::new(map_source(&state, &costmap).await?);
@@ -152,6 +157,7 @@ pub async fn create_route(
     let new = NewRoute {
         name: req.name,
         costmap_id,
+        project_id: costmap.project_id.clone(),
         parent_id: None,
         request: StoredRequest {
             start: req.start,
@@ -201,6 +207,7 @@ pub async fn create_route(
         (status = 201, description = "Replanned: the new route", body = RouteResponse,
             headers(("Location" = String, description = "URL of the new route"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The caller is a viewer of the route's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such route", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
@@ -210,10 +217,13 @@ pub async fn create_route(
 )]
 pub async fn replan_route(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
     JsonBody(doc): JsonBody,
 ) -> Result<Response, ApiError> {
-    let parent = found(state.db.get_route(&id).await?, "route", &id)?;
+    // Before the searches kept for replanning (keyed by route id) are
+    // asked.
+    let parent = visible_route(&state, &caller, &id, Role::Editor).await?;
     let request: StoredRequest = stored(&id, "request", &parent.request)?;
     let previous: Changes = stored(&id, "changes", &parent.changes)?;
     let earlier = Earlier::of(&previous)?;
@@ -253,6 +263,7 @@ pub async fn replan_route(
     let new = NewRoute {
         name: req.name.or(parent.name),
         costmap_id: parent.costmap_id,
+        project_id: costmap.project_id,
         parent_id: Some(id),
         request: StoredRequest {
             start: req.position,
@@ -293,22 +304,38 @@ async fn replan_off_runtime(
         .await?
 }
 
+/// The stored route `id` when the caller has at least `need` in its
+/// (its costmap's) project; one of another project is the 404 of a
+/// missing one.
+pub(super) async fn visible_route(
+    state: &AppState,
+    caller: &Caller,
+    id: &str,
+    need: Role,
+) -> Result<RouteRow, ApiError> {
+    let row = state.db.get_route(id).await?;
+    visible(&state.db, caller, row, "route", id, need).await
+}
+
 /// Routes, newest first, a page at a time; only those of one costmap with
 /// `?costmap_id=`.
 #[utoipa::path(
     get,
     path = "/api/v1/routes",
     tag = "routes",
-    params(ListQuery, RouteFilter),
+    params(ListQuery, RouteFilter, ProjectFilter),
     responses(
-        (status = 200, description = "A page of routes", body = RouteList),
+        (status = 200, description = "A page of the routes of the caller's projects", body = RouteList),
         (status = 400, description = "Bad paging parameters", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No project `project_id` (of the caller's)", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn list_routes(
     State(state): State<AppState>,
+    caller: Caller,
     query: Result<Query<ListQuery>, QueryRejection>,
     filter: Result<Query<RouteFilter>, QueryRejection>,
+    projects: Result<Query<ProjectFilter>, QueryRejection>,
 ) -> Result<Json<RouteList>, ApiError> {
     let costmap_id = match costmap_filter(filter) {
         Ok(id) => id,
@@ -318,9 +345,16 @@ pub async fn list_routes(
             return Err(e);
         }
     };
-    let page = list(
+    let (db, user, costmap_id) = (&state.db, caller.user_id.as_str(), costmap_id.as_deref());
+    let page = list_visible(
+        db,
+        &caller,
         query,
-        |limit, offset| state.db.list_routes(costmap_id.as_deref(), limit, offset),
+        projects,
+        |project, limit, offset| async move {
+            db.list_routes(user, project.as_deref(), costmap_id, limit, offset)
+                .await
+        },
         response,
     )
     .await?;
@@ -357,9 +391,10 @@ fn costmap_filter(
 )]
 pub async fn get_route(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<RouteResponse>, ApiError> {
-    let row = found(state.db.get_route(&id).await?, "route", &id)?;
+    let row = visible_route(&state, &caller, &id, Role::Viewer).await?;
     Ok(Json(response(&row)?))
 }
 
@@ -372,13 +407,16 @@ pub async fn get_route(
     params(("id" = String, Path, description = "Route id")),
     responses(
         (status = 204, description = "Deleted"),
+        (status = 403, description = "The caller is a viewer of the route's project", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such route", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn delete_route(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
+    visible_route(&state, &caller, &id, Role::Editor).await?;
     let was_deleted = state.db.delete_route(&id).await?;
     state.routes.searches.remove(&id);
     deleted(was_deleted, "route", &id)

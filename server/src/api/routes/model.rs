@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use utoipa::{IntoParams, ToSchema};
 
+use crate::api::access::answered_project;
 use crate::api::costmaps::costmap_url;
 use crate::clock::rfc3339;
 use crate::db::RouteRow;
@@ -179,6 +180,8 @@ pub struct RouteUrls {
 pub struct RouteResponse {
     id: String,
     name: Option<String>,
+    /// The project it belongs to: its costmap's.
+    project_id: String,
     /// The costmap it was planned on.
     costmap_id: String,
     /// The route it was replanned from (it may have been deleted since);
@@ -266,6 +269,7 @@ pub(super) fn response(row: &RouteRow) -> Result<RouteResponse, ApiError> {
     Ok(RouteResponse {
         id: id.clone(),
         name: row.name.clone(),
+        project_id: answered_project(&row.project_id),
         costmap_id: row.costmap_id.clone(),
         parent_id: row.parent_id.clone(),
         created_at: rfc3339(row.created_at),
