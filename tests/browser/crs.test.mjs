@@ -6,10 +6,8 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawnSync } from 'node:child_process';
-import { mkdtempSync } from 'node:fs';
-import { tmpdir } from 'node:os';
 import path from 'node:path';
-import { withServerAndBrowser, openPage, uploadDtm, screenshot, DTM } from './helpers.mjs';
+import { withServerAndBrowser, openPage, uploadDtm, screenshot, tempDir, DTM } from './helpers.mjs';
 
 const env = withServerAndBrowser();
 
@@ -31,7 +29,7 @@ async function captureGrey(page, slot) {
 }
 
 test('a DEM in CONUS Albers is placed exactly where the same terrain in UTM is', async () => {
-  const dir = mkdtempSync(path.join(tmpdir(), 'terraplan-crs-'));
+  const dir = tempDir('terraplan-crs-');
   const albers = path.join(dir, 'dtm_conus_albers.tif');
   const warp = spawnSync('gdalwarp', ['-q', '-t_srs', 'EPSG:5070', '-r', 'bilinear', '-tr', '2', '2', DTM, albers], { encoding: 'utf8' });
   assert.equal(warp.status, 0, `gdalwarp (package gdal-bin, installed by scripts/setup.sh --with-validators): ${warp.stderr}`);

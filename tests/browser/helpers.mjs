@@ -45,6 +45,15 @@ function createUser(dataDir, name, password) {
   return { name, password, token };
 }
 
+const TEMP_DIRS = [];
+
+/** A temporary directory (downloads, files to import), removed after the calling file's tests. */
+export function tempDir(prefix) {
+  const dir = mkdtempSync(path.join(tmpdir(), prefix));
+  TEMP_DIRS.push(dir);
+  return dir;
+}
+
 /** The servers started here, by URL: the page signs in as their first user. */
 const SERVERS = new Map();
 
@@ -115,6 +124,7 @@ export function withServerAndBrowser(options) {
   after(async () => {
     await env.browser?.close();
     await env.server?.stop();
+    for (const dir of TEMP_DIRS.splice(0)) rmSync(dir, { recursive: true, force: true });
   });
   return env;
 }

@@ -5,10 +5,8 @@
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { mkdtempSync } from 'node:fs';
-import { tmpdir } from 'node:os';
 import path from 'node:path';
-import { withServerAndBrowser, openPage, clickLonLat, drawPolygon, uploadDtm, screenshot, loadWaypoints } from './helpers.mjs';
+import { withServerAndBrowser, openPage, clickLonLat, drawPolygon, uploadDtm, screenshot, loadWaypoints, tempDir } from './helpers.mjs';
 
 // Traversable ground for the default vehicle (u-go) on the DTM's costmap (see README: Ground routes).
 const START = [-77.05430, 38.81068];
@@ -132,7 +130,7 @@ test('build a costmap, click start and goal, plan, block and replan', async () =
 
   // The rover mission loads in pymavlink.
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#route-downloads a[href$="mission.waypoints"]')]);
-  const file = path.join(mkdtempSync(path.join(tmpdir(), 'terraplan-dl-')), download.suggestedFilename());
+  const file = path.join(tempDir('terraplan-dl-'), download.suggestedFilename());
   await download.saveAs(file);
   const mission = loadWaypoints(file);
   assert.ok(mission.count > 3, `rover mission with ${mission.count} items`);

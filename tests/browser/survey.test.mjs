@@ -5,11 +5,10 @@
 
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { mkdtempSync, writeFileSync } from 'node:fs';
-import { tmpdir } from 'node:os';
+import { writeFileSync } from 'node:fs';
 import path from 'node:path';
 import {
-  withServerAndBrowser, openPage, drawPolygon, clickLonLat, uploadDtm, screenshot, loadWaypoints, countMapPixels, SCREENSHOTS,
+  withServerAndBrowser, openPage, drawPolygon, clickLonLat, uploadDtm, screenshot, loadWaypoints, countMapPixels, tempDir, SCREENSHOTS,
 } from './helpers.mjs';
 
 // Inside the DTM (lon −77.0559…−77.0493, lat 38.8082…38.8130), clear of its nodata cells.
@@ -147,7 +146,7 @@ test('plan a survey with 3 UAVs over the DTM and download a mission', async () =
     page.waitForEvent('download'),
     page.click('a[aria-label="uav1 mission waypoints"]'),
   ]);
-  const dir = mkdtempSync(path.join(tmpdir(), 'terraplan-dl-'));
+  const dir = tempDir('terraplan-dl-');
   const file = path.join(dir, download.suggestedFilename());
   await download.saveAs(file);
   assert.match(download.suggestedFilename(), /\.waypoints$/);
@@ -243,7 +242,7 @@ test('a battery limit splits a UAV’s mission into sorties, each charted and do
     page.waitForEvent('download'),
     page.click('a[aria-label="uav1 mission waypoints (sortie 2)"]'),
   ]);
-  const dir = mkdtempSync(path.join(tmpdir(), 'terraplan-dl-'));
+  const dir = tempDir('terraplan-dl-');
   const file = path.join(dir, download.suggestedFilename());
   await download.saveAs(file);
   const mission = loadWaypoints(file);
@@ -260,7 +259,7 @@ test('a battery limit splits a UAV’s mission into sorties, each charted and do
 
 test('import the area from GeoJSON and no-fly zones from KML', async () => {
   const { page, context, problems } = await openPage(env.browser, env.server.url);
-  const dir = mkdtempSync(path.join(tmpdir(), 'terraplan-import-'));
+  const dir = tempDir('terraplan-import-');
   const roiFile = path.join(dir, 'field.geojson');
   writeFileSync(roiFile, JSON.stringify({
     type: 'FeatureCollection',
