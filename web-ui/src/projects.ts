@@ -40,9 +40,9 @@ export class ProjectSwitcher {
       byId<HTMLInputElement>('project-name').value = '';
       openOverlay(this.dialog);
     });
-    byId('project-cancel').addEventListener('click', () => closeOverlay(this.dialog));
+    byId('project-cancel').addEventListener('click', () => this.closeDialog());
     this.dialog.addEventListener('keydown', (e) => {
-      if ((e as KeyboardEvent).key === 'Escape') closeOverlay(this.dialog);
+      if ((e as KeyboardEvent).key === 'Escape') this.closeDialog();
     });
     byId('project-form').addEventListener('submit', (e) => {
       e.preventDefault();
@@ -100,6 +100,12 @@ export class ProjectSwitcher {
     if (notify) this.changed(project);
   }
 
+  /** Closes the new-project dialog; focus goes back to `to` (the button that opened it). */
+  private closeDialog(to: HTMLElement = byId('new-project')): void {
+    closeOverlay(this.dialog);
+    to.focus();
+  }
+
   private async create(): Promise<void> {
     this.dialogErrors.clear();
     const name = byId<HTMLInputElement>('project-name').value.trim();
@@ -113,7 +119,7 @@ export class ProjectSwitcher {
       const project = await accounts.createProject(name);
       this.projects.push(project);
       this.fill();
-      closeOverlay(this.dialog);
+      this.closeDialog(this.select);
       this.choose(project.id);
     } catch (err) {
       if (err instanceof ApiError) this.dialogErrors.showError(err);

@@ -193,6 +193,7 @@ describe('the project switcher', () => {
     await flush();
     expect(calls.at(-1)).toEqual({ method: 'POST', url: '/api/v1/projects', headers: { 'Content-Type': 'application/json', 'X-CSRF-Token': 'csrf-ann' }, body: { name: 'Field team' } });
     expect($('project-dialog').hidden).toBe(true);
+    expect(document.activeElement).toBe($('project-select'));
     expect($<HTMLSelectElement>('project-select').value).toBe('new');
     expect(apiContext.projectId).toBe('new');
     expect(changed).toHaveBeenCalledTimes(1);
