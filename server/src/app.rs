@@ -21,7 +21,10 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::api::{cameras, costmaps, dems, health, routes, surveys, vehicles};
+use crate::api::{
+    cameras, costmaps, dems, health, members, projects, routes, session, surveys, tokens, users,
+    vehicles,
+};
 use crate::error::ApiError;
 use crate::state::AppState;
 
@@ -38,6 +41,8 @@ use crate::state::AppState;
         (name = "dems", description = "Digital elevation models: upload (GeoTIFF, ESRI ASCII grid, SRTM .hgt), metadata, hillshade preview, heights at points"),
         (name = "costmaps", description = "Traversability costmaps of a DEM for a ground vehicle: background jobs with progress events, GeoTIFF, preview and per-layer files"),
         (name = "routes", description = "UGV routes across a finished costmap: the cheapest safe path (A* or D* Lite), incremental replanning around blocked areas, GeoJSON, CSV (UTM) and ArduPilot Rover missions"),
+        (name = "accounts", description = "Signing in (session cookie and CSRF token, or an API token), a user's own API tokens, and users (admins)"),
+        (name = "projects", description = "Projects and their members: every DEM, survey, costmap and route belongs to one; viewers read, editors also create and delete, owners also manage members"),
         (name = "service", description = "Health"),
     ),
     components(schemas(crate::error::Problem, crate::error::IssueSchema))
@@ -55,7 +60,14 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .merge(vehicles::routes())
         .merge(cameras::routes())
         .merge(routes::routes())
+        .merge(session::routes())
+        .merge(tokens::routes())
+        .merge(users::routes())
+        .merge(projects::routes())
+        .merge(members::routes())
         .split_for_parts();
+    let mut openapi = openapi;
+    crate::auth::openapi::describe_credentials(&mut openapi);
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();
     let request_id = HeaderName::from_static("x-request-id");
@@ -71,8 +83,9 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .merge(SwaggerUi::new("/api/docs").url("/api/v1/openapi-ui.json", openapi.as_ref().clone()))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
-        .with_state(state)
+        .with_state(state.clone())
         .layer(DefaultBodyLimit::max(max_body_bytes))
+        .layer(middleware::from_fn_with_state(state, crate::auth::authenticate))
         .layer(middleware::from_fn(move |req: Request, next: Next| {
             let limit = if is_dem_upload(&req) {
                 max_dem_bytes
@@ -108,19 +121,27 @@ fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
     }
     let layer = CorsLayer::new()
         .allow_methods([Method::GET, Method::POST, Method::DELETE])
-        .allow_headers(Any)
         .expose_headers([
             axum::http::header::LOCATION,
             axum::http::header::CONTENT_DISPOSITION,
         ]);
     Some(if origins.iter().any(|o| o == "*") {
-        layer.allow_origin(Any)
+        // Any origin, but never with credentials (cookies): a page
+        // elsewhere may call the API only with a token it holds.
+        layer.allow_origin(Any).allow_headers(Any)
     } else {
         let list: Vec<HeaderValue> = origins
             .iter()
             .filter_map(|o| HeaderValue::from_str(o).ok())
             .collect();
-        layer.allow_origin(AllowOrigin::list(list))
+        layer
+            .allow_origin(AllowOrigin::list(list))
+            .allow_headers([
+                axum::http::header::CONTENT_TYPE,
+                axum::http::header::AUTHORIZATION,
+                HeaderName::from_static(crate::auth::caller::CSRF_HEADER),
+            ])
+            .allow_credentials(true)
     })
 }
 

@@ -111,6 +111,10 @@ pub struct ServeConfig {
         value_delimiter = ','
     )]
     pub cors_origins: Vec<String>,
+    /// Mark the session cookie `Secure` on every answer (it is anyway when
+    /// a proxy sends `X-Forwarded-Proto: https`): for a service behind TLS.
+    #[arg(long, env = "TERRAPLAN_COOKIE_SECURE")]
+    pub cookie_secure: bool,
     /// Log format.
     #[arg(long, env = "TERRAPLAN_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,

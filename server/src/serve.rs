@@ -45,6 +45,19 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         .map_err(|e| format!("cannot open the database: {e}"))?;
     tracing::info!(backend = db.backend(), data_dir = %config.data_dir.display(), "database ready, migrations applied");
 
+    // A service with no users gets its admin now; the secrets are shown
+    // once, on stdout after the address, and never logged.
+    let first = crate::auth::accounts::first_start(&db)
+        .await
+        .map_err(|e| format!("cannot make the first user: {e}"))?;
+    if let Some(first) = &first {
+        tracing::info!(
+            user = crate::auth::accounts::FIRST_ADMIN,
+            adopted_resources = first.adopted,
+            "first start: made the admin user"
+        );
+    }
+
     let state = AppState::from_config(&config, db.clone());
     let jobs = state.costmaps.clone();
     if state.web.is_built() {
@@ -69,6 +82,15 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
     // The first line on stdout is the address, for scripts and tests that
     // start the service on port 0.
     println!("listening on http://{addr}");
+    if let Some(first) = first {
+        println!(
+            "first start: sign in at http://{addr} as \"{}\" with the one-time password {}, or \
+             call the API with \"Authorization: Bearer {}\"",
+            crate::auth::accounts::FIRST_ADMIN,
+            first.password,
+            first.token
+        );
+    }
     tracing::info!(%addr, "terraplan serving");
     let limits = conn_limits(&config);
     tracing::info!(

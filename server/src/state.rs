@@ -41,6 +41,8 @@ pub struct AppState {
     /// hillshades, costmap builds and route searches reserve their
     /// estimated peak here first, and wait while it is taken.
     pub memory: Arc<MemoryBudget>,
+    /// `--cookie-secure`: the session cookie is always `Secure`.
+    pub cookie_secure: bool,
 }
 
 impl AppState {
@@ -65,6 +67,7 @@ impl AppState {
             routes: Arc::new(RouteStore::from_config(config)),
             web: Arc::new(WebUi::new(&config.web_dir)),
             memory,
+            cookie_secure: config.cookie_secure,
         }
     }
 

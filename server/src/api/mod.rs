@@ -1,16 +1,22 @@
 //! HTTP API, one module per resource.
 
 pub mod access;
+mod account_fields;
 pub mod cameras;
 pub mod costmaps;
 pub mod dems;
 pub mod health;
 mod immutable;
 pub mod json_body;
+pub mod members;
 pub mod names;
 pub mod paging;
+pub mod projects;
 pub mod routes;
+pub mod session;
 pub mod surveys;
+pub mod tokens;
+pub mod users;
 pub mod vehicles;
 
 /// The first 8 characters of an id, for download file names.

@@ -10,8 +10,6 @@ use crate::db::{Db, ProjectRow, TokenRow, UserRow};
 
 /// Longest user name, in characters.
 pub const NAME_MAX_CHARS: usize = 64;
-/// Longest token name, in characters.
-pub const TOKEN_NAME_MAX_CHARS: usize = 200;
 /// The name of the admin made on first start.
 pub const FIRST_ADMIN: &str = "admin";
 
@@ -35,21 +33,16 @@ pub enum AccountError {
 pub fn name_fault(name: &str) -> Option<String> {
     let chars = name.chars().count();
     if chars == 0 {
-        Some("a user name may not be empty".to_string())
-    } else if chars > NAME_MAX_CHARS {
-        Some(format!(
-            "a user name has at most {NAME_MAX_CHARS} characters, this one {chars}"
-        ))
-    } else if let Some(c) = name
-        .chars()
-        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-')))
-    {
-        Some(format!(
-            "a user name may hold only letters, digits, '.', '_' and '-', not {c:?}"
-        ))
-    } else {
-        None
+        return Some("a user name may not be empty".to_string());
     }
+    if chars > NAME_MAX_CHARS {
+        return Some(format!(
+            "a user name has at most {NAME_MAX_CHARS} characters, this one {chars}"
+        ));
+    }
+    name.chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-')))
+        .map(|c| format!("a user name may hold only letters, digits, '.', '_' and '-', not {c:?}"))
 }
 
 /// A user just made, with its first API token (shown once).

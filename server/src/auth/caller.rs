@@ -44,8 +44,8 @@ pub struct Caller {
 /// The credentials of a request.
 #[derive(Clone, Debug)]
 pub enum Via {
-    /// `Authorization: Bearer tp_…`: the token's id.
-    Token { id: String },
+    /// `Authorization: Bearer tp_…`.
+    Token,
     /// The session cookie: the session's id and its CSRF token.
     Session { id: String, csrf_token: String },
 }
@@ -100,7 +100,9 @@ pub async fn authenticate(State(state): State<AppState>, mut req: Request, next:
             req.extensions_mut().insert(caller);
             next.run(req).await
         }
-        Ok(None) if open => next.run(req).await,
+        // An open route needs no credentials, so stale ones (an ended
+        // session's cookie, say) must not keep anyone from signing in.
+        Ok(None) | Err(_) if open => next.run(req).await,
         Ok(None) => unauthorized().into_response(),
         Err(e) => e.into_response(),
     }
@@ -196,7 +198,7 @@ pub async fn token_caller(db: &Db, token: &str) -> Result<Caller, ApiError> {
     if row.last_used_at.is_none_or(|t| now - t >= TOUCH_EVERY_MS) {
         db.touch_token(&row.id, now).await?;
     }
-    Ok(Caller::from_user(user, Via::Token { id: row.id }))
+    Ok(Caller::from_user(user, Via::Token))
 }
 
 async fn session_caller(db: &Db, cookie: &str) -> Result<Caller, ApiError> {

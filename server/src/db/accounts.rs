@@ -125,11 +125,6 @@ impl Db {
         })
     }
 
-    pub async fn set_password_hash(&self, id: &str, hash: &str) -> Result<(), sqlx::Error> {
-        const SQL: &str = "UPDATE users SET password_hash = $2 WHERE id = $1";
-        on_pool!(self, pool => sqlx::query(SQL).bind(id).bind(hash).execute(pool).await.map(|_| ()))
-    }
-
     pub async fn insert_token(&self, row: &TokenRow) -> Result<(), sqlx::Error> {
         const SQL: &str = "INSERT INTO api_tokens (id, user_id, name, secret_hash, created_at, last_used_at, expires_at) VALUES ($1, $2, $3, $4, $5, $6, $7)";
         on_pool!(self, pool => sqlx::query(SQL)

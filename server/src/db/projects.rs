@@ -25,7 +25,6 @@ pub struct MembershipRow {
 /// A member of a project, by name.
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct MemberRow {
-    pub user_id: String,
     pub user_name: String,
     pub role: String,
 }
@@ -105,7 +104,7 @@ impl Db {
 
     /// The members of a project, owners first, then by name.
     pub async fn project_members(&self, project_id: &str) -> Result<Vec<MemberRow>, sqlx::Error> {
-        const SQL: &str = "SELECT m.user_id, u.name AS user_name, m.role \
+        const SQL: &str = "SELECT u.name AS user_name, m.role \
             FROM project_members m JOIN users u ON u.id = m.user_id \
             WHERE m.project_id = $1 \
             ORDER BY CASE m.role WHEN 'owner' THEN 0 WHEN 'editor' THEN 1 ELSE 2 END, u.name";
