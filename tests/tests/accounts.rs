@@ -732,3 +732,36 @@ fn secrets_are_not_stored_in_clear() {
         }
     }
 }
+
+/// Resources made before accounts (no project) move into the personal
+/// project of the admin the first start makes. (SQLite: the state before
+/// accounts is made by hand on the database file.)
+#[test]
+fn the_first_admin_adopts_older_resources() {
+    if on_postgres() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), NO_LIMIT);
+    let dem = terraplan_e2e::upload_dem(&server, &terraplan_e2e::dtm());
+    server.stop();
+    // As before accounts: no users, no projects, a DEM of no project.
+    sql(
+        dir.path(),
+        "PRAGMA foreign_keys = ON; DELETE FROM users; DELETE FROM projects; \
+         UPDATE dems SET project_id = NULL;",
+    );
+    let server = Server::start_without_user(dir.path(), NO_LIMIT);
+    let line = server
+        .stdout_line(Duration::from_secs(10))
+        .expect("first start");
+    let token = line
+        .rsplit_once("Bearer ")
+        .map(|(_, t)| t.trim_end_matches('"').to_string())
+        .unwrap_or_else(|| panic!("{line}"));
+    let admin = bearer(&token);
+    let r = get_as(&admin, &server.url(&format!("/api/v1/dems/{dem}")));
+    assert_eq!(r.status, 200, "{}", r.text());
+    let personal = whoami(&server, &admin).json()["personal_project_id"].clone();
+    assert_eq!(r.json()["project_id"], personal);
+}
