@@ -96,7 +96,7 @@ struct Made {
 
 fn make_everything(server: &Server, user: &User, project: Option<&str>) -> Made {
     let dem = created(&upload_as(&server.base, user, project, 0.0), 201);
-    let mut body = json!({"dem_id": dem["id"], "name": "iso"});
+    let mut body = json!({"dem_id": dem["id"], "name": "iso", "options": {"layers": ["slope"]}});
     let mut survey_body = example_survey_request();
     if let Some(p) = project {
         body["project_id"] = json!(p);
@@ -517,7 +517,7 @@ fn concurrent_users_never_cross() {
     let url = |path: &str| format!("{base}{path}");
     let work = |user: &User, owner: bool| {
         let mut mine = Vec::new();
-        for round in 0..4 {
+        for round in 0..6 {
             let dem_r = created(&upload_as(&base, user, None, round as f64), 201);
             mine.push(id(&dem_r).to_string());
             let r = post_json_as(
