@@ -26,6 +26,7 @@ use crate::api::{
     vehicles,
 };
 use crate::error::ApiError;
+use crate::guard::{self, AllowedHosts};
 use crate::state::AppState;
 
 #[derive(OpenApi)]
@@ -50,7 +51,12 @@ use crate::state::AppState;
 struct ApiDoc;
 
 /// The OpenAPI document and the router it describes.
-pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -> Router {
+pub fn router(
+    state: AppState,
+    cors_origins: &[String],
+    allowed_hosts: AllowedHosts,
+    max_body_bytes: usize,
+) -> Router {
     let max_dem_bytes = state.dems.max_upload_bytes;
     let (api, openapi) = OpenApiRouter::with_openapi(ApiDoc::openapi())
         .merge(health::routes())
@@ -85,6 +91,10 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(state.clone())
         .layer(DefaultBodyLimit::max(max_body_bytes))
+        .layer(middleware::from_fn_with_state(
+            state.clone(),
+            crate::rate_limit::limit_rates,
+        ))
         .layer(middleware::from_fn_with_state(state, crate::auth::authenticate))
         .layer(middleware::from_fn(move |req: Request, next: Next| {
             let limit = if is_dem_upload(&req) {
@@ -107,6 +117,10 @@ pub fn router(state: AppState, cors_origins: &[String], max_body_bytes: usize) -
             })
             .on_response(DefaultOnResponse::new().level(tracing::Level::INFO).latency_unit(LatencyUnit::Millis)),
         )
+        .layer(middleware::from_fn(guard::security_headers))
+        .layer(middleware::from_fn(move |req: Request, next: Next| {
+            guard::check_host(allowed_hosts.clone(), req, next)
+        }))
         .layer(PropagateRequestIdLayer::new(request_id.clone()))
         .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid));
     if let Some(cors) = cors_layer(cors_origins) {

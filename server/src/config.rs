@@ -111,6 +111,25 @@ pub struct ServeConfig {
         value_delimiter = ','
     )]
     pub cors_origins: Vec<String>,
+    /// Host name the service answers to besides the loopback names and the
+    /// `--host` address (repeatable; `*` any). Other `Host` headers get 400,
+    /// which keeps web pages elsewhere from reaching the service through
+    /// DNS rebinding. Behind a proxy or on a LAN, name the public host.
+    #[arg(
+        long = "allowed-host",
+        env = "TERRAPLAN_ALLOWED_HOSTS",
+        value_delimiter = ','
+    )]
+    pub allowed_hosts: Vec<String>,
+    /// Sign-in attempts a minute from one address, and for one user name
+    /// (0: no limit); more get 429 with Retry-After.
+    #[arg(long, env = "TERRAPLAN_SIGN_IN_PER_MINUTE", default_value_t = 10)]
+    pub sign_in_per_minute: u32,
+    /// Planning requests (surveys, costmaps, routes, replans, DEM uploads) a
+    /// minute from one user, and from one address (0: no limit), up to half
+    /// of them at once; more get 429 with Retry-After.
+    #[arg(long, env = "TERRAPLAN_PLANNING_PER_MINUTE", default_value_t = 600)]
+    pub planning_per_minute: u32,
     /// Mark the session cookie `Secure` on every answer (it is anyway when
     /// a proxy sends `X-Forwarded-Proto: https`): for a service behind TLS.
     #[arg(long, env = "TERRAPLAN_COOKIE_SECURE")]

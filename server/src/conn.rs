@@ -236,10 +236,10 @@ pub async fn serve(
             () = &mut shutdown => break,
             r = listener.accept() => r,
         };
-        let stream = match accepted {
-            Ok((stream, _)) => {
+        let (stream, peer) = match accepted {
+            Ok((stream, peer)) => {
                 short_of_descriptors = false;
-                stream
+                (stream, peer)
             }
             Err(e) if is_connection_error(&e) => continue,
             Err(e) => {
@@ -267,7 +267,14 @@ pub async fn serve(
             () = &mut shutdown => break,
             slot = registry.slot() => slot,
         };
-        let conn = serve_connection(stream, slot, app.clone(), limits.clone(), stop_rx.clone());
+        let conn = serve_connection(
+            stream,
+            peer,
+            slot,
+            app.clone(),
+            limits.clone(),
+            stop_rx.clone(),
+        );
         let done = done_tx.clone();
         tokio::spawn(async move {
             conn.await;
@@ -295,6 +302,7 @@ fn is_connection_error(e: &io::Error) -> bool {
 /// server stops (then gracefully: the request in hand is answered).
 async fn serve_connection(
     stream: TcpStream,
+    peer: std::net::SocketAddr,
     slot: Slot,
     app: Router,
     limits: Arc<ConnLimits>,
@@ -312,7 +320,10 @@ async fn serve_connection(
         .header_read_timeout(limits.header_read_timeout);
     let min_rate = limits.body_min_bytes_per_s;
     let service_state = state.clone();
-    let service = hyper::service::service_fn(move |req: Request<Incoming>| {
+    let service = hyper::service::service_fn(move |mut req: Request<Incoming>| {
+        // The client's address, for the rate limits by address.
+        req.extensions_mut()
+            .insert(axum::extract::ConnectInfo(peer));
         let app = app.clone();
         let limits = limits.clone();
         let state = service_state.clone();

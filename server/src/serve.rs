@@ -71,7 +71,13 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         tracing::info!(jobs = recovered, "unfinished costmap jobs queued again");
     }
     jobs.start_maintenance();
-    let app = router(state, &config.cors_origins, config.max_body_bytes);
+    let allowed_hosts = crate::guard::AllowedHosts::new(&config.host, &config.allowed_hosts);
+    let app = router(
+        state,
+        &config.cors_origins,
+        allowed_hosts,
+        config.max_body_bytes,
+    );
     let listener = listen(&config.host, config.port)
         .await
         .map_err(|e| format!("cannot listen on {}:{}: {e}", config.host, config.port))?;

@@ -20,6 +20,7 @@ use crate::db::Db;
 use crate::error::ApiError;
 use crate::jobs::CostmapJobs;
 use crate::memory::{MemoryBudget, Reservation};
+use crate::rate_limit::RateLimits;
 use crate::web_ui::WebUi;
 
 #[derive(Clone)]
@@ -41,6 +42,8 @@ pub struct AppState {
     /// hillshades, costmap builds and route searches reserve their
     /// estimated peak here first, and wait while it is taken.
     pub memory: Arc<MemoryBudget>,
+    /// Sign-in and planning rate limits.
+    pub rates: Arc<RateLimits>,
     /// `--cookie-secure`: the session cookie is always `Secure`.
     pub cookie_secure: bool,
 }
@@ -67,6 +70,10 @@ impl AppState {
             routes: Arc::new(RouteStore::from_config(config)),
             web: Arc::new(WebUi::new(&config.web_dir)),
             memory,
+            rates: Arc::new(RateLimits::new(
+                config.sign_in_per_minute,
+                config.planning_per_minute,
+            )),
             cookie_secure: config.cookie_secure,
         }
     }

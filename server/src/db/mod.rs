@@ -47,15 +47,19 @@ macro_rules! visible_to_member {
 
 // After `on_pool!` and `visible_to_member!`: a macro is only visible to
 // modules declared below it.
+mod accounts;
 mod costmaps;
 mod dems;
 mod files;
+mod projects;
 mod routes;
 mod surveys;
 
+pub use accounts::{SessionRow, TokenRow, UserRow};
 pub use costmaps::{CostmapFileRow, CostmapRow};
 pub use dems::DemMetaRow;
 pub use files::StoredFile;
+pub use projects::{MemberRow, MembershipRow, ProjectRow};
 pub use routes::RouteRow;
 pub use surveys::{SurveyRow, SurveySummaryRow};
 
