@@ -254,10 +254,12 @@ fn slow_surveys_hold_neither_health_nor_dem_work() {
     std::thread::sleep(Duration::from_secs(2));
     let began = Instant::now();
 
-    // /healthz answers at once: each probe within 100 ms (a probe slower
-    // than that once, a load spike on the shared machine, is tried again).
+    // /healthz answers at once, not after the surveys' 12 s: the fastest
+    // of three probes within 500 ms (the planners keep both cores busy, and
+    // the machine may be loaded further; waiting behind a planner would take
+    // seconds).
     for _ in 0..10 {
-        let fastest = (0..2)
+        let fastest = (0..3)
             .map(|_| {
                 let t = Instant::now();
                 let r = get(&server.url("/healthz"));
@@ -267,7 +269,7 @@ fn slow_surveys_hold_neither_health_nor_dem_work() {
             .min()
             .unwrap();
         assert!(
-            fastest < Duration::from_millis(100),
+            fastest < Duration::from_millis(500),
             "/healthz took {fastest:?}"
         );
         std::thread::sleep(Duration::from_millis(50));
