@@ -236,6 +236,8 @@ fn sessions_cookies_and_csrf() {
     for body in [
         json!({"user": name, "password": "wrong password"}),
         json!({"user": "no-such-user-anywhere", "password": PASSWORD}),
+        // A name no user can have (PostgreSQL refuses NUL in text).
+        json!({"user": "a\u{0}b", "password": PASSWORD}),
         json!({"token": format!("{token}x")}),
     ] {
         let r = sign_in(&server, &body, &[]);
@@ -568,12 +570,10 @@ fn projects_members_and_roles() {
         r.json()["id"].as_str().unwrap()
     ));
 
-    let r = post_json_as(
-        &alice,
-        &members,
-        &json!({"user": "nobody-by-that-name", "role": "viewer"}),
-    );
-    assert_invalid_at(&r, "unknown user", "/user", "no user named");
+    for nobody in ["nobody-by-that-name", "a\u{0}b"] {
+        let r = post_json_as(&alice, &members, &json!({"user": nobody, "role": "viewer"}));
+        assert_invalid_at(&r, "unknown user", "/user", "no user named");
+    }
     let r = post_json_as(&alice, &members, &json!({"user": bob_name, "role": "boss"}));
     assert_invalid_at(&r, "bad role", "/role", "viewer");
     let r = post_json_as(

@@ -122,11 +122,12 @@ pub async fn set_member(
     let role_text = required_string(body, "role")?;
     let role = Role::parse(&role_text)
         .ok_or_else(|| invalid("/role", "role must be \"viewer\", \"editor\" or \"owner\""))?;
-    let user = state
-        .db
-        .user_by_name(&name)
-        .await?
-        .ok_or_else(|| invalid("/user", &format!("there is no user named {name:?}")))?;
+    let unknown = || invalid("/user", &format!("there is no user named {name:?}"));
+    // A name no user can have is not looked up (PostgreSQL refuses NUL).
+    if crate::auth::accounts::name_fault(&name).is_some() {
+        return Err(unknown());
+    }
+    let user = state.db.user_by_name(&name).await?.ok_or_else(unknown)?;
     let current = state.db.member_role(&id, &user.id).await?;
     if current.as_deref() == Some("owner") && role != Role::Owner {
         keep_an_owner(&state, &id, "demote").await?;

@@ -134,7 +134,12 @@ pub async fn sign_in(
 /// A missing user or password costs the same argon2 verification as a
 /// wrong one, so the answer's timing does not tell names apart.
 async fn check_password(db: &Db, name: &str, password: String) -> Result<UserRow, ApiError> {
-    let user = db.user_by_name(name).await?;
+    // A name no user can have is not looked up (PostgreSQL refuses some,
+    // NUL among them), but costs the same verification.
+    let user = match crate::auth::accounts::name_fault(name) {
+        Some(_) => None,
+        None => db.user_by_name(name).await?,
+    };
     let phc = user
         .as_ref()
         .and_then(|u| u.password_hash.clone())
