@@ -15,7 +15,7 @@ use super::json_body::JsonBody;
 use super::paging::{self, ListQuery, Page, listing};
 use super::projects::project_for;
 use crate::auth::{Caller, Role};
-use crate::db::MemberRow;
+use crate::db::{MemberChange, MemberRow};
 use crate::error::{ApiError, Problem};
 use crate::state::AppState;
 
@@ -128,15 +128,14 @@ pub async fn set_member(
         return Err(unknown());
     }
     let user = state.db.user_by_name(&name).await?.ok_or_else(unknown)?;
-    let current = state.db.member_role(&id, &user.id).await?;
-    if current.as_deref() == Some("owner") && role != Role::Owner {
-        keep_an_owner(&state, &id, "demote").await?;
-    }
-    let new = state.db.set_member(&id, &user.id, role.as_str()).await?;
-    let status = if new {
-        StatusCode::CREATED
-    } else {
-        StatusCode::OK
+    let status = match state
+        .db
+        .change_member(&id, &user.id, Some(role.as_str()))
+        .await?
+    {
+        MemberChange::Added => StatusCode::CREATED,
+        MemberChange::LastOwner => return Err(last_owner(&id, "demote")),
+        _ => StatusCode::OK,
     };
     Ok((
         status,
@@ -147,15 +146,11 @@ pub async fn set_member(
     ))
 }
 
-/// 409 when project `id` has a single owner (whom the caller would
-/// `verb`).
-async fn keep_an_owner(state: &AppState, id: &str, verb: &str) -> Result<(), ApiError> {
-    if state.db.count_owners(id).await? <= 1 {
-        return Err(ApiError::Conflict(format!(
-            "cannot {verb} the last owner of project {id:?}: make another member an owner first"
-        )));
-    }
-    Ok(())
+/// The 409 of a change that would leave project `id` without an owner.
+fn last_owner(id: &str, verb: &str) -> ApiError {
+    ApiError::Conflict(format!(
+        "cannot {verb} the last owner of project {id:?}: make another member an owner first"
+    ))
 }
 
 /// Remove a member (owners).
@@ -183,13 +178,11 @@ pub async fn remove_member(
     let not_member =
         || ApiError::NotFound(format!("user {name:?} is not a member of project {id:?}"));
     let user = state.db.user_by_name(&name).await?.ok_or_else(not_member)?;
-    match state.db.member_role(&id, &user.id).await?.as_deref() {
-        None => return Err(not_member()),
-        Some("owner") => keep_an_owner(&state, &id, "remove").await?,
-        Some(_) => {}
+    match state.db.change_member(&id, &user.id, None).await? {
+        MemberChange::NotMember => Err(not_member()),
+        MemberChange::LastOwner => Err(last_owner(&id, "remove")),
+        _ => Ok(StatusCode::NO_CONTENT),
     }
-    state.db.remove_member(&id, &user.id).await?;
-    Ok(StatusCode::NO_CONTENT)
 }
 
 /// `/api/v1/projects/{id}/members`.

@@ -59,7 +59,7 @@ pub use accounts::{SessionRow, TokenRow, UserRow};
 pub use costmaps::{CostmapFileRow, CostmapRow};
 pub use dems::DemMetaRow;
 pub use files::StoredFile;
-pub use projects::{MemberRow, MembershipRow, ProjectRow};
+pub use projects::{MemberChange, MemberRow, MembershipRow, ProjectRow};
 pub use routes::RouteRow;
 pub use surveys::{SurveyRow, SurveySummaryRow};
 

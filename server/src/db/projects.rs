@@ -29,6 +29,18 @@ pub struct MemberRow {
     pub role: String,
 }
 
+/// What [`Db::change_member`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MemberChange {
+    Added,
+    Changed,
+    Removed,
+    /// Nothing: the user is not a member (to remove).
+    NotMember,
+    /// Nothing: the user is the project's only owner.
+    LastOwner,
+}
+
 /// The tables whose rows belong to a project (constants, so the SQL
 /// built from them is safe).
 const RESOURCE_TABLES: [&str; 4] = ["dems", "surveys", "costmaps", "routes"];
@@ -111,54 +123,61 @@ impl Db {
         on_pool!(self, pool => sqlx::query_as::<_, MemberRow>(SQL).bind(project_id).fetch_all(pool).await)
     }
 
-    /// Add a member or change its role; true when the member is new.
-    pub async fn set_member(
+    /// Add a member, change its role (`role` given) or remove it (`None`),
+    /// never leaving the project without an owner. The project's row is
+    /// written first, which locks it (a row lock on PostgreSQL, the write
+    /// lock on SQLite), so two owners demoting each other at once cannot
+    /// both succeed.
+    pub async fn change_member(
         &self,
         project_id: &str,
         user_id: &str,
-        role: &str,
-    ) -> Result<bool, sqlx::Error> {
+        role: Option<&str>,
+    ) -> Result<MemberChange, sqlx::Error> {
+        const LOCK: &str = "UPDATE projects SET name = name WHERE id = $1";
+        const CURRENT: &str =
+            "SELECT role FROM project_members WHERE project_id = $1 AND user_id = $2";
+        const OWNERS: &str =
+            "SELECT COUNT(*) FROM project_members WHERE project_id = $1 AND role = 'owner'";
         const UPDATE: &str =
             "UPDATE project_members SET role = $3 WHERE project_id = $1 AND user_id = $2";
         const INSERT: &str =
             "INSERT INTO project_members (project_id, user_id, role) VALUES ($1, $2, $3)";
+        const DELETE: &str = "DELETE FROM project_members WHERE project_id = $1 AND user_id = $2";
         on_pool!(self, pool => {
             let mut tx = pool.begin().await?;
-            let changed = sqlx::query(UPDATE)
+            sqlx::query(LOCK).bind(project_id).execute(&mut *tx).await?;
+            let current: Option<(String,)> = sqlx::query_as(CURRENT)
                 .bind(project_id)
                 .bind(user_id)
-                .bind(role)
-                .execute(&mut *tx)
-                .await?
-                .rows_affected();
-            if changed == 0 {
-                sqlx::query(INSERT).bind(project_id).bind(user_id).bind(role).execute(&mut *tx).await?;
+                .fetch_optional(&mut *tx)
+                .await?;
+            let current = current.map(|(r,)| r);
+            if current.as_deref() == Some("owner") && role != Some("owner") {
+                let (owners,): (i64,) =
+                    sqlx::query_as(OWNERS).bind(project_id).fetch_one(&mut *tx).await?;
+                if owners <= 1 {
+                    return Ok(MemberChange::LastOwner);
+                }
             }
+            let change = match (current, role) {
+                (None, None) => return Ok(MemberChange::NotMember),
+                (Some(_), None) => {
+                    sqlx::query(DELETE).bind(project_id).bind(user_id).execute(&mut *tx).await?;
+                    MemberChange::Removed
+                }
+                (Some(_), Some(role)) => {
+                    sqlx::query(UPDATE).bind(project_id).bind(user_id).bind(role).execute(&mut *tx).await?;
+                    MemberChange::Changed
+                }
+                (None, Some(role)) => {
+                    sqlx::query(INSERT).bind(project_id).bind(user_id).bind(role).execute(&mut *tx).await?;
+                    MemberChange::Added
+                }
+            };
             tx.commit().await?;
-            Ok(changed == 0)
+            Ok(change)
         })
-    }
-
-    /// Remove a member; true when it was one.
-    pub async fn remove_member(
-        &self,
-        project_id: &str,
-        user_id: &str,
-    ) -> Result<bool, sqlx::Error> {
-        const SQL: &str = "DELETE FROM project_members WHERE project_id = $1 AND user_id = $2";
-        on_pool!(self, pool => sqlx::query(SQL)
-            .bind(project_id)
-            .bind(user_id)
-            .execute(pool)
-            .await
-            .map(|r| r.rows_affected() > 0))
-    }
-
-    /// How many owners a project has.
-    pub async fn count_owners(&self, project_id: &str) -> Result<i64, sqlx::Error> {
-        const SQL: &str =
-            "SELECT COUNT(*) FROM project_members WHERE project_id = $1 AND role = 'owner'";
-        on_pool!(self, pool => sqlx::query_as::<_, (i64,)>(SQL).bind(project_id).fetch_one(pool).await.map(|r| r.0))
     }
 
     /// How many resources (DEMs, surveys, costmaps, routes) a project holds.
@@ -190,5 +209,66 @@ impl Db {
             tx.commit().await?;
             Ok(moved)
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::UserRow;
+
+    async fn user(db: &Db, name: &str) -> String {
+        let row = UserRow {
+            id: format!("id-{name}"),
+            name: name.to_string(),
+            password_hash: None,
+            admin: 0,
+            disabled: 0,
+            created_at: 1,
+        };
+        db.insert_user(&row).await.unwrap();
+        row.id
+    }
+
+    /// Two owners demoting each other at the same time: one succeeds, the
+    /// other finds itself the last owner, and the project keeps one.
+    #[tokio::test]
+    async fn a_project_always_keeps_an_owner() {
+        let dir = std::env::temp_dir().join(format!("terraplan-proj-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let db = Db::connect(None, &dir).await.unwrap();
+        let (a, b) = (user(&db, "a").await, user(&db, "b").await);
+        let project = ProjectRow {
+            id: "p".into(),
+            name: "p".into(),
+            personal_of: None,
+            created_at: 1,
+        };
+        db.insert_project(&project, &a).await.unwrap();
+        assert_eq!(
+            db.change_member("p", &b, Some("owner")).await.unwrap(),
+            MemberChange::Added
+        );
+        let (x, y) = tokio::join!(
+            db.change_member("p", &a, Some("viewer")),
+            db.change_member("p", &b, Some("viewer")),
+        );
+        let mut outcomes = [x.unwrap(), y.unwrap()];
+        outcomes.sort_by_key(|c| *c == MemberChange::LastOwner);
+        assert_eq!(outcomes, [MemberChange::Changed, MemberChange::LastOwner]);
+        let owners = db.project_members("p").await.unwrap();
+        assert_eq!(owners.iter().filter(|m| m.role == "owner").count(), 1);
+        assert_eq!(
+            db.change_member("p", "id-nobody", None).await.unwrap(),
+            MemberChange::NotMember
+        );
+        let last = owners.iter().find(|m| m.role == "owner").unwrap();
+        let last_id = format!("id-{}", last.user_name);
+        assert_eq!(
+            db.change_member("p", &last_id, None).await.unwrap(),
+            MemberChange::LastOwner
+        );
+        db.close().await;
+        let _ = std::fs::remove_dir_all(dir);
     }
 }
