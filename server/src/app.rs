@@ -73,7 +73,7 @@ pub fn router(
         .merge(members::routes())
         .split_for_parts();
     let mut openapi = openapi;
-    crate::auth::openapi::describe_credentials(&mut openapi);
+    crate::api::document::complete(&mut openapi);
     let openapi = Arc::new(openapi);
     let doc = openapi.clone();
     let request_id = HeaderName::from_static("x-request-id");
@@ -91,6 +91,9 @@ pub fn router(
         .method_not_allowed_fallback(method_not_allowed)
         .with_state(state.clone())
         .layer(DefaultBodyLimit::max(max_body_bytes))
+        .layer(middleware::from_fn(
+            crate::api::names::refuse_control_characters,
+        ))
         .layer(middleware::from_fn_with_state(
             state.clone(),
             crate::rate_limit::limit_rates,

@@ -372,22 +372,6 @@ async fn answer(
     req: Request<Incoming>,
 ) -> Response<Body> {
     let busy = conn.begin_request();
-    if crate::api::names::path_has_control_character(req.uri().path()) {
-        // No resource has such an id, and PostgreSQL cannot even look
-        // one up (its text holds no NUL).
-        let res = ApiError::NotFound(format!(
-            "there is no resource at {} {}: ids hold no control characters",
-            req.method(),
-            req.uri().path()
-        ))
-        .into_response();
-        return res.map(|body| {
-            Body::new(Tracked {
-                inner: body,
-                _busy: busy,
-            })
-        });
-    }
     let clock = Arc::new(BodyClock::default());
     let req = req.map(|body| {
         Body::new(TimedBody::new(

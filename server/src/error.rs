@@ -147,6 +147,31 @@ impl ApiError {
     }
 }
 
+/// A problem+json answer as the OpenAPI document lists it, for the rules
+/// that add answers to many operations at once (credentials, rate limits,
+/// JSON bodies).
+pub fn documented_problem(description: &str) -> utoipa::openapi::RefOr<utoipa::openapi::Response> {
+    utoipa::openapi::response::ResponseBuilder::new()
+        .description(description)
+        .content(
+            PROBLEM_JSON,
+            utoipa::openapi::ContentBuilder::new()
+                .schema(Some(utoipa::openapi::Ref::from_schema_name("Problem")))
+                .build(),
+        )
+        .build()
+        .into()
+}
+
+/// Add `status` with `description` to an operation's answers, unless the
+/// operation documents that status itself.
+pub fn document_answer(op: &mut utoipa::openapi::path::Operation, status: u16, description: &str) {
+    op.responses
+        .responses
+        .entry(status.to_string())
+        .or_insert_with(|| documented_problem(description));
+}
+
 /// The problem document of an answer `status` with `detail`, serialised
 /// (for answers made outside the router, as hyper's parse errors).
 pub fn problem_body(status: StatusCode, detail: String) -> Vec<u8> {

@@ -59,7 +59,8 @@ impl AllowedHosts {
             return true;
         };
         let name = host_name(host).to_ascii_lowercase();
-        names.iter().any(|n| *n == name) || name.ends_with(".localhost") && names.iter().any(|n| n == "localhost")
+        names.contains(&name)
+            || (name.ends_with(".localhost") && names.iter().any(|n| n == "localhost"))
     }
 }
 
@@ -129,10 +130,23 @@ mod tests {
     #[test]
     fn loopback_names_are_allowed_by_default_and_others_are_not() {
         let a = AllowedHosts::new("127.0.0.1", &[]);
-        for ok in ["localhost", "localhost:8080", "127.0.0.1:1", "[::1]:80", "LOCALHOST", "app.localhost:3"] {
+        for ok in [
+            "localhost",
+            "localhost:8080",
+            "127.0.0.1:1",
+            "[::1]:80",
+            "LOCALHOST",
+            "app.localhost:3",
+        ] {
             assert!(a.allows(ok), "{ok}");
         }
-        for bad in ["evil.example", "evil.example:8080", "127.0.0.2", "localhost.evil.example", ""] {
+        for bad in [
+            "evil.example",
+            "evil.example:8080",
+            "127.0.0.2",
+            "localhost.evil.example",
+            "",
+        ] {
             assert!(!a.allows(bad), "{bad}");
         }
     }

@@ -124,13 +124,25 @@ fn too_many(what: &str, wait: Duration) -> ApiError {
     }
 }
 
+/// Whether requests `method path` (a path or its template) are rate
+/// limited: sign-ins and planning.
+pub fn is_rate_limited(method: &Method, path: &str) -> bool {
+    is_sign_in(method, path) || is_planning(method, path)
+}
+
+fn is_sign_in(method: &Method, path: &str) -> bool {
+    method == Method::POST && path == "/api/v1/session"
+}
+
 /// Requests that start planning work (or store a large upload).
 fn is_planning(method: &Method, path: &str) -> bool {
     if method != Method::POST {
         return false;
     }
-    matches!(path, "/api/v1/surveys" | "/api/v1/costmaps" | "/api/v1/dems")
-        || (path.starts_with("/api/v1/costmaps/") && path.ends_with("/routes"))
+    matches!(
+        path,
+        "/api/v1/surveys" | "/api/v1/costmaps" | "/api/v1/dems"
+    ) || (path.starts_with("/api/v1/costmaps/") && path.ends_with("/routes"))
         || (path.starts_with("/api/v1/routes/") && path.ends_with("/replan"))
 }
 
@@ -143,7 +155,7 @@ pub async fn limit_rates(State(state): State<AppState>, req: Request, next: Next
         .get::<ConnectInfo<SocketAddr>>()
         .map(|c| c.0.ip().to_string());
     let path = req.uri().path();
-    let checked = if req.method() == Method::POST && path == "/api/v1/session" {
+    let checked = if is_sign_in(req.method(), path) {
         match &address {
             Some(ip) => state
                 .rates
@@ -211,7 +223,10 @@ mod tests {
         assert!(n <= MAX_KEYS, "{n} keys kept");
         // The newest key is still limited.
         let last = (MAX_KEYS + 9).to_string();
-        assert!(l.take(&last, t0 + Duration::from_nanos(MAX_KEYS as u64 + 9)).is_err());
+        assert!(
+            l.take(&last, t0 + Duration::from_nanos(MAX_KEYS as u64 + 9))
+                .is_err()
+        );
     }
 
     #[test]

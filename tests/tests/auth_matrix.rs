@@ -10,8 +10,8 @@
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Auth, Framing, Reply, Server, dtm, example_survey_request, get, last_line, post_json,
-    send_as, text, unique_user_name, upload_dem, user_command, wait_costmap_finished,
+    Auth, Framing, Reply, Server, dtm, example_survey_request, get, last_line, post_json, send_as,
+    text, unique_user_name, upload_dem, user_command, wait_costmap_finished,
 };
 
 /// What one identity gets from one operation.
@@ -79,7 +79,14 @@ fn cases() -> Vec<Case> {
         c("GET", "/api/v1/users", 0, S403, S403, OK),
         // Reads of the shared project's resources.
         c("GET", "/api/v1/surveys/{id}", 0, S404, OK, OK),
-        c("GET", "/api/v1/surveys/{id}/uavs/{uav}/{file}", 0, S404, OK, OK),
+        c(
+            "GET",
+            "/api/v1/surveys/{id}/uavs/{uav}/{file}",
+            0,
+            S404,
+            OK,
+            OK,
+        ),
         c("GET", "/api/v1/surveys/{id}/cells.geojson", 0, S404, OK, OK),
         c("GET", "/api/v1/dems/{id}", 0, S404, OK, OK),
         c("GET", "/api/v1/dems/{id}/hillshade.png", 0, S404, OK, OK),
@@ -90,11 +97,25 @@ fn cases() -> Vec<Case> {
         c("GET", "/api/v1/costmaps/{id}/costmap.tif", 0, S404, OK, OK),
         c("GET", "/api/v1/costmaps/{id}/preview.png", 0, S404, OK, OK),
         c("GET", "/api/v1/costmaps/{id}/legend.svg", 0, S404, OK, OK),
-        c("GET", "/api/v1/costmaps/{id}/layers/{file}", 0, S404, OK, OK),
+        c(
+            "GET",
+            "/api/v1/costmaps/{id}/layers/{file}",
+            0,
+            S404,
+            OK,
+            OK,
+        ),
         c("GET", "/api/v1/routes/{id}", 0, S404, OK, OK),
         c("GET", "/api/v1/routes/{id}/route.geojson", 0, S404, OK, OK),
         c("GET", "/api/v1/routes/{id}/route.csv", 0, S404, OK, OK),
-        c("GET", "/api/v1/routes/{id}/mission.waypoints", 0, S404, OK, OK),
+        c(
+            "GET",
+            "/api/v1/routes/{id}/mission.waypoints",
+            0,
+            S404,
+            OK,
+            OK,
+        ),
         c("GET", "/api/v1/projects/{id}", 0, S404, OK, OK),
         c("GET", "/api/v1/projects/{id}/members", 0, S404, OK, OK),
         // Writes.
@@ -112,7 +133,14 @@ fn cases() -> Vec<Case> {
         c("DELETE", "/api/v1/costmaps/{id}", 3, S404, S403, OK),
         c("DELETE", "/api/v1/surveys/{id}", 3, S404, S403, OK),
         c("DELETE", "/api/v1/dems/{id}", 4, S404, S403, OK),
-        c("DELETE", "/api/v1/projects/{id}/members/{user}", 4, S404, S403, OK),
+        c(
+            "DELETE",
+            "/api/v1/projects/{id}/members/{user}",
+            4,
+            S404,
+            S403,
+            OK,
+        ),
         c("DELETE", "/api/v1/projects/{id}", 5, S404, S403, OK),
         c("DELETE", "/api/v1/tokens/{id}", 5, S404, S404, OK),
         c("POST", "/api/v1/users/{name}/disable", 5, S403, S403, OK),
@@ -309,7 +337,14 @@ fn first_layer(job: &Value) -> String {
 fn first_route(server: &Server, costmap: &str, b: [f64; 4]) -> (String, Value) {
     let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
     let (dx, dy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
-    let offsets = [(-1.0, -1.0), (1.0, 1.0), (-1.0, 1.0), (1.0, -1.0), (0.0, -1.0), (0.0, 1.0)];
+    let offsets = [
+        (-1.0, -1.0),
+        (1.0, 1.0),
+        (-1.0, 1.0),
+        (1.0, -1.0),
+        (0.0, -1.0),
+        (0.0, 1.0),
+    ];
     for (i, a) in offsets.iter().enumerate() {
         for z in &offsets[i + 1..] {
             let body = json!({
@@ -381,7 +416,7 @@ impl Fixture {
             ("POST", "/api/v1/costmaps/{id}/routes") => json_body(self.route_body.clone()),
             ("POST", "/api/v1/routes/{id}/replan") => {
                 json_body(json!({"position": self.route_body["start"]}))
-            },
+            }
             ("POST", "/api/v1/projects") => json_body(json!({"name": "another"})),
             ("POST", "/api/v1/projects/{id}/members") => {
                 json_body(json!({"user": self.new_member, "role": "viewer"}))
@@ -404,7 +439,14 @@ fn call(server: &Server, auth: &Auth, method: &str, path: &str, ct: &str, body: 
     } else {
         vec![("Content-Type", ct)]
     };
-    send_as(auth, method, &server.url(path), &headers, body, Framing::Length)
+    send_as(
+        auth,
+        method,
+        &server.url(path),
+        &headers,
+        body,
+        Framing::Length,
+    )
 }
 
 /// The operations of the served OpenAPI document.
@@ -452,7 +494,10 @@ fn every_documented_operation_checks_credentials_membership_and_role() {
         .filter(|c| !api.iter().any(|(m, p)| m == c.method && p == c.template))
         .map(|c| format!("{} {}", c.method, c.template))
         .collect();
-    assert!(stale.is_empty(), "cases for operations the document does not have: {stale:?}");
+    assert!(
+        stale.is_empty(),
+        "cases for operations the document does not have: {stale:?}"
+    );
 
     // Open operations answer without credentials.
     for (method, path) in OPEN {
@@ -477,7 +522,11 @@ fn every_documented_operation_checks_credentials_membership_and_role() {
         let (url, ct, body) = fx.request(case);
         let who = [
             ("no credentials", Auth::None, S401),
-            ("a stranger", Auth::Bearer(stranger_token.clone()), case.stranger),
+            (
+                "a stranger",
+                Auth::Bearer(stranger_token.clone()),
+                case.stranger,
+            ),
             ("a viewer", Auth::Bearer(viewer_token.clone()), case.viewer),
             ("the owner", Auth::Bearer(server.token.clone()), case.owner),
         ];

@@ -5,6 +5,7 @@ mod account_fields;
 pub mod cameras;
 pub mod costmaps;
 pub mod dems;
+pub mod document;
 pub mod health;
 mod immutable;
 pub mod json_body;

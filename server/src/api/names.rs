@@ -60,6 +60,26 @@ pub fn control_character_issue(pointer: &str, what: &str, text: &str) -> Option<
     ))
 }
 
+/// Middleware (inside authentication, so an API caller without
+/// credentials gets its 401 first): a path with a control character is a
+/// 404 at once. No resource has such an id, and PostgreSQL cannot even
+/// look one up (its text holds no NUL).
+pub async fn refuse_control_characters(
+    req: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    use axum::response::IntoResponse;
+    if path_has_control_character(req.uri().path()) {
+        return crate::error::ApiError::NotFound(format!(
+            "there is no resource at {} {}: ids hold no control characters",
+            req.method(),
+            req.uri().path()
+        ))
+        .into_response();
+    }
+    next.run(req).await
+}
+
 /// Whether a URL path, percent-decoded, holds a control character: no
 /// resource has such an id.
 pub fn path_has_control_character(path: &str) -> bool {

@@ -5,21 +5,20 @@
 //! the document cannot drift from what the service enforces.
 
 use axum::http::Method;
+use utoipa::openapi::OpenApi;
 use utoipa::openapi::path::Operation;
-use utoipa::openapi::response::ResponseBuilder;
 use utoipa::openapi::security::{
     ApiKey, ApiKeyValue, HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme,
 };
-use utoipa::openapi::{ContentBuilder, OpenApi, Ref};
 
 use super::caller::{SESSION_COOKIE, is_open};
+use crate::error::document_answer;
 
 const BEARER: &str = "bearer";
 const COOKIE: &str = "session_cookie";
 
-/// Add the security schemes, and the requirement and its answers to every
-/// closed operation.
-pub fn describe_credentials(doc: &mut OpenApi) {
+/// Add the two security schemes to the document's components.
+pub fn add_schemes(doc: &mut OpenApi) {
     let components = doc.components.get_or_insert_with(Default::default);
     components.add_security_scheme(
         BEARER,
@@ -40,47 +39,28 @@ pub fn describe_credentials(doc: &mut OpenApi) {
             "The web page's session (POST /api/v1/session); writes also need the X-CSRF-Token header",
         ))),
     );
-    for (path, item) in doc.paths.paths.iter_mut() {
-        let ops = [
-            (Method::GET, &mut item.get),
-            (Method::POST, &mut item.post),
-            (Method::PUT, &mut item.put),
-            (Method::DELETE, &mut item.delete),
-            (Method::PATCH, &mut item.patch),
-            (Method::HEAD, &mut item.head),
-        ];
-        for (method, op) in ops {
-            if let Some(op) = op
-                && path.starts_with("/api/v1/")
-                && !is_open(&method, path)
-            {
-                require_credentials(op);
-            }
-        }
-    }
 }
 
-fn require_credentials(op: &mut Operation) {
-    op.security = Some(vec![
-        SecurityRequirement::new(BEARER, Vec::<String>::new()),
-        SecurityRequirement::new(COOKIE, Vec::<String>::new()),
-    ]);
-    let problem = |description: &str| {
-        ResponseBuilder::new()
-            .description(description)
-            .content(
-                "application/problem+json",
-                ContentBuilder::new()
-                    .schema(Some(Ref::from_schema_name("Problem")))
-                    .build(),
-            )
-            .build()
-    };
-    let responses = &mut op.responses.responses;
-    responses
-        .entry("401".to_string())
-        .or_insert_with(|| problem("No valid credentials (API token or session cookie)").into());
-    responses.entry("403".to_string()).or_insert_with(|| {
-        problem("The caller's role is too low for this, or a cookie-authenticated write lacks X-CSRF-Token").into()
-    });
+/// Whether the operation `method path` (a path template) needs credentials.
+pub fn needs_credentials(method: &Method, path: &str) -> bool {
+    path.starts_with("/api/v1/") && !is_open(method, path)
+}
+
+/// State that an operation needs credentials, and its 401 and 403.
+pub fn require_credentials(op: &mut Operation) {
+    // Only the bearer token is stated as the requirement: it is what
+    // programs use. The page's cookie is described as a scheme, but a
+    // client given the choice (a contract tester) would otherwise send a
+    // cookie it cannot have.
+    op.security = Some(vec![SecurityRequirement::new(BEARER, Vec::<String>::new())]);
+    document_answer(
+        op,
+        401,
+        "No valid credentials (API token or session cookie)",
+    );
+    document_answer(
+        op,
+        403,
+        "The caller's role is too low for this, or a cookie-authenticated write lacks X-CSRF-Token",
+    );
 }
