@@ -50,7 +50,12 @@ fn only_the_configured_host_names_are_answered() {
         let (status, answer) = get_with_host(&server, "/api/v1/surveys", &host);
         assert_eq!(status, 200, "{host}: {answer}");
     }
-    for host in ["evil.example", "evil.example:8080", "127.0.0.2", "survey.example.org.evil.example"] {
+    for host in [
+        "evil.example",
+        "evil.example:8080",
+        "127.0.0.2",
+        "survey.example.org.evil.example",
+    ] {
         let (status, answer) = get_with_host(&server, "/api/v1/surveys", host);
         assert_eq!(status, 400, "{host}: {answer}");
         assert!(answer.contains("application/problem+json"), "{answer}");
@@ -68,15 +73,28 @@ fn only_the_configured_host_names_are_answered() {
 fn every_answer_carries_the_security_headers() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(dir.path(), &[]);
-    for path in ["/", "/healthz", "/api/v1/surveys", "/api/v1/openapi.json", "/api/v1/no-such"] {
+    for path in [
+        "/",
+        "/healthz",
+        "/api/v1/surveys",
+        "/api/v1/openapi.json",
+        "/api/v1/no-such",
+    ] {
         let r = get(&server.url(path));
-        assert_eq!(r.header("x-content-type-options"), Some("nosniff"), "{path}");
+        assert_eq!(
+            r.header("x-content-type-options"),
+            Some("nosniff"),
+            "{path}"
+        );
         assert_eq!(r.header("referrer-policy"), Some("no-referrer"), "{path}");
         assert_eq!(r.header("x-frame-options"), Some("DENY"), "{path}");
         let csp = r.header("content-security-policy").unwrap_or_default();
         assert!(csp.contains("default-src 'self'"), "{path}: {csp}");
         assert!(csp.contains("frame-ancestors 'none'"), "{path}: {csp}");
-        assert!(!csp.contains("script-src 'self' 'unsafe-inline'"), "{path}: {csp}");
+        assert!(
+            !csp.contains("script-src 'self' 'unsafe-inline'"),
+            "{path}: {csp}"
+        );
     }
 }
 
@@ -93,7 +111,10 @@ fn sign_in_attempts_are_rate_limited_per_address() {
     assert_eq!(statuses[0].status, 401, "{}", statuses[0].text());
     let limited = statuses.last().unwrap();
     let p = assert_problem(limited, 429, "too many sign-in attempts");
-    assert!(p["detail"].as_str().unwrap().contains("try again in"), "{p}");
+    assert!(
+        p["detail"].as_str().unwrap().contains("try again in"),
+        "{p}"
+    );
     let retry: u64 = limited
         .header("retry-after")
         .expect("Retry-After")
