@@ -74,11 +74,18 @@ fn session_of(r: &Reply) -> String {
 }
 
 /// Run `statement` on the test database (sqlite3 on the data directory's
-/// file, psql on PostgreSQL).
-fn sql(dir: &Path, statement: &str) {
+/// file, psql on PostgreSQL); what it prints, bare values one a line.
+fn sql(dir: &Path, statement: &str) -> String {
     let out = match std::env::var("TERRAPLAN_TEST_DATABASE_URL") {
         Ok(url) => std::process::Command::new("psql")
-            .args([url.as_str(), "-v", "ON_ERROR_STOP=1", "-c", statement])
+            .args([
+                url.as_str(),
+                "-tA",
+                "-v",
+                "ON_ERROR_STOP=1",
+                "-c",
+                statement,
+            ])
             .output(),
         Err(_) => std::process::Command::new("sqlite3")
             .arg(dir.join("terraplan.sqlite3"))
@@ -87,6 +94,7 @@ fn sql(dir: &Path, statement: &str) {
     }
     .expect("sqlite3 / psql");
     assert!(out.status.success(), "{statement}: {}", text(&out.stderr));
+    text(&out.stdout).trim().to_string()
 }
 
 /// `terraplan user create` prints a working token last; `user token`,
@@ -313,6 +321,26 @@ fn sessions_cookies_and_csrf() {
     assert_eq!(r.status, 204);
     assert!(r.header("set-cookie").unwrap().contains("Max-Age=0"));
     assert_problem(&whoami(&server, &without_csrf), 401, "sign in again");
+    // A session idle for longer than 12 h has ended; the next sign-in
+    // forgets it.
+    let idle = sign_in(&server, &json!({"token": token}), &[]);
+    let idle_session = session_of(&idle);
+    let idle_id = &idle_session[3..19];
+    sql(
+        dir.path(),
+        &format!("UPDATE sessions SET last_used_at = 1 WHERE id = '{idle_id}'"),
+    );
+    assert_eq!(sign_in(&server, &json!({"token": token}), &[]).status, 201);
+    let left = sql(
+        dir.path(),
+        &format!("SELECT COUNT(*) FROM sessions WHERE id = '{idle_id}'"),
+    );
+    assert_eq!(left, "0");
+    let idle_cookie = Auth::Cookie {
+        session: idle_session.clone(),
+        csrf: None,
+    };
+    assert_problem(&whoami(&server, &idle_cookie), 401, "sign in again");
     // A stale cookie does not keep anyone from signing in again.
     let again = sign_in(
         &server,

@@ -14,7 +14,7 @@ use utoipa_axum::routes;
 use super::account_fields::{object, required_string, string_member};
 use super::json_body::JsonBody;
 use crate::auth::Caller;
-use crate::auth::caller::{SESSION_COOKIE, SESSION_MAX_MS, Via, token_caller};
+use crate::auth::caller::{SESSION_COOKIE, SESSION_IDLE_MS, SESSION_MAX_MS, Via, token_caller};
 use crate::auth::password;
 use crate::auth::secret::{self, SESSION_PREFIX};
 use crate::clock::now_millis;
@@ -122,6 +122,9 @@ pub async fn sign_in(
         expires_at: now + SESSION_MAX_MS,
     };
     state.db.insert_session(&row).await?;
+    // Ended sessions are otherwise only forgotten when their cookie comes
+    // back; each sign-in clears them out.
+    state.db.purge_sessions(now, now - SESSION_IDLE_MS).await?;
     let secure = state.cookie_secure || forwarded_https(&headers);
     let cookie = session_cookie(&s.full, SESSION_MAX_MS / 1000, secure);
     let body = view(&state.db, session_user(&user), Some(row.csrf_token)).await?;

@@ -209,6 +209,13 @@ impl Db {
         on_pool!(self, pool => sqlx::query(SQL).bind(id).bind(now).execute(pool).await.map(|_| ()))
     }
 
+    /// Forget the sessions that have ended (expired, or idle since
+    /// `idle_since`); how many.
+    pub async fn purge_sessions(&self, now: i64, idle_since: i64) -> Result<u64, sqlx::Error> {
+        const SQL: &str = "DELETE FROM sessions WHERE expires_at <= $1 OR last_used_at <= $2";
+        on_pool!(self, pool => sqlx::query(SQL).bind(now).bind(idle_since).execute(pool).await.map(|r| r.rows_affected()))
+    }
+
     pub async fn delete_session(&self, id: &str) -> Result<(), sqlx::Error> {
         const SQL: &str = "DELETE FROM sessions WHERE id = $1";
         on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|_| ()))
