@@ -107,6 +107,31 @@ impl CellLayouts {
         line_spacing_m: f64,
         slice_angle_deg: f64,
     ) -> Option<CellLayouts> {
+        Self::with_bearings(cell_index, cell, line_spacing_m, |ring| {
+            candidate_bearings(ring, slice_angle_deg)
+        })
+    }
+
+    /// The layout of `cell` with lanes of bearing `bearing_deg` only: for a
+    /// cell joined from several ([`crate::decompose::decompose_merged`]),
+    /// whose lanes across the slice cover it whole, where another layout of
+    /// as many lanes could leave a corner out.
+    pub fn along(
+        cell_index: usize,
+        cell: &Polygon<f64>,
+        line_spacing_m: f64,
+        bearing_deg: f64,
+    ) -> Option<CellLayouts> {
+        let b = bearing_deg.rem_euclid(180.0);
+        Self::with_bearings(cell_index, cell, line_spacing_m, |_| vec![b])
+    }
+
+    fn with_bearings(
+        cell_index: usize,
+        cell: &Polygon<f64>,
+        line_spacing_m: f64,
+        bearings: impl FnOnce(&[Coord<f64>]) -> Vec<f64>,
+    ) -> Option<CellLayouts> {
         if !is_positive(line_spacing_m) {
             return None;
         }
@@ -125,17 +150,16 @@ impl CellLayouts {
         // count with a monotone direction wins; only those finalists get
         // their free-space clipping and links computed. Cells with a curved
         // outline have hundreds of candidate directions, so this matters.
-        let mut candidates: Vec<(Frame, Vec<RowOffset>)> =
-            candidate_bearings(&ring, slice_angle_deg)
-                .into_iter()
-                .filter_map(|b| {
-                    // Cancelled: no more candidates; checked again below.
-                    crate::cancel::check().ok()?;
-                    let frame = Frame::new(b, &ring);
-                    let offsets = row_offsets(frame.v, line_spacing_m)?;
-                    Some((frame, offsets))
-                })
-                .collect();
+        let mut candidates: Vec<(Frame, Vec<RowOffset>)> = bearings(&ring)
+            .into_iter()
+            .filter_map(|b| {
+                // Cancelled: no more candidates; checked again below.
+                crate::cancel::check().ok()?;
+                let frame = Frame::new(b, &ring);
+                let offsets = row_offsets(frame.v, line_spacing_m)?;
+                Some((frame, offsets))
+            })
+            .collect();
         candidates.sort_by_key(|(_, offsets)| offsets.len());
         let mut finalists: Vec<Layout> = Vec::new();
         let mut rejected: Vec<Layout> = Vec::new();

@@ -12,8 +12,9 @@ use geo_types::{Coord, LineString, MultiPolygon, Polygon, Rect};
 
 use super::DecomposeError;
 use super::frame::SliceFrame;
+use super::merge::merge_cells;
 use super::ring::{clean_ring, signed_area};
-use super::sweep::{SweepFailure, sweep};
+use super::sweep::{SweepFailure, sweep_linked};
 use super::touch::split_at_touches;
 
 /// Largest coordinate magnitude accepted, in metres: far beyond any UTM
@@ -45,6 +46,42 @@ pub fn decompose(
     free: &MultiPolygon<f64>,
     slice_angle_deg: f64,
 ) -> Result<Vec<Polygon<f64>>, DecomposeError> {
+    let cells = decompose_with(free, slice_angle_deg, None)?;
+    Ok(cells.into_iter().map(|c| c.polygon).collect())
+}
+
+/// A cell of [`decompose_merged`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct MergedCell {
+    pub polygon: Polygon<f64>,
+    /// It joins several cells of [`decompose`]: lanes across the slice
+    /// (bearing `slice_angle_deg + 90°`), `line_spacing_m` apart as laid
+    /// for a cell, each cross it whole and cover it.
+    pub joined: bool,
+}
+
+/// [`decompose`], then every chain of cells that meet on slice lines and
+/// that lanes across the slice, `line_spacing_m` apart, fly as one sweep is
+/// joined into one cell (see [`super::merge`]): fewer lanes or as many, far
+/// fewer cells among many small no-fly zones. The cells keep every property
+/// listed for [`decompose`], but some end at a critical point without being
+/// split there.
+pub fn decompose_merged(
+    free: &MultiPolygon<f64>,
+    slice_angle_deg: f64,
+    line_spacing_m: f64,
+) -> Result<Vec<MergedCell>, DecomposeError> {
+    if !(line_spacing_m.is_finite() && line_spacing_m > 0.0) {
+        return Err(DecomposeError::NonPositiveSpacing);
+    }
+    decompose_with(free, slice_angle_deg, Some(line_spacing_m))
+}
+
+fn decompose_with(
+    free: &MultiPolygon<f64>,
+    slice_angle_deg: f64,
+    merge_spacing: Option<f64>,
+) -> Result<Vec<MergedCell>, DecomposeError> {
     if !slice_angle_deg.is_finite() {
         return Err(DecomposeError::NonFiniteAngle);
     }
@@ -73,7 +110,7 @@ pub fn decompose(
     split_at_touches(&mut rings, eps);
     crate::cancel::check()?;
 
-    let cells = sweep(&rings, eps).map_err(|f| {
+    let swept = sweep_linked(&rings, eps).map_err(|f| {
         DecomposeError::InvalidGeometry(
             match f {
                 SweepFailure::Crossing => "boundary edges cross each other",
@@ -83,16 +120,23 @@ pub fn decompose(
         )
     })?;
     crate::cancel::check()?;
+    let cells = match merge_spacing {
+        Some(spacing) => merge_cells(swept, spacing, eps),
+        None => swept.cells.into_iter().map(|c| (c, false)).collect(),
+    };
 
     let mut polygons = Vec::with_capacity(cells.len());
     let mut total = 0.0;
-    for cell in &cells {
+    for (cell, joined) in &cells {
         let ring = clean_ring(&cell.ring(), eps);
         let area = signed_area(&ring);
         // Otherwise nothing is left but a rounding-level sliver.
         if ring.len() >= 3 && area > 0.0 {
             total += area;
-            polygons.extend(world_polygon(&ring, &frame));
+            polygons.extend(world_polygon(&ring, &frame).map(|polygon| MergedCell {
+                polygon,
+                joined: *joined,
+            }));
         }
     }
     if polygons.is_empty() {

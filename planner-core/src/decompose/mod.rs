@@ -11,13 +11,14 @@
 mod boustrophedon;
 mod frame;
 mod free_space;
+mod merge;
 mod ring;
 mod sweep;
 #[cfg(test)]
 mod test_support;
 mod touch;
 
-pub use boustrophedon::decompose;
+pub use boustrophedon::{MergedCell, decompose, decompose_merged};
 pub use free_space::free_space;
 
 /// Why [`decompose`] could not produce cells.
@@ -26,6 +27,9 @@ pub enum DecomposeError {
     /// Nothing is left to cover: no polygon, or only zero-area ones.
     #[error("the free space is empty: nothing is left to cover once the no-fly zones are removed")]
     EmptyFreeSpace,
+    /// The line spacing given for joining cells is not a positive number.
+    #[error("the line spacing must be a positive number of metres")]
+    NonPositiveSpacing,
     /// The slice angle is NaN or infinite.
     #[error("the slice angle must be a finite number of degrees")]
     NonFiniteAngle,

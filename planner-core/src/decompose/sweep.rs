@@ -138,7 +138,26 @@ struct Run {
 /// vertical slice lines. Rings are open or closed vertex lists with the
 /// interior on their left (exteriors CCW, holes CW); where rings overlap, the
 /// region is the set of points with a positive winding number.
+#[cfg(test)]
 pub(crate) fn sweep(rings: &[Vec<Coord<f64>>], eps: f64) -> Result<Vec<Cell>, SweepFailure> {
+    sweep_linked(rings, eps).map(|s| s.cells)
+}
+
+/// Two cells that meet on a slice line, the first ending there and the
+/// second starting there, sharing a segment of positive length.
+pub(crate) type Link = (u32, u32);
+
+/// The cells of a sweep and where they meet.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Swept {
+    /// In the order they open, i.e. by where they start along the sweep.
+    pub(crate) cells: Vec<Cell>,
+    /// Every pair of cells meeting across a slice line, by the left one's id.
+    pub(crate) links: Vec<Link>,
+}
+
+/// [`sweep`], also telling which cells meet across each slice line.
+pub(crate) fn sweep_linked(rings: &[Vec<Coord<f64>>], eps: f64) -> Result<Swept, SweepFailure> {
     let edges = build_edges(rings);
     let mut by_start: Vec<u32> = (0..edges.len() as u32).collect();
     by_start.sort_by(|&a, &b| edges[a as usize].x0.total_cmp(&edges[b as usize].x0));
@@ -150,6 +169,7 @@ pub(crate) fn sweep(rings: &[Vec<Coord<f64>>], eps: f64) -> Result<Vec<Cell>, Sw
         eps,
         slots: Vec::new(),
         cells: Vec::new(),
+        links: Vec::new(),
     };
     let (mut i, mut j) = (0, 0);
     while i < by_start.len() || j < by_end.len() {
@@ -172,7 +192,10 @@ pub(crate) fn sweep(rings: &[Vec<Coord<f64>>], eps: f64) -> Result<Vec<Cell>, Sw
     if !state.slots.is_empty() {
         return Err(SweepFailure::Inconsistent);
     }
-    Ok(state.cells)
+    Ok(Swept {
+        cells: state.cells,
+        links: state.links,
+    })
 }
 
 /// The non-vertical edges of all rings. Edges parallel to the slice bound no
@@ -216,6 +239,7 @@ struct Sweep<'a> {
     /// Active edges, bottom to top, valid just right of the last event.
     slots: Vec<Slot>,
     cells: Vec<Cell>,
+    links: Vec<Link>,
 }
 
 impl Sweep<'_> {
@@ -374,7 +398,7 @@ impl Sweep<'_> {
         let old_runs = self.runs(old, base, x)?;
         let new_runs = self.runs(&new_slots, base, x)?;
         let live = self.live_runs(&new_runs, &new_slots);
-        let (right, left) = neighbours(&old_runs, &new_runs, &live, eps);
+        let (right, left, pairs) = neighbours(&old_runs, &new_runs, &live, eps);
 
         for (i, o) in old_runs.iter().enumerate() {
             if o.cell == NO_CELL {
@@ -405,6 +429,12 @@ impl Sweep<'_> {
                     lower: vec![Coord { x, y: n.ylo }],
                     upper: vec![Coord { x, y: n.yhi }],
                 });
+            }
+        }
+        for (i, j) in pairs {
+            let (a, b) = (old_runs[i].cell, new_slots[new_runs[j].lower].cell);
+            if a != NO_CELL && b != NO_CELL && a != b {
+                self.links.push((a, b));
             }
         }
         Ok(new_slots)
@@ -550,11 +580,18 @@ type Links = Vec<(u32, usize)>;
 
 /// Neighbours across x: runs whose extents on the line overlap by more than
 /// eps. For each old run (`right`) and each live new run (`left`), how many
-/// runs on the other side it touches and the last of them. Both lists are
-/// sorted and disjoint, so a merge walk finds all pairs.
-fn neighbours(old_runs: &[Run], new_runs: &[Run], live: &[bool], eps: f64) -> (Links, Links) {
+/// runs on the other side it touches and the last of them; and every
+/// overlapping pair (old, new). Both lists are sorted and disjoint, so a
+/// merge walk finds all pairs.
+fn neighbours(
+    old_runs: &[Run],
+    new_runs: &[Run],
+    live: &[bool],
+    eps: f64,
+) -> (Links, Links, Vec<(usize, usize)>) {
     let mut right: Links = vec![(0, 0); old_runs.len()];
     let mut left: Links = vec![(0, 0); new_runs.len()];
+    let mut pairs = Vec::new();
     let (mut i, mut j) = (0, 0);
     while i < old_runs.len() && j < new_runs.len() {
         let (o, n) = (&old_runs[i], &new_runs[j]);
@@ -569,6 +606,7 @@ fn neighbours(old_runs: &[Run], new_runs: &[Run], live: &[bool], eps: f64) -> (L
         if o.yhi.min(n.yhi) - o.ylo.max(n.ylo) > eps {
             right[i] = (right[i].0 + 1, j);
             left[j] = (left[j].0 + 1, i);
+            pairs.push((i, j));
         }
         if o.yhi < n.yhi {
             i += 1;
@@ -576,7 +614,7 @@ fn neighbours(old_runs: &[Run], new_runs: &[Run], live: &[bool], eps: f64) -> (L
             j += 1;
         }
     }
-    (right, left)
+    (right, left, pairs)
 }
 
 /// Appends the points of a boundary on the slice line `x` going from `from`
