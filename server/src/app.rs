@@ -185,11 +185,7 @@ const SMALL_BODY_BYTES: u64 = 64 * 1024;
 ///   so the client gets the answer rather than a reset.
 async fn early_answers(req: Request, next: Next, limit: usize) -> Response {
     use axum::body::{Body, HttpBody};
-    let declared = req
-        .headers()
-        .get(axum::http::header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.parse::<u64>().ok());
+    let declared = crate::api::json_body::declared_length(req.headers());
     if let Some(n) = declared.filter(|&n| n > limit as u64) {
         return closing(
             ApiError::PayloadTooLarge(format!(

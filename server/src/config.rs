@@ -130,6 +130,14 @@ pub struct ServeConfig {
     /// of them at once; more get 429 with Retry-After.
     #[arg(long, env = "TERRAPLAN_PLANNING_PER_MINUTE", default_value_t = 600)]
     pub planning_per_minute: u32,
+    /// Bytes of DEM and costmap files one project may hold, MiB (0: no
+    /// limit); an upload or costmap past it gets 413.
+    #[arg(long, env = "TERRAPLAN_PROJECT_QUOTA_MB", default_value_t = 4096)]
+    pub project_quota_mb: u64,
+    /// Costmap jobs one project may have queued or running (0: no limit);
+    /// more get 429 with Retry-After.
+    #[arg(long, env = "TERRAPLAN_PROJECT_QUEUED_JOBS", default_value_t = 8)]
+    pub project_queued_jobs: u64,
     /// Mark the session cookie `Secure` on every answer (it is anyway when
     /// a proxy sends `X-Forwarded-Proto: https`): for a service behind TLS.
     #[arg(long, env = "TERRAPLAN_COOKIE_SECURE")]

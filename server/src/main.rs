@@ -15,6 +15,7 @@ mod guard;
 mod jobs;
 mod linger;
 mod memory;
+mod quota;
 mod rate_limit;
 mod serve;
 mod state;

@@ -20,6 +20,7 @@ use crate::db::Db;
 use crate::error::ApiError;
 use crate::jobs::CostmapJobs;
 use crate::memory::{MemoryBudget, Reservation};
+use crate::quota::Quotas;
 use crate::rate_limit::RateLimits;
 use crate::web_ui::WebUi;
 
@@ -44,6 +45,8 @@ pub struct AppState {
     pub memory: Arc<MemoryBudget>,
     /// Sign-in and planning rate limits.
     pub rates: Arc<RateLimits>,
+    /// Storage and queued-job quotas of every project.
+    pub quotas: Quotas,
     /// `--cookie-secure`: the session cookie is always `Secure`.
     pub cookie_secure: bool,
 }
@@ -70,6 +73,7 @@ impl AppState {
             routes: Arc::new(RouteStore::from_config(config)),
             web: Arc::new(WebUi::new(&config.web_dir)),
             memory,
+            quotas: Quotas::new(config.project_quota_mb, config.project_queued_jobs),
             rates: Arc::new(RateLimits::new(
                 config.sign_in_per_minute,
                 config.planning_per_minute,

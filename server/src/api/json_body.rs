@@ -66,3 +66,14 @@ pub fn media_type(headers: &axum::http::HeaderMap) -> (String, String) {
         .to_ascii_lowercase();
     (content_type, essence)
 }
+
+/// A request's declared body length (`Content-Length`), if it has one.
+pub fn declared_length(headers: &axum::http::HeaderMap) -> Option<u64> {
+    headers
+        .get(header::CONTENT_LENGTH)?
+        .to_str()
+        .ok()?
+        .trim()
+        .parse()
+        .ok()
+}

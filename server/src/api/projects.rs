@@ -17,6 +17,7 @@ use crate::auth::{Caller, Role, require_role};
 use crate::clock::{now_millis, rfc3339};
 use crate::db::{MembershipRow, ProjectRow};
 use crate::error::{ApiError, Problem, not_found};
+use crate::quota::Usage;
 use crate::state::AppState;
 
 /// A project as the caller sees it.
@@ -30,6 +31,9 @@ pub struct ProjectView {
     pub role: Role,
     /// RFC 3339 UTC.
     pub created_at: String,
+    /// Its use of the storage and job quotas (in `GET /api/v1/projects/{id}`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub usage: Option<Usage>,
 }
 
 impl ProjectView {
@@ -41,6 +45,7 @@ impl ProjectView {
             role: Role::parse(&row.role)
                 .ok_or_else(|| ApiError::Internal(format!("stored role {:?}", row.role)))?,
             created_at: rfc3339(row.created_at),
+            usage: None,
         })
     }
 }
@@ -117,6 +122,7 @@ pub async fn create_project(
             personal: false,
             role: Role::Owner,
             created_at: rfc3339(row.created_at),
+            usage: None,
         }),
     ))
 }
@@ -163,12 +169,14 @@ pub async fn get_project(
     Path(id): Path<String>,
 ) -> Result<Json<ProjectView>, ApiError> {
     let (project, role) = project_for(&state, &caller, &id, Role::Viewer).await?;
+    let usage = state.quotas.usage(&state.db, &project.id).await?;
     Ok(Json(ProjectView {
         id: project.id,
         name: project.name,
         personal: project.personal_of.is_some(),
         role,
         created_at: rfc3339(project.created_at),
+        usage: Some(usage),
     }))
 }
 

@@ -190,6 +190,23 @@ impl Db {
         Ok(total)
     }
 
+    /// A project's stored bytes (its DEM files and costmap files) and its
+    /// costmap jobs queued or running.
+    pub async fn project_usage(&self, project_id: &str) -> Result<(i64, i64), sqlx::Error> {
+        // SUM of BIGINT is NUMERIC on PostgreSQL: cast back.
+        const SQL: &str = "SELECT \
+            CAST((SELECT COALESCE(SUM(size_bytes), 0) FROM dems WHERE project_id = $1) AS BIGINT), \
+            CAST((SELECT COALESCE(SUM(f.size_bytes), 0) FROM costmap_files f \
+                  JOIN costmaps c ON c.id = f.costmap_id WHERE c.project_id = $1) AS BIGINT), \
+            (SELECT COUNT(*) FROM costmaps WHERE project_id = $1 \
+                  AND status IN ('queued', 'running'))";
+        on_pool!(self, pool => sqlx::query_as::<_, (i64, i64, i64)>(SQL)
+            .bind(project_id)
+            .fetch_one(pool)
+            .await
+            .map(|(dems, costmaps, queued)| (dems.saturating_add(costmaps), queued)))
+    }
+
     /// Delete a project (its members go with it); true when it existed.
     pub async fn delete_project(&self, id: &str) -> Result<bool, sqlx::Error> {
         const SQL: &str = "DELETE FROM projects WHERE id = $1";

@@ -21,6 +21,7 @@ use crate::db::CostmapRow;
 use crate::error::{ApiError, Problem, deleted};
 use crate::jobs::{JobStatus, LEASE_MS, StoredRequest};
 use crate::memory::costmap_build_bytes;
+use crate::quota::costmap_file_bytes;
 use crate::state::AppState;
 
 fn to_json<T: Serialize>(value: &T) -> Result<String, ApiError> {
@@ -43,8 +44,9 @@ fn to_json<T: Serialize>(value: &T) -> Result<String, ApiError> {
             headers(("Location" = String, description = "URL of the new costmap"))),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
         (status = 403, description = "The caller is a viewer of the project `project_id`", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Body too large", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Body too large, or the costmap's files would take the project past its storage quota (--project-quota-mb)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Too many planning requests, or the project has as many costmap jobs queued or running as it may (--project-queued-jobs); see Retry-After", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid request (no project `project_id` the caller may add to, unknown DEM, vehicle or options out of range, options that do not fit the DEM, a build needing more than the memory budget): `errors` names each fault by JSON pointer", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The DEM (or land-cover raster) had to be read again from storage and no planner thread became free in time, or the service is shutting down; retry (see Retry-After)", body = Problem, content_type = "application/problem+json"),
     )
@@ -113,6 +115,16 @@ pub async fn create_costmap(
     if !issues.is_empty() {
         return Err(ApiError::Validation(issues));
     }
+    state.quotas.check_jobs(&state.db, &project_id).await?;
+    state
+        .quotas
+        .check_bytes(
+            &state.db,
+            &project_id,
+            costmap_file_bytes(w.saturating_mul(h), layers),
+            &format!("the files of {what}"),
+        )
+        .await?;
 
     let now = now_millis();
     let stored = StoredRequest {

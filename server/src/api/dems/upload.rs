@@ -29,7 +29,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::header::{self as dem_header, Declared};
 use super::model::{BinaryFile, DemResponse, parse_epsg, response};
-use crate::api::json_body::media_type;
+use crate::api::json_body::{declared_length, media_type};
 use crate::api::names::{NAME_MAX_CHARS, control_character_issue};
 use crate::auth::{Caller, new_resource_project};
 use crate::clock::now_millis;
@@ -246,7 +246,7 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
         (status = 201, description = "Read and stored", body = DemResponse,
             headers(("Location" = String, description = "URL of the new DEM"))),
         (status = 400, description = "Empty body, malformed form or query", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "File over the size limit, raster over the pixel limit, or a raster whose declared size needs more than the memory budget to read", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "File over the size limit, raster over the pixel limit, a raster whose declared size needs more than the memory budget to read, or a file that would take the project past its storage quota (--project-quota-mb)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported Content-Type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Not a readable DEM, its CRS is unknown (give `crs`), or no project `project_id` the caller may add to", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
@@ -276,6 +276,12 @@ pub async fn upload_dem(
     // caller may not add to.
     let project_id =
         new_resource_project(&state.db, &caller, q.project_id.as_deref(), "/project_id").await?;
+    // A declared size over the project's quota is refused before any of
+    // the body is read; the size received is checked again below.
+    if let Some(declared) = declared_length(req.headers()) {
+        let what = "the upload";
+        state.quotas.check_bytes(&state.db, &project_id, declared, what).await?;
+    }
     let upload = if multipart {
         read_multipart(req, &state, limit).await?
     } else {
@@ -300,6 +306,10 @@ pub async fn upload_dem(
         })
         .await??;
 
+    state
+        .quotas
+        .check_bytes(&state.db, &project_id, data.len() as u64, "the DEM file")
+        .await?;
     let row = DemMetaRow {
         id: uuid::Uuid::now_v7().to_string(),
         name: labels.name,
@@ -516,3 +526,4 @@ mod tests {
         assert_eq!(base_name("dir/"), None);
     }
 }
+

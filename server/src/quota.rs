@@ -1,0 +1,136 @@
+//! Storage quotas per project: the bytes of its DEMs and costmap files
+//! (`--project-quota-mb`), and its costmap jobs waiting or running
+//! (`--project-queued-jobs`). Checked before work is queued or a file is
+//! stored: over the bytes, 413; over the jobs, 429.
+//!
+//! A costmap counts against the bytes by an estimate of its files when it
+//! is asked for; the queued-jobs limit bounds how far estimates of jobs
+//! still running can add up past the quota.
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::db::Db;
+use crate::error::ApiError;
+
+/// How long a client whose project has too many jobs queued should wait.
+const JOBS_RETRY_AFTER_S: u64 = 10;
+
+/// The limits of every project (`None`: no limit).
+#[derive(Clone, Copy, Debug)]
+pub struct Quotas {
+    pub bytes: Option<u64>,
+    pub queued_jobs: Option<u64>,
+}
+
+/// A project's use of its quotas, as the project resource reports it.
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+pub struct Usage {
+    /// Bytes of the project's DEM files and costmap files.
+    pub stored_bytes: u64,
+    /// `--project-quota-mb` in bytes; absent when there is no limit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quota_bytes: Option<u64>,
+    /// Costmap jobs queued or running.
+    pub queued_jobs: u64,
+    /// `--project-queued-jobs`; absent when there is no limit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_queued_jobs: Option<u64>,
+}
+
+impl Quotas {
+    /// From the flags: 0 means no limit.
+    pub fn new(quota_mb: u64, queued_jobs: u64) -> Quotas {
+        Quotas {
+            bytes: (quota_mb > 0).then(|| quota_mb.saturating_mul(1024 * 1024)),
+            queued_jobs: (queued_jobs > 0).then_some(queued_jobs),
+        }
+    }
+
+    /// A project's use of its quotas.
+    pub async fn usage(&self, db: &Db, project_id: &str) -> Result<Usage, ApiError> {
+        let (stored, queued) = db.project_usage(project_id).await?;
+        Ok(Usage {
+            stored_bytes: stored.max(0) as u64,
+            quota_bytes: self.bytes,
+            queued_jobs: queued.max(0) as u64,
+            max_queued_jobs: self.queued_jobs,
+        })
+    }
+
+    /// 413 when storing `adding` more bytes (`what`) would take the
+    /// project past its quota.
+    pub async fn check_bytes(
+        &self,
+        db: &Db,
+        project_id: &str,
+        adding: u64,
+        what: &str,
+    ) -> Result<(), ApiError> {
+        let Some(quota) = self.bytes else {
+            return Ok(());
+        };
+        let stored = db.project_usage(project_id).await?.0.max(0) as u64;
+        if stored.saturating_add(adding) > quota {
+            return Err(ApiError::PayloadTooLarge(format!(
+                "{what} ({}) would take project {project_id:?} to {} of its {} quota \
+                 (--project-quota-mb): delete DEMs or costmaps first",
+                mib(adding),
+                mib(stored.saturating_add(adding)),
+                mib(quota)
+            )));
+        }
+        Ok(())
+    }
+
+    /// 429 when the project already has as many costmap jobs queued or
+    /// running as it may.
+    pub async fn check_jobs(&self, db: &Db, project_id: &str) -> Result<(), ApiError> {
+        let Some(max) = self.queued_jobs else {
+            return Ok(());
+        };
+        let queued = db.project_usage(project_id).await?.1.max(0) as u64;
+        if queued >= max {
+            return Err(ApiError::TooManyRequests {
+                message: format!(
+                    "project {project_id:?} has {queued} costmap jobs queued or running, its \
+                     limit (--project-queued-jobs): try again when one has finished"
+                ),
+                retry_after_s: JOBS_RETRY_AFTER_S,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The files of a costmap of `cells` cells with `layers` extra layers, at
+/// most: the cost (f32) and class (u8) bands, each layer as f32, and the
+/// RGBA preview, uncompressed.
+pub fn costmap_file_bytes(cells: u64, layers: u64) -> u64 {
+    cells.saturating_mul(5 + 4 * layers + 4)
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1024.0 * 1024.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_means_no_limit() {
+        let q = Quotas::new(0, 0);
+        assert!(q.bytes.is_none() && q.queued_jobs.is_none());
+        let q = Quotas::new(2, 3);
+        assert_eq!(q.bytes, Some(2 * 1024 * 1024));
+        assert_eq!(q.queued_jobs, Some(3));
+    }
+
+    #[test]
+    fn a_costmap_estimate_grows_with_its_layers() {
+        assert_eq!(costmap_file_bytes(1000, 0), 9000);
+        assert_eq!(costmap_file_bytes(1000, 2), 17000);
+        assert_eq!(costmap_file_bytes(u64::MAX, 3), u64::MAX);
+    }
+}
