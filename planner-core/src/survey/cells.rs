@@ -78,7 +78,7 @@ pub(super) fn decompose_and_cover(
     let decomposed = |a: f64| -> Result<Laid, PlanError> {
         token.scope(|| {
             crate::cancel::check()?;
-            let merged = decompose::decompose_merged(free, a, spacing).map_err(|e| match e {
+            let cells = decompose::decompose(free, a).map_err(|e| match e {
                 decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
                     NO_FLY_POINTER,
                     "the no-fly zones cover the whole region of interest: nothing is left to \
@@ -87,17 +87,11 @@ pub(super) fn decompose_and_cover(
                 decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
                 other => PlanError::Internal(other.to_string()),
             })?;
-            // A joined cell is flown by the lanes across the slice that
-            // justified joining it: they cover it whole.
-            let layouts: Vec<Option<coverage::CellLayouts>> = merged
+            let layouts: Vec<Option<coverage::CellLayouts>> = cells
                 .iter()
                 .enumerate()
-                .map(|(i, c)| match c.joined {
-                    true => coverage::CellLayouts::along(i, &c.polygon, spacing, a + 90.0),
-                    false => coverage::CellLayouts::new(i, &c.polygon, spacing, a),
-                })
+                .map(|(i, c)| coverage::CellLayouts::new(i, c, spacing, a))
                 .collect();
-            let cells: Vec<Polygon<f64>> = merged.into_iter().map(|c| c.polygon).collect();
             // The cells stop early when cancelled, with layouts to throw away.
             crate::cancel::check()?;
             let turns = layouts.iter().flatten().map(|l| l.turns()).sum();
