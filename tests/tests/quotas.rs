@@ -12,7 +12,10 @@ use terraplan_e2e::{
 
 fn personal_project(server: &Server) -> String {
     let s = get(&server.url("/api/v1/session")).json();
-    s["personal_project_id"].as_str().expect("personal project").to_string()
+    s["personal_project_id"]
+        .as_str()
+        .expect("personal project")
+        .to_string()
 }
 
 #[test]
@@ -65,10 +68,10 @@ fn a_costmap_whose_files_would_pass_the_quota_is_refused() {
     let job = wait_costmap_finished(&server, &id);
     assert_eq!(job["status"], "done", "{job}");
     let project = personal_project(&server);
-    let stored = get(&server.url(&format!("/api/v1/projects/{project}"))).json()["usage"]
-        ["stored_bytes"]
-        .as_u64()
-        .unwrap();
+    let stored =
+        get(&server.url(&format!("/api/v1/projects/{project}"))).json()["usage"]["stored_bytes"]
+            .as_u64()
+            .unwrap();
     let dem_bytes = std::fs::metadata(dtm()).unwrap().len();
     let cells = job["width"].as_u64().unwrap() * job["height"].as_u64().unwrap();
     assert!(

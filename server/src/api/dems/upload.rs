@@ -280,7 +280,10 @@ pub async fn upload_dem(
     // the body is read; the size received is checked again below.
     if let Some(declared) = declared_length(req.headers()) {
         let what = "the upload";
-        state.quotas.check_bytes(&state.db, &project_id, declared, what).await?;
+        state
+            .quotas
+            .check_bytes(&state.db, &project_id, declared, what)
+            .await?;
     }
     let upload = if multipart {
         read_multipart(req, &state, limit).await?
@@ -526,4 +529,3 @@ mod tests {
         assert_eq!(base_name("dir/"), None);
     }
 }
-
