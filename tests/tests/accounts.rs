@@ -160,6 +160,41 @@ fn the_user_command() {
         text(&out.stderr)
     );
 
+    // A new password: the old one and the sessions it opened stop working,
+    // the tokens go on.
+    let r = sign_in(&server, &json!({"user": alice, "password": PASSWORD}), &[]);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let old_session = session_of(&r);
+    let new_password = "a brand new passphrase";
+    let out = user_command(
+        dir.path(),
+        &["password", &alice],
+        Some(&format!("{new_password}\n")),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let r = sign_in(&server, &json!({"user": alice, "password": PASSWORD}), &[]);
+    assert_problem(&r, 401, "wrong user name, password or token");
+    let old = Auth::Cookie {
+        session: old_session,
+        csrf: None,
+    };
+    assert_problem(&whoami(&server, &old), 401, "sign in again");
+    let r = sign_in(
+        &server,
+        &json!({"user": alice, "password": new_password}),
+        &[],
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    assert_eq!(whoami(&server, &bearer(&alice_token)).status, 200);
+    let out = user_command(dir.path(), &["password", &alice], Some("short\n"));
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let out = user_command(
+        dir.path(),
+        &["password", "nobody-at-all-here"],
+        Some("long enough pw\n"),
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+
     let out = user_command(dir.path(), &["disable", &alice], None);
     assert!(out.status.success(), "{}", text(&out.stderr));
     for token in [&alice_token, &second] {

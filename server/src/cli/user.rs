@@ -1,4 +1,4 @@
-//! `terraplan user create|list|token|disable`: manage the service's users
+//! `terraplan user create|list|token|disable|password`: manage the service's users
 //! on its database (the same `--data-dir` / `DATABASE_URL` as `serve`),
 //! whether or not a server is running on it. A new API token is printed
 //! as the last line of stdout, for scripts.
@@ -24,6 +24,9 @@ pub enum UserCommand {
     Token(NameArgs),
     /// Disable a user: its tokens and sessions stop working at once.
     Disable(NameArgs),
+    /// Set (or reset) a user's password from the first line of stdin; the
+    /// user's web sessions end, its API tokens go on working.
+    Password(NameArgs),
 }
 
 /// Where the service keeps its data, as for `terraplan serve`.
@@ -66,6 +69,7 @@ pub(super) fn user(command: UserCommand) -> Result<(), Failure> {
     // database, and a bad one fails before anything is written.
     let password = match &command {
         UserCommand::Create(args) if args.password_stdin => Some(read_password()?),
+        UserCommand::Password(_) => Some(read_password()?),
         _ => None,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
@@ -126,6 +130,17 @@ async fn run(command: UserCommand, password: Option<String>) -> Result<(), Failu
             println!("{token}");
             Ok(())
         }
+        UserCommand::Password(args) => {
+            let db = open(&args.db).await?;
+            let done = set_password(&db, &args.name, password.as_deref().unwrap_or_default()).await;
+            db.close().await;
+            done?;
+            println!(
+                "user {:?} has a new password; its web sessions have ended",
+                args.name
+            );
+            Ok(())
+        }
         UserCommand::Disable(args) => {
             let db = open(&args.db).await?;
             let done = disable(&db, &args.name).await;
@@ -158,6 +173,13 @@ async fn disable(db: &Db, name: &str) -> Result<(), Failure> {
     db.disable_user(&user.id)
         .await
         .map(|_| ())
+        .map_err(|e| Failure::other(format!("database: {e}")))
+}
+
+async fn set_password(db: &Db, name: &str, password: &str) -> Result<(), Failure> {
+    let user = accounts::user_named(db, name).await.map_err(failure)?;
+    db.set_password_hash(&user.id, &password::hash(password))
+        .await
         .map_err(|e| Failure::other(format!("database: {e}")))
 }
 

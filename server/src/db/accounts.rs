@@ -216,6 +216,19 @@ impl Db {
         on_pool!(self, pool => sqlx::query(SQL).bind(now).bind(idle_since).execute(pool).await.map(|r| r.rows_affected()))
     }
 
+    /// Set a user's password hash and end its sessions (a changed password
+    /// signs out every browser that used the old one).
+    pub async fn set_password_hash(&self, id: &str, hash: &str) -> Result<(), sqlx::Error> {
+        const SQL: &str = "UPDATE users SET password_hash = $2 WHERE id = $1";
+        const END: &str = "DELETE FROM sessions WHERE user_id = $1";
+        on_pool!(self, pool => {
+            let mut tx = pool.begin().await?;
+            sqlx::query(SQL).bind(id).bind(hash).execute(&mut *tx).await?;
+            sqlx::query(END).bind(id).execute(&mut *tx).await?;
+            tx.commit().await
+        })
+    }
+
     pub async fn delete_session(&self, id: &str) -> Result<(), sqlx::Error> {
         const SQL: &str = "DELETE FROM sessions WHERE id = $1";
         on_pool!(self, pool => sqlx::query(SQL).bind(id).execute(pool).await.map(|_| ()))
