@@ -22,8 +22,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::{
-    cameras, costmaps, dems, health, members, projects, routes, session, surveys, tokens, users,
-    vehicles,
+    cameras, costmaps, dems, health, members, password, projects, routes, session, surveys, tokens,
+    users, vehicles,
 };
 use crate::error::ApiError;
 use crate::guard::{self, AllowedHosts};
@@ -67,6 +67,7 @@ pub fn router(
         .merge(cameras::routes())
         .merge(routes::routes())
         .merge(session::routes())
+        .merge(password::routes())
         .merge(tokens::routes())
         .merge(users::routes())
         .merge(projects::routes())

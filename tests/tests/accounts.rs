@@ -195,6 +195,56 @@ fn the_user_command() {
     );
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
 
+    // Users change their own password over HTTP, giving the current one.
+    let r = sign_in(
+        &server,
+        &json!({"user": alice, "password": new_password}),
+        &[],
+    );
+    let session = session_of(&r);
+    let csrf = r.json()["csrf_token"].as_str().unwrap().to_string();
+    let cookie = Auth::Cookie {
+        session: session.clone(),
+        csrf: Some(csrf),
+    };
+    let url = server.url("/api/v1/session/password");
+    for (body, pointer) in [
+        (
+            json!({"current": "not it at all", "new": "third password here"}),
+            "/current",
+        ),
+        (json!({"new": "third password here"}), "/current"),
+        (json!({"current": new_password, "new": "short"}), "/new"),
+        (
+            json!({"current": new_password, "new": "third password here", "x": 1}),
+            "/x",
+        ),
+    ] {
+        let r = post_json_as(&cookie, &url, &body);
+        assert_eq!(r.status, 422, "{body}: {}", r.text());
+        assert_eq!(r.json()["errors"][0]["pointer"], pointer, "{}", r.text());
+    }
+    let without_csrf = Auth::Cookie {
+        session: session.clone(),
+        csrf: None,
+    };
+    let body = json!({"current": new_password, "new": "third password here"});
+    assert_problem(
+        &post_json_as(&without_csrf, &url, &body),
+        403,
+        "X-CSRF-Token",
+    );
+    let r = post_json_as(&cookie, &url, &body);
+    assert_eq!(r.status, 204, "{}", r.text());
+    assert_problem(&whoami(&server, &cookie), 401, "sign in again");
+    let r = sign_in(
+        &server,
+        &json!({"user": alice, "password": "third password here"}),
+        &[],
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    assert_eq!(whoami(&server, &bearer(&alice_token)).status, 200);
+
     let out = user_command(dir.path(), &["disable", &alice], None);
     assert!(out.status.success(), "{}", text(&out.stderr));
     for token in [&alice_token, &second] {

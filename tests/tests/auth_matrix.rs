@@ -128,6 +128,8 @@ fn cases() -> Vec<Case> {
         c("POST", "/api/v1/projects/{id}/members", 1, S404, S403, OK),
         c("POST", "/api/v1/tokens", 1, OK, OK, OK),
         c("POST", "/api/v1/users", 1, S403, S403, OK),
+        // Each changes its own password (the test's users have none yet).
+        c("POST", "/api/v1/session/password", 1, OK, OK, OK),
         // Deletes, children before parents.
         c("DELETE", "/api/v1/routes/{id}", 2, S404, S403, OK),
         c("DELETE", "/api/v1/costmaps/{id}", 3, S404, S403, OK),
@@ -426,6 +428,9 @@ impl Fixture {
                 json_body(json!({"name": unique_user_name("made"), "password": "a long password"}))
             }
             ("POST", "/api/v1/session") => json_body(json!({"token": self.owner_token})),
+            ("POST", "/api/v1/session/password") => {
+                json_body(json!({"new": "a long enough password"}))
+            }
             ("POST", _) => json_body(json!({})),
             _ => ("", Vec::new()),
         };

@@ -12,6 +12,7 @@ pub mod json_body;
 pub mod members;
 pub mod names;
 pub mod paging;
+pub mod password;
 pub mod projects;
 pub mod routes;
 pub mod session;
