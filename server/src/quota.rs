@@ -12,6 +12,7 @@ use utoipa::ToSchema;
 
 use crate::db::Db;
 use crate::error::ApiError;
+use crate::memory::mib;
 
 /// How long a client whose project has too many jobs queued should wait.
 const JOBS_RETRY_AFTER_S: u64 = 10;
@@ -57,44 +58,40 @@ impl Quotas {
             max_queued_jobs: self.queued_jobs,
         })
     }
+}
 
-    /// 413 when storing `adding` more bytes (`what`) would take the
-    /// project past its quota.
-    pub async fn check_bytes(
-        &self,
-        db: &Db,
-        project_id: &str,
-        adding: u64,
-        what: &str,
-    ) -> Result<(), ApiError> {
-        let Some(quota) = self.bytes else {
+impl Usage {
+    /// 413 when storing `adding` more bytes (`what`) would take project
+    /// `project_id` past its quota.
+    pub fn check_bytes(&self, project_id: &str, adding: u64, what: &str) -> Result<(), ApiError> {
+        let Some(quota) = self.quota_bytes else {
             return Ok(());
         };
-        let stored = db.project_usage(project_id).await?.0.max(0) as u64;
-        if stored.saturating_add(adding) > quota {
+        let after = self.stored_bytes.saturating_add(adding);
+        if after > quota {
             return Err(ApiError::PayloadTooLarge(format!(
                 "{what} ({}) would take project {project_id:?} to {} of its {} quota \
                  (--project-quota-mb): delete DEMs or costmaps first",
                 mib(adding),
-                mib(stored.saturating_add(adding)),
+                mib(after),
                 mib(quota)
             )));
         }
         Ok(())
     }
 
-    /// 429 when the project already has as many costmap jobs queued or
-    /// running as it may.
-    pub async fn check_jobs(&self, db: &Db, project_id: &str) -> Result<(), ApiError> {
-        let Some(max) = self.queued_jobs else {
+    /// 429 when project `project_id` already has as many costmap jobs
+    /// queued or running as it may.
+    pub fn check_jobs(&self, project_id: &str) -> Result<(), ApiError> {
+        let Some(max) = self.max_queued_jobs else {
             return Ok(());
         };
-        let queued = db.project_usage(project_id).await?.1.max(0) as u64;
-        if queued >= max {
+        if self.queued_jobs >= max {
             return Err(ApiError::TooManyRequests {
                 message: format!(
-                    "project {project_id:?} has {queued} costmap jobs queued or running, its \
-                     limit (--project-queued-jobs): try again when one has finished"
+                    "project {project_id:?} has {} costmap jobs queued or running, its \
+                     limit (--project-queued-jobs): try again when one has finished",
+                    self.queued_jobs
                 ),
                 retry_after_s: JOBS_RETRY_AFTER_S,
             });
@@ -108,10 +105,6 @@ impl Quotas {
 /// RGBA preview, uncompressed.
 pub fn costmap_file_bytes(cells: u64, layers: u64) -> u64 {
     cells.saturating_mul(5 + 4 * layers + 4)
-}
-
-fn mib(bytes: u64) -> String {
-    format!("{:.1} MiB", bytes as f64 / (1024.0 * 1024.0))
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@ use super::account_fields::{invalid, object, required_string, string_member};
 use super::json_body::JsonBody;
 use crate::auth::{Caller, password};
 use crate::error::{ApiError, Problem};
-use crate::state::AppState;
+use crate::state::{AppState, off_runtime};
 
 /// `{"current", "new"}`.
 #[derive(Deserialize, ToSchema)]
@@ -67,23 +67,14 @@ pub async fn change_password(
         .ok_or_else(|| ApiError::Internal(format!("user {:?} vanished", caller.name)))?;
     if let Some(phc) = user.password_hash {
         let current = current.ok_or_else(|| invalid("/current", "current is required"))?;
-        let matched = blocking(move || password::verify(&current, &phc)).await?;
+        let matched = off_runtime(move || password::verify(&current, &phc)).await?;
         if !matched {
             return Err(invalid("/current", "this is not your current password"));
         }
     }
-    let hash = blocking(move || password::hash(&new)).await?;
+    let hash = off_runtime(move || password::hash(&new)).await?;
     state.db.set_password_hash(&user.id, &hash).await?;
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// argon2 work off the async runtime.
-async fn blocking<T: Send + 'static>(
-    work: impl FnOnce() -> T + Send + 'static,
-) -> Result<T, ApiError> {
-    tokio::task::spawn_blocking(work)
-        .await
-        .map_err(|e| ApiError::Internal(format!("password work: {e}")))
 }
 
 /// `/api/v1/session/password`.

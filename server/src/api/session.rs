@@ -20,7 +20,7 @@ use crate::auth::secret::{self, SESSION_PREFIX};
 use crate::clock::now_millis;
 use crate::db::{Db, SessionRow, UserRow};
 use crate::error::{ApiError, Problem};
-use crate::state::AppState;
+use crate::state::{AppState, off_runtime};
 
 /// The one answer to every failed sign-in, so that it tells nothing about
 /// which part was wrong.
@@ -147,9 +147,7 @@ async fn check_password(db: &Db, name: &str, password: String) -> Result<UserRow
         .as_ref()
         .and_then(|u| u.password_hash.clone())
         .unwrap_or_else(|| password::decoy_hash().to_string());
-    let matched = tokio::task::spawn_blocking(move || password::verify(&password, &phc))
-        .await
-        .map_err(|e| ApiError::Internal(format!("password check: {e}")))?;
+    let matched = off_runtime(move || password::verify(&password, &phc)).await?;
     user.filter(|u| matched && u.password_hash.is_some() && u.disabled == 0)
         .ok_or_else(|| ApiError::Unauthorized(WRONG.to_string()))
 }

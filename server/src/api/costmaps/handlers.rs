@@ -115,16 +115,14 @@ pub async fn create_costmap(
     if !issues.is_empty() {
         return Err(ApiError::Validation(issues));
     }
-    state.quotas.check_jobs(&state.db, &project_id).await?;
-    state
-        .quotas
-        .check_bytes(
-            &state.db,
-            &project_id,
-            costmap_file_bytes(w.saturating_mul(h), layers),
-            &format!("the files of {what}"),
-        )
-        .await?;
+    // One reading of the project's use for both of its quotas.
+    let usage = state.quotas.usage(&state.db, &project_id).await?;
+    usage.check_jobs(&project_id)?;
+    usage.check_bytes(
+        &project_id,
+        costmap_file_bytes(w.saturating_mul(h), layers),
+        &format!("the files of {what}"),
+    )?;
 
     let now = now_millis();
     let stored = StoredRequest {

@@ -279,11 +279,8 @@ pub async fn upload_dem(
     // A declared size over the project's quota is refused before any of
     // the body is read; the size received is checked again below.
     if let Some(declared) = declared_length(req.headers()) {
-        let what = "the upload";
-        state
-            .quotas
-            .check_bytes(&state.db, &project_id, declared, what)
-            .await?;
+        let usage = state.quotas.usage(&state.db, &project_id).await?;
+        usage.check_bytes(&project_id, declared, "the upload")?;
     }
     let upload = if multipart {
         read_multipart(req, &state, limit).await?
@@ -309,10 +306,8 @@ pub async fn upload_dem(
         })
         .await??;
 
-    state
-        .quotas
-        .check_bytes(&state.db, &project_id, data.len() as u64, "the DEM file")
-        .await?;
+    let usage = state.quotas.usage(&state.db, &project_id).await?;
+    usage.check_bytes(&project_id, data.len() as u64, "the DEM file")?;
     let row = DemMetaRow {
         id: uuid::Uuid::now_v7().to_string(),
         name: labels.name,
