@@ -1,8 +1,11 @@
 //! Coverage stage: camera model (GSD, footprint, spacing) and the
 //! back-and-forth (lawnmower) path inside each cell (SPEC §3.1, §3.3).
 
+pub mod airframe;
+pub mod arcs;
 mod camera;
 mod coverage_ratio;
+pub mod dubins;
 mod lanes;
 mod links;
 mod region;
