@@ -79,6 +79,7 @@ fn request(policy: Policy, nfz_count: usize) -> SurveyRequest {
         .collect();
     SurveyRequest {
         roi: vec![to_lonlat(&roi, "/roi/coordinates".into())],
+        corridor: None,
         no_fly: nfzs(nfz_count)
             .iter()
             .enumerate()

@@ -81,6 +81,7 @@ proptest! {
         };
         let req = SurveyRequest {
             roi: vec![parsed(roi, "/roi")],
+            corridor: None,
             no_fly: zones.iter().enumerate().map(|(i, z)| parsed(z.clone(), &format!("/no_fly_zones/{i}"))).collect(),
             params,
         };

@@ -160,6 +160,7 @@ proptest! {
         };
         let req = SurveyRequest {
             roi: vec![ParsedPolygon { polygon: roi, pointer: "/roi".into() }],
+            corridor: None,
             no_fly,
             params: params.clone(),
         };

@@ -44,16 +44,22 @@ impl CellPlan {
         cell: &Polygon<f64>,
         free: &FreeSpace,
     ) -> CellPlan {
-        let mut lanes = self.lanes.clone();
+        // A run of lanes (a corridor's lane round its bends) moves and
+        // turns as one lane.
+        let mut runs = self.runs();
         if reverse_order {
-            lanes.reverse();
+            runs.reverse();
         }
-        if flip_lanes {
-            for lane in &mut lanes {
-                *lane = Lane {
+        let mut lanes = Vec::with_capacity(self.lanes.len());
+        for run in runs {
+            let run = &self.lanes[run];
+            if flip_lanes {
+                lanes.extend(run.iter().rev().map(|lane| Lane {
                     start: lane.end,
                     end: lane.start,
-                };
+                }));
+            } else {
+                lanes.extend_from_slice(run);
             }
         }
         let links = LinkRouter::new(cell, free).links(&lanes);

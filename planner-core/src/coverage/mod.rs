@@ -4,6 +4,7 @@
 pub mod airframe;
 pub mod arcs;
 mod camera;
+mod corridor;
 mod coverage_ratio;
 pub mod dubins;
 mod lanes;
@@ -12,6 +13,10 @@ mod region;
 
 pub use camera::{
     Camera, Orientation, PRESETS, SurveyGeometry, altitude_for_gsd, photo_count, survey_geometry,
+};
+pub use corridor::{
+    CorridorCells, CorridorError, MAX_CORRIDOR_LANES, corridor_cells, corridor_lane_lines,
+    corridor_polygon, lane_offsets, offset_curve,
 };
 pub use coverage_ratio::coverage_ratio;
 pub use lanes::{CellLayouts, plan_cell, plan_cell_candidates_in, plan_cell_in};
@@ -83,6 +88,24 @@ impl CellPlan {
         out.links.reverse();
         for link in &mut out.links {
             link.reverse();
+        }
+        out
+    }
+
+    /// The lanes flown as one, as index ranges: consecutive lanes that
+    /// join end to start with no link points between (a corridor's lane
+    /// following its bends). In an area's plan every lane is a run.
+    pub fn runs(&self) -> Vec<std::ops::Range<usize>> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 0..self.lanes.len() {
+            let joined = self.lanes.get(i + 1).is_some_and(|next| {
+                self.lanes[i].end == next.start && self.links.get(i).is_none_or(Vec::is_empty)
+            });
+            if !joined {
+                out.push(start..i + 1);
+                start = i + 1;
+            }
         }
         out
     }

@@ -181,9 +181,18 @@ impl Job {
         // Ways 2 and 3 need new links through the cell; without the cell
         // polygon they fall back to ways 0 and 1.
         let across = if has_cell {
+            // The other end of the first run of lanes (a corridor's lane
+            // is a run of several), and the start of the last.
+            let runs = cell_plan.runs();
+            let first_run_end = runs
+                .first()
+                .map_or(first.end, |r| cell_plan.lanes[r.end - 1].end);
+            let last_run_start = runs
+                .last()
+                .map_or(last.start, |r| cell_plan.lanes[r.start].start);
             Way {
-                entry: first.end,
-                exit: last.start,
+                entry: first_run_end,
+                exit: last_run_start,
             }
         } else {
             forward

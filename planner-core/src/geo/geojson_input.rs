@@ -207,7 +207,11 @@ fn ring(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Option<LineStr
     Some(LineString::new(coords))
 }
 
-fn position(value: &Value, pointer: &str, issues: &mut Vec<Issue>) -> Option<Coord<f64>> {
+pub(super) fn position(
+    value: &Value,
+    pointer: &str,
+    issues: &mut Vec<Issue>,
+) -> Option<Coord<f64>> {
     let Some(items) = value.as_array() else {
         issues.push(Issue::new(
             pointer,

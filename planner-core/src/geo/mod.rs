@@ -2,11 +2,13 @@
 //! projection to the UTM zone of the ROI centroid (SPEC §2).
 
 mod clearance;
+mod corridor;
 mod geojson_input;
 mod utm;
 mod validate;
 
 pub use clearance::{distance_to_zones, fill_enclosed, keep_out_area};
+pub use corridor::{ParsedLine, parse_line, prepare_corridor};
 pub use geojson_input::{ParsedPolygon, parse_polygons};
 pub use utm::{MAX_OFFSET_FROM_CENTRAL_MERIDIAN_DEG, UtmProjection};
 pub use validate::polygon_issues;

@@ -46,6 +46,8 @@ pub(super) struct Decomposition {
     pub slice_angle_deg: f64,
     pub cells: Vec<Polygon<f64>>,
     pub plans: Vec<CellPlan>,
+    /// Lanes laid along a corridor's line: kept as laid (not re-planned).
+    pub along_line: bool,
 }
 
 /// The cells of one slice angle, their lane layouts and the turns these
@@ -144,6 +146,7 @@ pub(super) fn decompose_and_cover(
                     slice_angle_deg: a,
                     cells,
                     plans,
+                    along_line: false,
                 },
             ));
         }

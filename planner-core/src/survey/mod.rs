@@ -10,10 +10,11 @@
 
 use geo::Area;
 
-use crate::geo::{Limits, prepare_area};
+use crate::geo::Limits;
 use crate::terrain::Dem;
 
 mod cells;
+mod corridor;
 mod files;
 mod flock_plan;
 mod homes;
@@ -24,6 +25,7 @@ mod result;
 mod terrain_flight;
 mod terrain_prep;
 
+pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
 pub use files::PlanFile;
 pub use rally::MAX_RALLY_DISTANCE_M;
 pub use request::{
@@ -51,17 +53,23 @@ pub fn plan_survey_over(
     let params = &req.params;
     params.validate("").map_err(PlanError::Invalid)?;
     params.check_dem(dem)?;
-    let area = prepare_area(&req.roi, &req.no_fly, ROI_POINTER, NO_FLY_POINTER, limits)?;
+    let prepared = corridor::prepare(req, limits)?;
+    let req = prepared.as_area.as_ref().unwrap_or(req);
+    let area = prepared.area;
     let free = cells::free_space(&area)?;
     let free_area = free.unsigned_area();
     let flight = params.flight(free_area, limits, dem.is_some())?;
     let setup = homes::FlockSetup::new(req, &area, &free)?;
     crate::cancel::check()?;
-    let mut d = cells::decompose_and_cover(
-        &setup.flyable,
-        params.slice_angle_deg,
-        flight.geometry.line_spacing_m,
-    )?;
+    let mut d = if let Some((line, width)) = &prepared.centre {
+        corridor::lay_corridor(line, *width, &setup.flyable, flight.geometry.line_spacing_m)?
+    } else {
+        cells::decompose_and_cover(
+            &setup.flyable,
+            params.slice_angle_deg,
+            flight.geometry.line_spacing_m,
+        )?
+    };
     let over_dem = match dem {
         None => None,
         Some(dem) => Some(terrain_prep::follow_terrain(

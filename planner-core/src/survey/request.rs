@@ -189,6 +189,9 @@ pub struct SurveyParams {
     /// instead of home; exported in each `.plan` and as a rally file.
     #[cfg_attr(feature = "openapi", schema(max_items = 64))]
     pub rally_points: Vec<[f64; 2]>,
+    /// Width of a `corridor` (given instead of `roi`), m, in [1, 2000]: lanes run along its line.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 2000))]
+    pub corridor_width_m: Option<f64>,
 }
 
 impl Default for SurveyParams {
@@ -215,13 +218,21 @@ impl Default for SurveyParams {
             allow_partial_dem: false,
             assignment: Policy::Balanced,
             rally_points: Vec::new(),
+            corridor_width_m: None,
         }
     }
 }
 
 pub const DEFAULT_ALTITUDE_M: f64 = 60.0;
 
-fn check_range(issues: &mut Vec<Issue>, pointer: &str, v: f64, lo: f64, hi: f64, lo_open: bool) {
+pub(super) fn check_range(
+    issues: &mut Vec<Issue>,
+    pointer: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    lo_open: bool,
+) {
     let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
     if !ok {
         let (v, lo, hi) = (readable(v), readable(lo), readable(hi));
@@ -273,6 +284,7 @@ impl SurveyParams {
         self.check_uavs(&mut issues, &p);
         self.check_terrain(&mut issues, &p);
         self.check_rally_points(&mut issues, &p);
+        self.check_corridor(&mut issues, &p);
         if issues.is_empty() {
             Ok(())
         } else {
@@ -532,6 +544,8 @@ pub const NO_FLY_POINTER: &str = "/no_fly_zones";
 #[derive(Clone, Debug)]
 pub struct SurveyRequest {
     pub roi: Vec<ParsedPolygon>,
+    /// A corridor's centre line, given instead of `roi` (then empty).
+    pub corridor: Option<crate::geo::ParsedLine>,
     pub no_fly: Vec<ParsedPolygon>,
     pub params: SurveyParams,
 }
@@ -549,18 +563,13 @@ impl SurveyRequest {
             )]));
         };
         let mut issues = Vec::new();
+        let corridor = super::corridor::read_corridor(obj, &mut issues);
         let roi = match obj.get("roi") {
             Some(v) => parse_polygons(v, ROI_POINTER).unwrap_or_else(|e| {
                 issues.extend(e);
                 Vec::new()
             }),
-            None => {
-                issues.push(Issue::new(
-                    ROI_POINTER,
-                    "missing: the region of interest (GeoJSON) is required",
-                ));
-                Vec::new()
-            }
+            None => Vec::new(),
         };
         let mut no_fly = Vec::new();
         match obj.get("no_fly_zones") {
@@ -590,6 +599,7 @@ impl SurveyRequest {
         }
         let mut rest = obj.clone();
         rest.remove("roi");
+        rest.remove("corridor");
         rest.remove("no_fly_zones");
         let params = SurveyParams::from_json(&Value::Object(rest), "").unwrap_or_else(|e| {
             issues.extend(e);
@@ -598,6 +608,7 @@ impl SurveyRequest {
         if issues.is_empty() {
             Ok(SurveyRequest {
                 roi,
+                corridor,
                 no_fly,
                 params,
             })

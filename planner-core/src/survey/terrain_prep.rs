@@ -68,8 +68,8 @@ pub(super) fn follow_terrain(
     d.plans = plans
         .into_iter()
         .map(|p| {
-            if crate::cancel::check().is_err() {
-                return p; // checked again below
+            if d.along_line || crate::cancel::check().is_err() {
+                return p; // a corridor's lanes; or cancelled, checked again below
             }
             let candidates = coverage::plan_cell_candidates_in(
                 p.cell_index,

@@ -89,6 +89,16 @@ impl utoipa::PartialSchema for CreateSurvey {
             .into(),
         );
         body.properties.insert(
+            "corridor".into(),
+            geojson(
+                "A corridor's centre line instead of `roi`: a GeoJSON (RFC 7946, WGS84 lon/lat) \
+                 LineString (or a Feature or one-feature FeatureCollection of one). The area \
+                 surveyed is its flat-capped buffer `corridor_width_m` wide, flown in lanes along \
+                 the line. Give exactly one of `roi` and `corridor`.",
+            )
+            .into(),
+        );
+        body.properties.insert(
             "no_fly_zones".into(),
             ArrayBuilder::new()
                 .items(geojson("A no-fly zone: any GeoJSON area."))
@@ -97,9 +107,13 @@ impl utoipa::PartialSchema for CreateSurvey {
                 ))
                 .into(),
         );
-        body.required.push("roi".into());
-        body.description =
-            Some("A survey request: area, no-fly zones and planning parameters.".into());
+        // `roi` or `corridor`, exactly one: the planner answers 422 at both
+        // pointers otherwise (a schema of this object lists no alternatives).
+        body.description = Some(
+            "A survey request: area (`roi`, or `corridor` with `corridor_width_m`), no-fly zones \
+             and planning parameters."
+                .into(),
+        );
         RefOr::T(Schema::Object(body))
     }
 }

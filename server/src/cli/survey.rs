@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::{Issue, Limits};
-use planner_core::survey::{DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, plan_survey_over};
+use planner_core::survey::{
+    CORRIDOR_POINTER, DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, plan_survey_over,
+};
 use planner_core::terrain::DemLimits;
 use serde_json::{Value, json};
 
@@ -14,8 +16,12 @@ use super::common::{Failure, list_issues, read_dem_file, read_json};
 #[derive(clap::Args)]
 pub(super) struct SurveyArgs {
     /// Region of interest: a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection (WGS84).
-    #[arg(long, value_name = "FILE")]
-    roi: PathBuf,
+    #[arg(long, value_name = "FILE", required_unless_present = "corridor")]
+    roi: Option<PathBuf>,
+    /// A corridor instead of an area: its centre line, a GeoJSON LineString
+    /// (WGS84); the width is the params' `corridor_width_m`.
+    #[arg(long, value_name = "LINE.geojson", conflicts_with = "roi")]
+    corridor: Option<PathBuf>,
     /// No-fly zones (GeoJSON); may be given several times.
     #[arg(long = "no-fly", value_name = "FILE")]
     no_fly: Vec<PathBuf>,
@@ -51,14 +57,19 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     let Some(obj) = doc.as_object_mut() else {
         return Err(Failure::input("the params file must hold a JSON object"));
     };
-    for key in ["roi", "no_fly_zones"] {
+    for key in ["roi", "no_fly_zones", "corridor"] {
         if obj.contains_key(key) {
             return Err(Failure::input(format!(
-                "the params file may not contain {key:?}: give areas with --roi and --no-fly"
+                "the params file may not contain {key:?}: give areas with --roi (or --corridor) \
+                 and --no-fly"
             )));
         }
     }
-    obj.insert("roi".into(), read_json(&args.roi, "ROI")?);
+    match (&args.roi, &args.corridor) {
+        (Some(roi), _) => obj.insert("roi".into(), read_json(roi, "ROI")?),
+        (None, Some(line)) => obj.insert("corridor".into(), read_json(line, "corridor")?),
+        (None, None) => return Err(Failure::input("give --roi FILE or --corridor LINE.geojson")),
+    };
     let zones = args
         .no_fly
         .iter()
@@ -160,8 +171,14 @@ fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure 
 /// `field.geojson#/coordinates/0: ring self-intersects …`.
 fn describe_issues(issues: &[Issue], args: &SurveyArgs) -> String {
     let locate = |ptr: &str| -> String {
-        if let Some(rest) = ptr.strip_prefix(ROI_POINTER) {
-            return format!("{}#{rest}", args.roi.display());
+        if let (Some(rest), Some(roi)) = (ptr.strip_prefix(ROI_POINTER), &args.roi) {
+            return format!("{}#{rest}", roi.display());
+        }
+        let in_corridor = ptr
+            .strip_prefix(CORRIDOR_POINTER)
+            .filter(|r| r.is_empty() || r.starts_with('/'));
+        if let (Some(rest), Some(line)) = (in_corridor, &args.corridor) {
+            return format!("{}#{rest}", line.display());
         }
         if let Some(rest) = ptr.strip_prefix(NO_FLY_POINTER) {
             let rest = rest.trim_start_matches('/');

@@ -31,6 +31,7 @@ pub fn read_document(doc: &mut Value) -> Result<(SurveyRequest, Option<String>),
         let mut params = doc.as_object().cloned().unwrap_or_default();
         params.remove("roi");
         params.remove("no_fly_zones");
+        params.remove("corridor");
         serde_json::from_value::<SurveyParams>(Value::Object(params)).is_ok()
     };
     let result = match (read, checked) {
@@ -87,7 +88,12 @@ fn check_dem_id(v: &Value) -> Result<Option<String>, (Issue, Stage)> {
 fn place(issues: &mut Vec<Issue>, fault: Issue, stage: Stage, params_read: bool) {
     let first_param = issues
         .iter()
-        .position(|i| !i.pointer.starts_with(ROI_POINTER) && !i.pointer.starts_with(NO_FLY_POINTER))
+        .position(|i| {
+            let corridor = i.pointer == "/corridor" || i.pointer.starts_with("/corridor/");
+            !i.pointer.starts_with(ROI_POINTER)
+                && !i.pointer.starts_with(NO_FLY_POINTER)
+                && !corridor
+        })
         .unwrap_or(issues.len());
     let member = |i: &Issue| i.pointer.split('/').nth(1).unwrap_or("").to_string();
     match (stage, params_read) {
