@@ -26,6 +26,13 @@ const LANE_ARC_STEP_RAD: f64 = 0.35;
 /// Lane pieces shorter than this (m) are not flown: slivers cut off by a
 /// no-fly zone's corner.
 const MIN_PIECE_M: f64 = 0.1;
+/// Lane vertices closer than this (m) are merged.
+const MIN_SEGMENT_M: f64 = 0.01;
+/// Gaps shorter than this (m) between two pieces of one lane are flown
+/// through: where a lane grazes the round keep-out area of a no-fly zone,
+/// the overlay cuts it for a few millimetres (as deep as a micrometre),
+/// which would otherwise become two cells and a transit of millimetres.
+const GRAZE_GAP_M: f64 = 0.005;
 /// Most lanes across one corridor (width / spacing).
 pub const MAX_CORRIDOR_LANES: usize = 2000;
 
@@ -182,12 +189,26 @@ fn clip_polyline(line: &[Coord<f64>], region: &Region) -> Vec<Vec<Coord<f64>>> {
         for (k, &(a, b)) in intervals.iter().enumerate() {
             let (pa, pb) = (w[0] + d * a, w[0] + d * b);
             let continues = open && k == 0 && a <= 1e-6;
+            let grazed = pieces
+                .last()
+                .and_then(|p| p.last())
+                .is_some_and(|&end| dist(end, pa) < GRAZE_GAP_M);
             match pieces.last_mut() {
-                Some(piece) if continues => piece.push(pb),
+                Some(piece) if continues || grazed => piece.push(pb),
                 _ => pieces.push(vec![pa, pb]),
             }
         }
         open = intervals.last().is_some_and(|&(_, b)| b >= len - 1e-6);
+    }
+    for piece in &mut pieces {
+        // Vertices a centimetre apart are one waypoint (the missions
+        // write one), so one segment of the lane.
+        let last = piece[piece.len() - 1];
+        piece.dedup_by(|b, a| dist(*a, *b) < MIN_SEGMENT_M);
+        if piece.len() > 1 && dist(piece[piece.len() - 1], last) > 0.0 {
+            let n = piece.len();
+            piece[n - 1] = last;
+        }
     }
     pieces.retain(|p| p.windows(2).map(|w| dist(w[0], w[1])).sum::<f64>() >= MIN_PIECE_M);
     pieces

@@ -288,6 +288,9 @@ pub(super) fn fly_tour(
 enum Vertex {
     LaneStart,
     LaneEnd,
+    /// The end of a lane and the start of the next, which goes on from
+    /// there (a corridor's lane round a bend): no link between.
+    LaneJoint,
     LinkPoint,
 }
 
@@ -306,8 +309,15 @@ fn legs_3d(tour: &Tour, model: &TerrainModel, rules: &FlightRules) -> Vec<(LegKi
         let mut path = Vec::new();
         let mut roles = Vec::new();
         for (k, lane) in visit.lanes.iter().enumerate() {
-            path.push(lane.start);
-            roles.push(Vertex::LaneStart);
+            let goes_on =
+                k > 0 && visit.lanes[k - 1].end == lane.start && visit.links[k - 1].is_empty();
+            match roles.last_mut() {
+                Some(last) if goes_on => *last = Vertex::LaneJoint,
+                _ => {
+                    path.push(lane.start);
+                    roles.push(Vertex::LaneStart);
+                }
+            }
             path.push(lane.end);
             roles.push(Vertex::LaneEnd);
             if let Some(link) = visit.links.get(k) {
@@ -326,7 +336,7 @@ fn legs_3d(tour: &Tour, model: &TerrainModel, rules: &FlightRules) -> Vec<(LegKi
                     }
                     from = Some(at);
                 }
-                Vertex::LaneEnd => {
+                Vertex::LaneEnd | Vertex::LaneJoint => {
                     let f = from.unwrap_or(at);
                     legs.push((LegKind::Lane, pts[f..=at].to_vec()));
                     from = Some(at);
