@@ -6,7 +6,11 @@ use serde::{Deserialize, Serialize};
 pub mod cmd {
     pub const NAV_WAYPOINT: u16 = 16;
     pub const NAV_RETURN_TO_LAUNCH: u16 = 20;
+    pub const NAV_LAND: u16 = 21;
     pub const NAV_TAKEOFF: u16 = 22;
+    pub const NAV_VTOL_TAKEOFF: u16 = 84;
+    pub const NAV_VTOL_LAND: u16 = 85;
+    pub const DO_LAND_START: u16 = 189;
     pub const DO_CHANGE_SPEED: u16 = 178;
     pub const DO_SET_CAM_TRIGG_DIST: u16 = 206;
     pub const NAV_FENCE_POLYGON_VERTEX_INCLUSION: u16 = 5001;
@@ -79,6 +83,18 @@ pub enum MissionItem {
     CameraTriggerDistance { distance_m: f64 },
     /// Fly home and land.
     ReturnToLaunch,
+    /// A plane's take-off: climb to `alt` above the launch point, nose up
+    /// at least `pitch_deg`.
+    PlaneTakeoff { alt: f64, pitch_deg: f64 },
+    /// A VTOL's vertical take-off to `alt`, then the transition to forward
+    /// flight.
+    VtolTakeoff { alt: f64 },
+    /// Marks where the landing sequence starts (RTL jumps there).
+    LandStart,
+    /// A plane's landing at a point, on the slope from the waypoint before.
+    Land(GeoPoint),
+    /// A VTOL's landing: fly to the point, transition, descend vertically.
+    VtolLand(GeoPoint),
 }
 
 /// A complete mission for one vehicle.
@@ -168,6 +184,43 @@ impl Mission {
                 MissionItem::ReturnToLaunch => MavItem {
                     frame: f,
                     ..MavItem::action(cmd::NAV_RETURN_TO_LAUNCH, [0.0; 4])
+                },
+                // Param 1 is the (minimum) pitch of the climb for planes in
+                // both ArduPlane and PX4.
+                MissionItem::PlaneTakeoff { alt, pitch_deg } => MavItem {
+                    command: cmd::NAV_TAKEOFF,
+                    frame: f,
+                    params: [pitch_deg, 0.0, 0.0, KEEP_HEADING],
+                    lat: home.lat,
+                    lon: home.lon,
+                    alt,
+                },
+                // Param 2 0 = the autopilot's default transition heading.
+                MissionItem::VtolTakeoff { alt } => MavItem {
+                    command: cmd::NAV_VTOL_TAKEOFF,
+                    frame: f,
+                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
+                    lat: home.lat,
+                    lon: home.lon,
+                    alt,
+                },
+                MissionItem::LandStart => MavItem::action(cmd::DO_LAND_START, [0.0; 4]),
+                // Abort altitude and precision landing 0 = the defaults.
+                MissionItem::Land(p) => MavItem {
+                    command: cmd::NAV_LAND,
+                    frame: f,
+                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
+                    lat: p.lat,
+                    lon: p.lon,
+                    alt: p.alt,
+                },
+                MissionItem::VtolLand(p) => MavItem {
+                    command: cmd::NAV_VTOL_LAND,
+                    frame: f,
+                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
+                    lat: p.lat,
+                    lon: p.lon,
+                    alt: p.alt,
                 },
             })
             .collect()

@@ -48,6 +48,8 @@ struct FlockInput<'a> {
     /// Flight height of a flat survey.
     pub altitude_m: f64,
     pub terrain: Option<(&'a TerrainModel, FlightRules)>,
+    /// A plane's turns, flown between the lanes (flat surveys).
+    pub plane: Option<crate::coverage::airframe::PlaneTurns>,
 }
 
 /// One sortie: its tour and the pieces it flies, in order.
@@ -68,7 +70,9 @@ impl FlockInput<'_> {
     fn cell_length_3d(&self, plan: &CellPlan) -> f64 {
         match &self.terrain {
             Some((model, rules)) => cell_length_3d(model, plan, rules),
-            None => plan.length_m(),
+            None => self
+                .plane
+                .map_or_else(|| plan.length_m(), |t| t.plan_length(plan)),
         }
     }
 }
@@ -119,6 +123,7 @@ pub(super) fn share_cells(
         turn_penalty_s: params.turn_penalty_s,
         altitude_m: flight.altitude,
         terrain: over_dem.map(|o| (&o.terrain.model, flight.rules)),
+        plane: params.plane_turns(),
     };
     let outcome = share(&input).map_err(cancelled_or)?;
     crate::cancel::check()?;

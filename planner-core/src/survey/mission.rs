@@ -29,6 +29,9 @@ pub(super) fn uav_plans(
 ) -> Result<(Vec<UavPlan>, Vec<Coord<f64>>), PlanError> {
     let mut uav_plans = Vec::with_capacity(flock.specs.len());
     let mut all_paths: Vec<Coord<f64>> = Vec::new();
+    let plane = params
+        .plane()
+        .map(|a| super::plane_flight::PlaneFlight::new(a, flight.altitude, &flock.obstacles));
     for (i, (spec, tours)) in flock.specs.iter().zip(flights).enumerate() {
         let speed = spec.speed_m_s.unwrap_or(params.speed_m_s);
         let several = tours.len() > 1;
@@ -37,11 +40,22 @@ pub(super) fn uav_plans(
             crate::cancel::check()?;
             let tour = &sortie.tour;
             let home_amsl = over_dem.map(|o| (o, o.homes_amsl[i]));
-            let (mission, length_3d, uav_terrain) =
-                fly(tour, spec.start, home_amsl, speed, params, flight, proj)?;
-            let path = tour.path();
-            let stats = tour_stats(tour, &path, length_3d, speed, params, &flight.geometry);
-            all_paths.extend(path);
+            let (mission, stats, uav_terrain) = if let Some(plane) = &plane {
+                let home = flock.homes[i];
+                let trigger = flight.geometry.trigger_distance_m;
+                let frame = params.altitude_frame;
+                let (mission, stats, path) =
+                    plane.sortie(tour, home, spec.start, speed, trigger, frame, proj)?;
+                all_paths.extend(path);
+                (mission, stats, None)
+            } else {
+                let (mission, length_3d, uav_terrain) =
+                    fly(tour, spec.start, home_amsl, speed, params, flight, proj)?;
+                let path = tour.path();
+                let stats = tour_stats(tour, &path, length_3d, speed, params, &flight.geometry);
+                all_paths.extend(path);
+                (mission, stats, uav_terrain)
+            };
             sorties.push(SortiePlan {
                 file_stem: if several {
                     format!("{}.sortie{}", spec.id, k + 1)

@@ -13,12 +13,14 @@ use geo::Area;
 use crate::geo::Limits;
 use crate::terrain::Dem;
 
+mod aircraft;
 mod cells;
 mod corridor;
 mod files;
 mod flock_plan;
 mod homes;
 mod mission;
+mod plane_flight;
 mod rally;
 mod request;
 mod result;
@@ -26,6 +28,7 @@ mod terrain_flight;
 mod terrain_prep;
 
 pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
+pub use aircraft::{Aircraft, AircraftType};
 pub use files::PlanFile;
 pub use rally::MAX_RALLY_DISTANCE_M;
 pub use request::{
@@ -50,7 +53,8 @@ pub fn plan_survey_over(
     limits: &Limits,
     dem: Option<&Dem>,
 ) -> Result<SurveyPlan, PlanError> {
-    let params = &req.params;
+    let flown_params = req.params.as_flown();
+    let params = &flown_params;
     params.validate("").map_err(PlanError::Invalid)?;
     params.check_dem(dem)?;
     let prepared = corridor::prepare(req, limits)?;
@@ -76,6 +80,7 @@ pub fn plan_survey_over(
             dem, &area, &free, &setup, params, &flight, &mut d,
         )?),
     };
+    aircraft::order_lanes(&mut d, params);
     let (rally_points, rally_utm) =
         rally::check_rally_points(&params.rally_points, &area, setup.clearance, dem)?;
     let outcome = flock_plan::share_cells(&setup, &d, params, &flight, over_dem.as_ref())?;

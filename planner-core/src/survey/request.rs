@@ -185,6 +185,10 @@ pub struct SurveyParams {
     /// shortest makespan), `competition` (thesis Algorithm 3) or
     /// `min_reach` (thesis policy 1, least summed reach distance).
     pub assignment: Policy,
+    /// The airframe (`multirotor` by default): planes enter lanes straight
+    /// and turn on arcs (see [`super::Aircraft`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub aircraft: Option<super::aircraft::Aircraft>,
     /// Rally points, [lon, lat] each (at most 64): where a UAV may return
     /// instead of home; exported in each `.plan` and as a rally file.
     #[cfg_attr(feature = "openapi", schema(max_items = 64))]
@@ -217,6 +221,7 @@ impl Default for SurveyParams {
             max_descent_rate_m_s: None,
             allow_partial_dem: false,
             assignment: Policy::Balanced,
+            aircraft: None,
             rally_points: Vec::new(),
             corridor_width_m: None,
         }
@@ -284,6 +289,9 @@ impl SurveyParams {
         self.check_uavs(&mut issues, &p);
         self.check_terrain(&mut issues, &p);
         self.check_rally_points(&mut issues, &p);
+        if let Some(a) = &self.aircraft {
+            a.check(&mut issues, &p("aircraft"));
+        }
         self.check_corridor(&mut issues, &p);
         if issues.is_empty() {
             Ok(())

@@ -293,6 +293,21 @@ impl ObstacleMap {
         map
     }
 
+    /// The same obstacles (and allowed endpoints) with the graph nodes
+    /// pushed `clearance_m` out from their corners instead: paths bend
+    /// farther from the corners, as a turning plane needs.
+    pub fn pushed(&self, clearance_m: f64) -> ObstacleMap {
+        let ring = |r: &Vec<Coord<f64>>| LineString(r.clone());
+        let polygons = self
+            .obstacles
+            .iter()
+            .map(|o| geo_types::Polygon::new(ring(&o.exterior), o.holes.iter().map(ring).collect()))
+            .collect();
+        let mut map = ObstacleMap::new(&MultiPolygon(polygons), clearance_m);
+        map.exits = self.exits.clone();
+        map
+    }
+
     /// The clearance used for the graph nodes, in metres.
     pub fn clearance_m(&self) -> f64 {
         self.clearance_m

@@ -1,0 +1,238 @@
+//! The `aircraft` member of a survey request: the airframe type and the
+//! numbers its turns and climbs are planned with, their defaults per type
+//! and their checks.
+
+use serde::{Deserialize, Serialize};
+
+use super::cells::Decomposition;
+use super::request::SurveyParams;
+use crate::coverage::airframe::PlaneTurns;
+use crate::coverage::arcs::ARC_SLACK;
+use crate::geo::Issue;
+use crate::num::readable;
+
+/// What flies the survey.
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AircraftType {
+    /// Turns on the spot, climbs vertically: today's plans.
+    #[default]
+    Multirotor,
+    /// A plane: enters every lane straight, turns on arcs, takes off with
+    /// NAV_TAKEOFF and lands on a straight descending approach.
+    FixedWing,
+    /// A quadplane: flies as a plane, takes off and lands vertically.
+    Vtol,
+}
+
+/// `aircraft`: the airframe and its flight envelope. Absent numbers take
+/// the type's defaults ([`Aircraft::turn_radius`] and the others).
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Aircraft {
+    /// `multirotor` (default), `fixed_wing` or `vtol`.
+    #[serde(rename = "type", default)]
+    pub kind: AircraftType,
+    /// Smallest turn radius flown, m, in [5, 1000]; default 40 (fixed
+    /// wing), 60 (VTOL). Planes only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 5, maximum = 1000))]
+    pub turn_radius_m: Option<f64>,
+    /// Steepest climb or descent along the track, degrees, in (0, 45];
+    /// default 10 (fixed wing), 8 (VTOL). Planes only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 45))]
+    pub max_climb_angle_deg: Option<f64>,
+    /// Cruise speed, m/s, in (0, 50]; replaces `speed_m_s` (a UAV's own
+    /// `speed_m_s` still wins); default 16 (fixed wing), 20 (VTOL), the
+    /// survey's `speed_m_s` for a multirotor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0, maximum = 50))]
+    pub cruise_speed_m_s: Option<f64>,
+    /// Straight run before and after every lane (lead-in and overshoot),
+    /// m, in [0, 2000]; default the turn radius. Planes only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0, maximum = 2000))]
+    pub lead_in_m: Option<f64>,
+}
+
+impl Aircraft {
+    /// Planes (fixed wing and VTOL) fly turns on arcs.
+    pub fn is_plane(&self) -> bool {
+        self.kind != AircraftType::Multirotor
+    }
+
+    pub fn turn_radius(&self) -> f64 {
+        self.turn_radius_m.unwrap_or(match self.kind {
+            AircraftType::Vtol => 60.0,
+            _ => 40.0,
+        })
+    }
+
+    pub fn max_climb_angle_deg(&self) -> f64 {
+        self.max_climb_angle_deg.unwrap_or(match self.kind {
+            AircraftType::Vtol => 8.0,
+            _ => 10.0,
+        })
+    }
+
+    /// The cruise speed, `None` for a multirotor without one (the survey's
+    /// `speed_m_s` then).
+    pub fn cruise_speed(&self) -> Option<f64> {
+        self.cruise_speed_m_s.or(match self.kind {
+            AircraftType::Multirotor => None,
+            AircraftType::FixedWing => Some(16.0),
+            AircraftType::Vtol => Some(20.0),
+        })
+    }
+
+    pub fn lead_in(&self) -> f64 {
+        self.lead_in_m.unwrap_or_else(|| self.turn_radius())
+    }
+
+    /// Range checks at `pointer` (the member's own pointer, `/aircraft`).
+    pub fn check(&self, issues: &mut Vec<Issue>, pointer: &str) {
+        let p = |f: &str| format!("{pointer}/{f}");
+        let mut range = |name: &str, v: Option<f64>, lo: f64, hi: f64, lo_open: bool| {
+            let Some(v) = v else { return };
+            let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
+            if !ok {
+                let (open, close) = (if lo_open { "(" } else { "[" }, "]");
+                issues.push(Issue::new(
+                    &p(name),
+                    &format!(
+                        "{} is outside the allowed range {open}{}, {}{close}",
+                        readable(v),
+                        readable(lo),
+                        readable(hi)
+                    ),
+                ));
+            }
+        };
+        range("turn_radius_m", self.turn_radius_m, 5.0, 1000.0, false);
+        range(
+            "max_climb_angle_deg",
+            self.max_climb_angle_deg,
+            0.0,
+            45.0,
+            true,
+        );
+        range("cruise_speed_m_s", self.cruise_speed_m_s, 0.0, 50.0, true);
+        range("lead_in_m", self.lead_in_m, 0.0, 2000.0, false);
+        if !self.is_plane() {
+            for (name, v) in [
+                ("turn_radius_m", self.turn_radius_m),
+                ("max_climb_angle_deg", self.max_climb_angle_deg),
+                ("lead_in_m", self.lead_in_m),
+            ] {
+                if v.is_some() {
+                    issues.push(Issue::new(
+                        &p(name),
+                        "only planes (type fixed_wing or vtol) take this: a multirotor turns on \
+                         the spot and climbs vertically",
+                    ));
+                }
+            }
+        }
+    }
+}
+
+impl SurveyParams {
+    /// The aircraft if it is a plane.
+    pub(super) fn plane(&self) -> Option<&Aircraft> {
+        self.aircraft.as_ref().filter(|a| a.is_plane())
+    }
+
+    /// The parameters as the aircraft flies them: its cruise speed for
+    /// `speed_m_s` and, for planes, no time charged per turn (their turns
+    /// are flown arcs, counted in the length). Without `aircraft`, the
+    /// same parameters.
+    pub(super) fn as_flown(&self) -> SurveyParams {
+        let mut out = self.clone();
+        if let Some(a) = &self.aircraft {
+            if let Some(v) = a.cruise_speed().filter(|v| *v > 0.0 && *v <= 50.0) {
+                out.speed_m_s = v;
+            }
+            if a.is_plane() {
+                out.turn_penalty_s = 0.0;
+            }
+        }
+        out
+    }
+
+    /// How a plane turns between lanes (arcs planned [`ARC_SLACK`] wider
+    /// than its turn radius).
+    pub(super) fn plane_turns(&self) -> Option<PlaneTurns> {
+        self.plane().map(|a| PlaneTurns {
+            radius_m: a.turn_radius() * ARC_SLACK,
+            lead_in_m: a.lead_in(),
+            overshoot_m: a.lead_in(),
+        })
+    }
+}
+
+/// A plane flies each cell's lanes in the order its turns are shortest in.
+pub(super) fn order_lanes(d: &mut Decomposition, params: &SurveyParams) {
+    if let Some(turns) = params.plane_turns() {
+        for plan in &mut d.plans {
+            *plan = turns.order(plan);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn defaults_per_type_and_checks() {
+        let a: Aircraft = serde_json::from_value(json!({"type": "fixed_wing"})).unwrap();
+        assert_eq!(
+            (a.turn_radius(), a.max_climb_angle_deg(), a.cruise_speed()),
+            (40.0, 10.0, Some(16.0))
+        );
+        assert_eq!(a.lead_in(), 40.0);
+        let v: Aircraft =
+            serde_json::from_value(json!({"type": "vtol", "turn_radius_m": 80})).unwrap();
+        assert_eq!((v.turn_radius(), v.lead_in()), (80.0, 80.0));
+        let m = Aircraft::default();
+        assert!(!m.is_plane());
+        assert_eq!(m.cruise_speed(), None);
+        assert!(serde_json::from_value::<Aircraft>(json!({"type": "glider"})).is_err());
+
+        let mut issues = Vec::new();
+        let bad = Aircraft {
+            kind: AircraftType::FixedWing,
+            turn_radius_m: Some(2.0),
+            max_climb_angle_deg: Some(0.0),
+            cruise_speed_m_s: Some(60.0),
+            lead_in_m: Some(-1.0),
+        };
+        bad.check(&mut issues, "/aircraft");
+        let ptrs: Vec<&str> = issues.iter().map(|i| i.pointer.as_str()).collect();
+        assert_eq!(
+            ptrs,
+            [
+                "/aircraft/turn_radius_m",
+                "/aircraft/max_climb_angle_deg",
+                "/aircraft/cruise_speed_m_s",
+                "/aircraft/lead_in_m"
+            ]
+        );
+        assert!(
+            issues[0].message.contains("[5, 1000]"),
+            "{}",
+            issues[0].message
+        );
+        let mut issues = Vec::new();
+        Aircraft {
+            turn_radius_m: Some(30.0),
+            ..Aircraft::default()
+        }
+        .check(&mut issues, "/aircraft");
+        assert_eq!(issues[0].pointer, "/aircraft/turn_radius_m");
+    }
+}

@@ -1,0 +1,621 @@
+//! A tour flown by a plane (fixed wing or VTOL): lanes entered straight
+//! (lead-in, overshoot; a lane end facing a no-fly zone pulled back until
+//! the plane can turn before it), Dubins turns between lanes and Dubins
+//! transits smoothed along the NFZ-avoiding path, every piece checked
+//! against the keep-out area, written as waypoints under the turn rule.
+
+use geo_types::Coord;
+
+use super::aircraft::{Aircraft, AircraftType};
+use super::request::PlanError;
+use super::result::UavStats;
+use crate::coverage::airframe::{PlaneTurns, lane_poses};
+use crate::coverage::arcs::{self, ARC_SLACK, Flown, Mark, Waypoint};
+use crate::coverage::dubins::{Piece, Pose, dubins_paths};
+use crate::coverage::{Lane, photo_count};
+use crate::export::{GeoPoint, MissionItem};
+use crate::flock::{ObstacleMap, Tour};
+use crate::geo::{Issue, UtmProjection};
+
+/// Arc samples for clearance checks, radians (the polygon corners are
+/// never wider than 15°).
+const CHECK_STEP: f64 = 0.13;
+/// Lane ends are pulled back in steps of this share of the turn radius.
+const TRIM_STEP: f64 = 0.25;
+/// A lane shorter than this after trimming is left out, m.
+const MIN_LANE_M: f64 = 1.0;
+
+/// How a plane flies: its turns and the keep-out area it stays out of.
+pub(super) struct PlaneFlight<'a> {
+    pub kind: AircraftType,
+    /// Turn radius of the autopilot (the turn rule's).
+    pub radius: f64,
+    /// Planned arcs: a little wider (see [`ARC_SLACK`]).
+    pub turns: PlaneTurns,
+    pub climb_angle_deg: f64,
+    /// The last straight before the landing: a plane descends on it from
+    /// the survey altitude at its climb angle; a VTOL flies it level.
+    pub final_m: f64,
+    pub altitude: f64,
+    pub obstacles: &'a ObstacleMap,
+    /// The same obstacles with the transit search's corners a turn radius
+    /// out, so that the arcs round them keep clear.
+    pub routes: ObstacleMap,
+}
+
+/// One sortie as a plane flies it.
+pub(super) struct PlaneSortie {
+    pub items: Vec<MissionItem>,
+    pub stats: UavStats,
+    /// Every point of the rounded path (for the fence).
+    pub points: Vec<Coord<f64>>,
+    /// Lane length pulled back from no-fly zones, m.
+    pub trimmed_m: f64,
+}
+
+impl<'a> PlaneFlight<'a> {
+    pub(super) fn new(
+        aircraft: &Aircraft,
+        altitude: f64,
+        obstacles: &'a ObstacleMap,
+    ) -> PlaneFlight<'a> {
+        let radius = aircraft.turn_radius();
+        let lead = aircraft.lead_in();
+        let climb_angle_deg = aircraft.max_climb_angle_deg();
+        let final_m = match aircraft.kind {
+            AircraftType::Vtol => radius * ARC_SLACK,
+            _ => (altitude / climb_angle_deg.to_radians().tan()).max(radius * ARC_SLACK),
+        };
+        PlaneFlight {
+            kind: aircraft.kind,
+            radius,
+            turns: PlaneTurns {
+                radius_m: radius * ARC_SLACK,
+                lead_in_m: lead,
+                overshoot_m: lead,
+            },
+            climb_angle_deg,
+            final_m,
+            altitude,
+            obstacles,
+            routes: obstacles.pushed(radius * ARC_SLACK),
+        }
+    }
+
+    fn fault(&self, at: Coord<f64>, what: &str) -> PlanError {
+        PlanError::Invalid(vec![Issue::new(
+            "/aircraft/turn_radius_m",
+            &format!(
+                "{what} near ({:.0}, {:.0}) (UTM) cannot keep nfz_clearance_m from the no-fly zones \
+                 at a turn radius of {} m: lower turn_radius_m or lead_in_m, or move the start",
+                at.x, at.y, self.radius
+            ),
+        )])
+    }
+
+    /// Is every point of `piece` outside the keep-out area? Arcs are
+    /// checked along their chords and along the polygon round them (the
+    /// rounded path flown runs between the two).
+    fn clear(&self, piece: &Piece) -> bool {
+        match *piece {
+            Piece::Line { from, to } => self.obstacles.is_clear(from, to),
+            Piece::Arc {
+                centre,
+                radius,
+                start,
+                sweep,
+            } => {
+                let n = ((sweep.abs() / CHECK_STEP).ceil() as usize).max(1);
+                let step = sweep / n as f64;
+                let at = |a: f64, r: f64| {
+                    centre
+                        + Coord {
+                            x: r * a.cos(),
+                            y: r * a.sin(),
+                        }
+                };
+                let outer = radius / (step.abs() / 2.0).cos();
+                let mut inner = vec![piece.start()];
+                let mut around = vec![piece.start()];
+                for k in 0..n {
+                    inner.push(at(start + step * (k + 1) as f64, radius));
+                    around.push(at(start + step * (k as f64 + 0.5), outer));
+                }
+                around.push(piece.end());
+                [inner, around]
+                    .iter()
+                    .all(|p| p.windows(2).all(|w| self.obstacles.is_clear(w[0], w[1])))
+            }
+        }
+    }
+
+    fn all_clear(&self, pieces: &[Piece]) -> bool {
+        pieces.iter().all(|p| self.clear(p))
+    }
+
+    /// The first clear Dubins word from `a` to `b`.
+    fn dubins_clear(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
+        dubins_paths(a, b, self.turns.radius_m)
+            .into_iter()
+            .find(|w| self.all_clear(w))
+    }
+
+    /// From pose `a` to pose `b` keeping out of the keep-out area: one
+    /// Dubins word if one is clear, else Dubins words through the corners
+    /// of the NFZ-avoiding path (headed along the bisector of its legs),
+    /// skipping every corner it can.
+    fn connect(&self, a: Pose, b: Pose) -> Result<Vec<Piece>, PlanError> {
+        if let Some(w) = self.dubins_clear(a, b) {
+            return Ok(w);
+        }
+        let path = self
+            .routes
+            .shortest_path(a.at, b.at)
+            .map_err(|_| self.fault(a.at, "the transit"))?;
+        let mut poses = vec![a];
+        for i in 1..path.len().saturating_sub(1) {
+            let (p, c, n) = (path[i - 1], path[i], path[i + 1]);
+            let (u, v) = (unit(c - p), unit(n - c));
+            let d = u + v;
+            poses.push(Pose::new(c, d.y.atan2(d.x)));
+        }
+        poses.push(b);
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i + 1 < poses.len() {
+            crate::cancel::check()?;
+            let Some((j, w)) = (i + 1..poses.len())
+                .rev()
+                .find_map(|j| self.dubins_clear(poses[i], poses[j]).map(|w| (j, w)))
+                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))
+            else {
+                return Err(self.fault(poses[i].at, "the transit"));
+            };
+            out.extend(w);
+            i = j;
+        }
+        Ok(out)
+    }
+
+    /// Two clear Dubins words from `a` to `b` through a pose nearby (1 to 3
+    /// turn radii from their midpoint, 8 directions and 8 headings), the
+    /// shortest such; for turns too tight for one word.
+    fn detour(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
+        let r = self.turns.radius_m;
+        let mid = (a.at + b.at) / 2.0;
+        let mut best: Option<(f64, Vec<Piece>)> = None;
+        for ring in 1..=3 {
+            for k in 0..8 {
+                let dir = k as f64 * std::f64::consts::FRAC_PI_4;
+                let at = mid
+                    + Coord {
+                        x: ring as f64 * r * dir.cos(),
+                        y: ring as f64 * r * dir.sin(),
+                    };
+                if self.obstacles.contains_point(at) {
+                    continue;
+                }
+                for h in 0..8 {
+                    let via = Pose::new(at, h as f64 * std::f64::consts::FRAC_PI_4);
+                    let Some(first) = self.dubins_clear(a, via) else {
+                        continue;
+                    };
+                    let Some(second) = self.dubins_clear(via, b) else {
+                        continue;
+                    };
+                    let mut w = first;
+                    w.extend(second);
+                    let len: f64 = w.iter().map(Piece::length).sum();
+                    if best.as_ref().is_none_or(|(l, _)| len < *l) {
+                        best = Some((len, w));
+                    }
+                }
+            }
+            if best.is_some() {
+                break;
+            }
+        }
+        best.map(|(_, w)| w)
+    }
+
+    /// The lane pulled back at either end until the run beyond it (the
+    /// overshoot or lead-in and a turn radius) is clear; `None` when
+    /// nothing of it is left.
+    fn trim(&self, lane: &Lane) -> Option<Lane> {
+        let len = dist(lane.start, lane.end);
+        let (start, end) = lane_poses(lane);
+        let step = (self.radius * TRIM_STEP).max(1.0);
+        // Room beyond the lane: the straight run, then a half turn to
+        // either side (a lane start's run is looked at backwards).
+        let room = |pose: Pose, run: f64| {
+            let beyond = pose.ahead(run);
+            let facing = if run < 0.0 {
+                Pose::new(beyond.at, beyond.heading + std::f64::consts::PI)
+            } else {
+                beyond
+            };
+            self.obstacles.is_clear(pose.at, beyond.at)
+                && [1.0, -1.0]
+                    .iter()
+                    .any(|&side| self.clear(&self.half_turn(facing, side)))
+        };
+        let pull = |pose: Pose, run: f64, sign: f64| -> Option<f64> {
+            let mut t = 0.0;
+            while t <= len {
+                if room(pose.ahead(sign * t), run) {
+                    return Some(t);
+                }
+                t += step;
+            }
+            None
+        };
+        let ahead = self.turns.overshoot_m;
+        let behind = self.turns.lead_in_m;
+        let cut_end = pull(end, ahead, -1.0)?;
+        let cut_start = pull(start, -behind, 1.0)?;
+        (len - cut_end - cut_start >= MIN_LANE_M).then(|| Lane {
+            start: start.ahead(cut_start).at,
+            end: end.ahead(-cut_end).at,
+        })
+    }
+
+    /// A half turn from `pose` to the left (`side` 1) or right (−1).
+    fn half_turn(&self, pose: Pose, side: f64) -> Piece {
+        let r = self.turns.radius_m;
+        let normal = pose.heading + side * std::f64::consts::FRAC_PI_2;
+        Piece::Arc {
+            centre: pose.at
+                + Coord {
+                    x: r * normal.cos(),
+                    y: r * normal.sin(),
+                },
+            radius: r,
+            start: normal + std::f64::consts::PI,
+            sweep: side * std::f64::consts::PI,
+        }
+    }
+
+    /// The way from the end of lane `a` to the start of lane `b`: the
+    /// shortest clear turn, else a transit from the overshoot's end to the
+    /// lead-in's start.
+    fn lane_turn(&self, a: &Lane, b: &Lane) -> Result<Vec<Piece>, PlanError> {
+        if let Some(t) = self
+            .turns
+            .between(a, b)
+            .into_iter()
+            .find(|t| self.all_clear(t))
+        {
+            return Ok(t);
+        }
+        let (_, end) = lane_poses(a);
+        let (start, _) = lane_poses(b);
+        self.around(end, start)
+    }
+
+    /// Overshoot, transit, lead-in from a lane's end pose to a lane's
+    /// start pose.
+    fn around(&self, end: Pose, start: Pose) -> Result<Vec<Piece>, PlanError> {
+        let out = end.ahead(self.turns.overshoot_m);
+        let lead = start.ahead(-self.turns.lead_in_m);
+        let mut pieces = vec![Piece::Line {
+            from: end.at,
+            to: out.at,
+        }];
+        pieces.extend(self.connect(out, lead)?);
+        pieces.push(Piece::Line {
+            from: lead.at,
+            to: start.at,
+        });
+        pieces.retain(|p| p.length() > 1e-9);
+        Ok(pieces)
+    }
+
+    /// The pieces of `tour` flown from `home` and back, and the lengths
+    /// (lanes, transits) and trimmed lane length.
+    fn pieces(&self, tour: &Tour, home: Coord<f64>) -> Result<Flight, PlanError> {
+        let mut f = Flight::default();
+        let mut lanes: Vec<Vec<Lane>> = Vec::new();
+        for visit in &tour.visits {
+            let mut kept = Vec::new();
+            for lane in &visit.lanes {
+                let full = dist(lane.start, lane.end);
+                match self.trim(lane) {
+                    Some(l) => {
+                        f.trimmed_m += full - dist(l.start, l.end);
+                        kept.push(l);
+                    }
+                    None => f.trimmed_m += full,
+                }
+            }
+            if !kept.is_empty() {
+                lanes.push(kept);
+            }
+        }
+        // Departure: straight out of the take-off, towards the first lane.
+        let first_target = lanes
+            .first()
+            .and_then(|c| c.first())
+            .map_or(home, |l| l.start);
+        let heading = if dist(home, first_target) > 1e-9 {
+            Pose::towards(home, first_target).heading
+        } else {
+            0.0
+        };
+        let climb_out = self
+            .straight_at_home(home, heading, self.turns.radius_m)
+            .ok_or_else(|| self.fault(home, "the climb-out"))?;
+        f.push_transit(vec![Piece::Line {
+            from: home,
+            to: climb_out.at,
+        }]);
+        let mut at = climb_out;
+        let mut from_lane = false;
+        for cell in &lanes {
+            for (k, lane) in cell.iter().enumerate() {
+                let (start, end) = lane_poses(lane);
+                if k == 0 {
+                    let way = if from_lane {
+                        self.around(at, start)?
+                    } else {
+                        let lead = start.ahead(-self.turns.lead_in_m);
+                        let mut w = self.connect(at, lead)?;
+                        w.push(Piece::Line {
+                            from: lead.at,
+                            to: start.at,
+                        });
+                        w
+                    };
+                    f.push_transit(way);
+                } else {
+                    f.push_turn(self.lane_turn(&cell[k - 1], lane)?);
+                }
+                f.push_lane(lane);
+                at = end;
+                from_lane = true;
+            }
+        }
+        let landing = self.landing(home, at)?;
+        let way = if from_lane {
+            let out = at.ahead(self.turns.overshoot_m);
+            let mut w = vec![Piece::Line {
+                from: at.at,
+                to: out.at,
+            }];
+            w.extend(self.connect(out, landing)?);
+            w
+        } else {
+            self.connect(at, landing)?
+        };
+        f.push_transit(way);
+        f.push_transit(vec![Piece::Line {
+            from: landing.at,
+            to: home,
+        }]);
+        Ok(f)
+    }
+
+    /// Where the final straight to the landing starts ([`PlaneFlight::final_m`]
+    /// before home): of the clear directions, the one nearest to arriving
+    /// straight from `from`.
+    fn landing(&self, home: Coord<f64>, from: Pose) -> Result<Pose, PlanError> {
+        let base = if dist(from.at, home) > 1e-9 {
+            Pose::towards(from.at, home).heading
+        } else {
+            from.heading
+        };
+        self.straight_at_home(home, base, -self.final_m)
+            .ok_or_else(|| self.fault(home, "the landing approach"))
+    }
+
+    /// A straight of `length` m out of `home` (into it when negative),
+    /// headed as near `base` as the keep-out area allows (in 15° steps);
+    /// its far end.
+    fn straight_at_home(&self, home: Coord<f64>, base: f64, length: f64) -> Option<Pose> {
+        (0..24).find_map(|k| {
+            let turn = (k as f64 / 2.0).ceil() * if k % 2 == 0 { 1.0 } else { -1.0 };
+            let pose = Pose::new(home, base + turn * std::f64::consts::PI / 12.0).ahead(length);
+            (self.obstacles.is_clear(pose.at, home) && !self.obstacles.contains_point(pose.at))
+                .then_some(pose)
+        })
+    }
+
+    /// The sortie flying `tour` from `home` at `altitude` (flat): mission
+    /// items (take-off and landing of the type, the camera on along each
+    /// lane only), statistics and the rounded path's points. `to_geo`
+    /// writes a planning point as a mission position at an altitude.
+    pub(super) fn fly(
+        &self,
+        tour: &Tour,
+        home: Coord<f64>,
+        speed_m_s: f64,
+        trigger_distance_m: f64,
+        to_geo: &dyn Fn(Coord<f64>, f64) -> Result<GeoPoint, PlanError>,
+    ) -> Result<PlaneSortie, PlanError> {
+        let f = self.pieces(tour, home)?;
+        let wps = arcs::waypoints(&f.path, self.radius).map_err(|e| self.fault(e.at, "a turn"))?;
+        let pts: Vec<Coord<f64>> = wps.iter().map(|w| w.at).collect();
+        let rounded = arcs::rounded(&pts, self.radius);
+        // The climb-out and the final touch home, which may lie within the
+        // clearance (the final was checked on its own).
+        let n = rounded.len();
+        for (i, w) in rounded.windows(2).enumerate() {
+            if i > 0 && i + 2 < n && !self.obstacles.is_clear(w[0], w[1]) {
+                return Err(self.fault(w[0], "the rounded path"));
+            }
+        }
+        let alt = self.altitude;
+        let items = self.items(&wps, alt, speed_m_s, trigger_distance_m, to_geo)?;
+        let length_m = arcs::rounded_length(&pts, self.radius);
+        let angle = self.climb_angle_deg.to_radians();
+        let vertical = match self.kind {
+            AircraftType::Vtol => 2.0 * alt,
+            // The climb at the take-off pitch, and the final's slope.
+            _ => alt / angle.sin() + (self.final_m.hypot(alt) - self.final_m),
+        };
+        let length_3d_m = length_m + vertical;
+        let turns = f
+            .path
+            .iter()
+            .filter(
+                |p| matches!(p.piece, Piece::Arc { sweep, .. } if sweep.abs() > 10f64.to_radians()),
+            )
+            .count();
+        let mut cells: Vec<usize> = tour.visits.iter().map(|v| v.cell_index).collect();
+        cells.sort_unstable();
+        cells.dedup();
+        let stats = UavStats {
+            length_m,
+            length_3d_m,
+            survey_length_m: f.lanes.iter().sum(),
+            transit_length_m: f.transit_m,
+            turns,
+            flight_time_s: length_3d_m / speed_m_s,
+            photos: f
+                .lanes
+                .iter()
+                .map(|&l| photo_count(l, trigger_distance_m))
+                .sum(),
+            cells: cells.len(),
+            sorties: 1,
+        };
+        let mut points = rounded;
+        points.extend(pts);
+        Ok(PlaneSortie {
+            items,
+            stats,
+            points,
+            trimmed_m: f.trimmed_m,
+        })
+    }
+
+    /// The mission items: take-off, speed, the waypoints between home and
+    /// home with the camera switched at lane ends, and the landing.
+    fn items(
+        &self,
+        wps: &[Waypoint],
+        alt: f64,
+        speed_m_s: f64,
+        trigger_distance_m: f64,
+        to_geo: &dyn Fn(Coord<f64>, f64) -> Result<GeoPoint, PlanError>,
+    ) -> Result<Vec<MissionItem>, PlanError> {
+        let mut items = vec![
+            match self.kind {
+                AircraftType::Vtol => MissionItem::VtolTakeoff { alt },
+                _ => MissionItem::PlaneTakeoff {
+                    alt,
+                    pitch_deg: self.climb_angle_deg,
+                },
+            },
+            MissionItem::ChangeSpeed { speed_m_s },
+        ];
+        let inner = &wps[1..wps.len().saturating_sub(1)];
+        for (i, w) in inner.iter().enumerate() {
+            if i + 1 == inner.len() {
+                // The landing sequence: the last waypoint is its approach.
+                items.push(MissionItem::LandStart);
+            }
+            items.push(MissionItem::Waypoint(to_geo(w.at, alt)?));
+            match w.mark {
+                Mark::LaneStart => items.push(MissionItem::CameraTriggerDistance {
+                    distance_m: trigger_distance_m,
+                }),
+                Mark::LaneEnd => items.push(MissionItem::CameraTriggerDistance { distance_m: 0.0 }),
+                Mark::Point | Mark::Corner => {}
+            }
+        }
+        let home = to_geo(wps[wps.len() - 1].at, 0.0)?;
+        items.push(match self.kind {
+            AircraftType::Vtol => MissionItem::VtolLand(home),
+            _ => MissionItem::Land(home),
+        });
+        Ok(items)
+    }
+}
+
+/// The pieces of a sortie and what they add up to.
+#[derive(Default)]
+struct Flight {
+    path: Vec<Flown>,
+    lanes: Vec<f64>,
+    transit_m: f64,
+    trimmed_m: f64,
+}
+
+impl Flight {
+    fn push(&mut self, pieces: Vec<Piece>, lane: bool) {
+        self.path.extend(
+            pieces
+                .into_iter()
+                .filter(|p| p.length() > 1e-9)
+                .map(|piece| Flown { piece, lane }),
+        );
+    }
+
+    fn push_transit(&mut self, pieces: Vec<Piece>) {
+        self.transit_m += pieces.iter().map(Piece::length).sum::<f64>();
+        self.push(pieces, false);
+    }
+
+    fn push_turn(&mut self, pieces: Vec<Piece>) {
+        self.push(pieces, false);
+    }
+
+    fn push_lane(&mut self, lane: &Lane) {
+        self.lanes.push(dist(lane.start, lane.end));
+        self.push(
+            vec![Piece::Line {
+                from: lane.start,
+                to: lane.end,
+            }],
+            true,
+        );
+    }
+}
+
+fn unit(c: Coord<f64>) -> Coord<f64> {
+    let l = c.x.hypot(c.y);
+    if l > 0.0 { c / l } else { c }
+}
+
+fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
+    (b.x - a.x).hypot(b.y - a.y)
+}
+
+impl PlaneFlight<'_> {
+    /// The mission of one sortie flown from UAV home `home` (planning
+    /// coordinates; `start` the same in lon/lat), its statistics and the
+    /// points flown (for the fence). Flat surveys only.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn sortie(
+        &self,
+        tour: &Tour,
+        home: Coord<f64>,
+        start: [f64; 2],
+        speed_m_s: f64,
+        trigger_distance_m: f64,
+        frame: crate::export::AltitudeFrame,
+        proj: &UtmProjection,
+    ) -> Result<(crate::export::Mission, UavStats, Vec<Coord<f64>>), PlanError> {
+        let to_geo = |c: Coord<f64>, alt: f64| -> Result<GeoPoint, PlanError> {
+            let ll = proj.to_wgs84(c)?;
+            Ok(GeoPoint {
+                lon: ll.x,
+                lat: ll.y,
+                alt,
+            })
+        };
+        let flown = self.fly(tour, home, speed_m_s, trigger_distance_m, &to_geo)?;
+        let mission = crate::export::Mission {
+            home: GeoPoint {
+                lon: start[0],
+                lat: start[1],
+                alt: 0.0,
+            },
+            frame,
+            cruise_speed_m_s: speed_m_s,
+            items: flown.items,
+            over_terrain: false,
+        };
+        Ok((mission, flown.stats, flown.points))
+    }
+}
