@@ -26,6 +26,7 @@ export interface FieldMessage {
 /** The survey request's members and where each is shown. Longer prefixes first wins. */
 export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/roi', field: 'roi', label: 'Survey area' },
+  { prefix: '/corridor', field: 'corridor', label: 'Corridor' },
   { prefix: '/no_fly_zones', field: 'nfz', label: 'No-fly zone' },
   { prefix: '/dem_id', field: 'dem', label: 'Terrain model' },
   { prefix: '/allow_partial_dem', field: 'dem', label: 'Terrain model' },

@@ -3,6 +3,7 @@
 // unit-tested.
 
 import type { Camera, LonLat } from './api';
+import { corridorFromRequest, corridorMembers, type CorridorValues } from './corridor-fields';
 import { polygonsOf, type PolygonRings } from './geo-import';
 import type { FieldMessage } from './problems';
 
@@ -31,6 +32,8 @@ export interface UavStart {
 export interface SurveyFormValues {
   name: string;
   roi: PolygonRings | null;
+  /** A corridor along a line, surveyed instead of the ROI when given. */
+  corridor?: CorridorValues | null;
   noFlyZones: PolygonRings[];
   demId: string | null;
   allowPartialDem: boolean;
@@ -69,7 +72,9 @@ const polygon = (rings: PolygonRings) => ({ type: 'Polygon', coordinates: rings 
 /** Builds the request body, or the faults that keep it from being sent. */
 export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   const errors: FieldMessage[] = [];
-  if (!v.roi) errors.push({ field: 'roi', text: 'Survey area: draw it on the map or import a file first.' });
+  const corridor = v.corridor ? corridorMembers(v.corridor) : null;
+  if (corridor && 'error' in corridor) errors.push({ field: 'corridor', text: corridor.error, control: 'corridor-width' });
+  if (!v.roi && !corridor) errors.push({ field: 'roi', text: 'Survey area: draw it on the map or import a file first.' });
   if (v.altitudeFrame !== 'relative' && !v.demId) {
     errors.push({ field: 'altitude-frame', text: `Altitude frame: “${v.altitudeFrame}” needs a terrain model (DEM); choose one or use “relative”.` });
   }
@@ -107,7 +112,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
 
   const body: Record<string, unknown> = {
     ...v.extra,
-    roi: polygon(v.roi!),
+    ...(corridor && 'members' in corridor ? corridor.members : { roi: polygon(v.roi!) }),
     no_fly_zones: v.noFlyZones.map(polygon),
     front_overlap: round(v.frontOverlapPct / 100, 4),
     side_overlap: round(v.sideOverlapPct / 100, 4),
@@ -129,8 +134,9 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   // No UAVs placed: the server puts one at the ROI's first corner clear of the
   // NFZs; with a battery limit that UAV is spelled out here (the limit is per
   // UAV), at the point the server would choose.
-  const uavs: UavStart[] =
-    v.uavs.length > 0 || battery === null ? v.uavs : [{ id: 'uav1', start: defaultStart(v.roi!, v.noFlyZones, v.nfzClearanceM) }];
+  // A corridor's UAV takes off at the line's start (inside the corridor).
+  const start = (): LonLat => (v.corridor ? v.corridor.line[0] : defaultStart(v.roi!, v.noFlyZones, v.nfzClearanceM));
+  const uavs: UavStart[] = v.uavs.length > 0 || battery === null ? v.uavs : [{ id: 'uav1', start: start() }];
   if (uavs.length > 0) {
     body.uavs = uavs.map((u) => {
       const uav: Record<string, unknown> = { id: u.id, start: u.start };
@@ -284,7 +290,7 @@ export const FORM_DEFAULTS = {
  * `project_id` too: a plan made again goes to the project chosen now.
  */
 const FORM_MEMBERS = new Set([
-  'name', 'project_id', 'roi', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
+  'name', 'project_id', 'roi', 'corridor', 'corridor_width_m', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
   'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'nfz_clearance_m', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
 ]);
 
@@ -312,6 +318,7 @@ export function formFromRequest(
   const oneOf = <T extends string>(x: unknown, allowed: readonly T[], fallback: T): T => (allowed.includes(x as T) ? (x as T) : fallback);
 
   const rois = polygonsOf(r.roi);
+  const corridor = corridorFromRequest(r);
   if (rois.length > 1) notes.push(`The saved area has ${rois.length} parts; only the first is shown and planned again.`);
   const noFlyZones = Array.isArray(r.no_fly_zones) ? r.no_fly_zones.flatMap((z) => polygonsOf(z)) : [];
 
@@ -347,6 +354,7 @@ export function formFromRequest(
     values: {
       name: name ?? '',
       roi: rois[0] ?? null,
+      ...(corridor ? { corridor } : {}),
       noFlyZones,
       demId: typeof r.dem_id === 'string' ? r.dem_id : null,
       allowPartialDem: r.allow_partial_dem === true,

@@ -3,6 +3,7 @@
 // profile, downloads).
 
 import { api, type CameraPreset, type LonLat, type Survey } from './api';
+import { CorridorFields } from './corridor-fields';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue, swatch } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
@@ -29,6 +30,7 @@ export class SurveyPanel {
   private readonly root = byId('survey-panel');
   private readonly errors = new ErrorSlots(this.root, 'survey', SURVEY_FIELDS);
   private roi: PolygonRings | null = null;
+  private readonly corridor: CorridorFields;
   private noFlyZones: PolygonRings[] = [];
   private uavs: UavStart[] = [];
   private rally: LonLat[] = [];
@@ -61,6 +63,11 @@ export class SurveyPanel {
     byId('clear-nfz').addEventListener('click', () => this.map.clearNoFlyZones());
     byId<HTMLInputElement>('import-roi').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'roi'));
     byId<HTMLInputElement>('import-nfz').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'nfz'));
+    this.corridor = new CorridorFields(
+      (line) => this.map.fitLonLat(extentOf([line])),
+      () => this.markStale(),
+      (text) => this.errors.show('corridor', text),
+    );
 
     // Any edit of the form: the flight geometry follows the numbers as they are typed, and the
     // results of an earlier plan must not pass for the current settings.
@@ -296,6 +303,7 @@ export class SurveyPanel {
     return {
       name: val('survey-name'),
       roi: this.roi,
+      corridor: this.corridor.values(),
       noFlyZones: this.noFlyZones,
       demId: follow ? (this.dem.current?.id ?? null) : null,
       allowPartialDem: byId<HTMLInputElement>('allow-partial-dem').checked,
@@ -384,6 +392,7 @@ export class SurveyPanel {
       this.map.clearNoFlyZones();
       this.map.addNoFlyZones(v.noFlyZones);
       this.map.setRoi(v.roi);
+      this.corridor.restore(v.corridor ?? null);
 
       const select = byId<HTMLSelectElement>('camera');
       if (v.camera !== 'custom' && ![...select.options].some((o) => o.value === v.camera)) {
