@@ -137,7 +137,7 @@ impl Camera {
     }
 
     /// Sensor side (mm) and pixel count lying across track.
-    fn across_track(&self) -> (f64, f64) {
+    pub(crate) fn across_track(&self) -> (f64, f64) {
         match self.orientation {
             Orientation::Landscape => (self.sensor_width_mm, f64::from(self.image_width_px)),
             Orientation::Portrait => (self.sensor_height_mm, f64::from(self.image_height_px)),
@@ -145,7 +145,7 @@ impl Camera {
     }
 
     /// Sensor side (mm) lying along track.
-    fn along_track_mm(&self) -> f64 {
+    pub(crate) fn along_track_mm(&self) -> f64 {
         match self.orientation {
             Orientation::Landscape => self.sensor_height_mm,
             Orientation::Portrait => self.sensor_width_mm,

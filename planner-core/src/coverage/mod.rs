@@ -9,6 +9,8 @@ mod coverage_ratio;
 pub mod dubins;
 mod lanes;
 mod links;
+mod oblique;
+mod pattern;
 mod region;
 
 pub use camera::{
@@ -20,6 +22,11 @@ pub use corridor::{
 };
 pub use coverage_ratio::coverage_ratio;
 pub use lanes::{CellLayouts, plan_cell, plan_cell_candidates_in, plan_cell_in};
+pub use oblique::{
+    FAR_EDGE_BELOW_HORIZON_DEG, MIN_PITCH_DEG, NADIR_PITCH_DEG, PitchTooShallow, footprint_corners,
+    least_steep_pitch_deg, pitched_geometry,
+};
+pub use pattern::{Pattern, crosshatch, crosshatch_all};
 pub use region::FreeSpace;
 
 use geo_types::Coord;

@@ -13,6 +13,10 @@ pub mod cmd {
     pub const DO_LAND_START: u16 = 189;
     pub const DO_CHANGE_SPEED: u16 = 178;
     pub const DO_SET_CAM_TRIGG_DIST: u16 = 206;
+    pub const DO_SET_CAM_TRIGG_INTERVAL: u16 = 214;
+    pub const DO_GIMBAL_MANAGER_PITCHYAW: u16 = 1000;
+    pub const IMAGE_START_CAPTURE: u16 = 2000;
+    pub const DO_TRIGGER_CONTROL: u16 = 2003;
     pub const NAV_FENCE_POLYGON_VERTEX_INCLUSION: u16 = 5001;
     pub const NAV_FENCE_POLYGON_VERTEX_EXCLUSION: u16 = 5002;
     pub const NAV_RALLY_POINT: u16 = 5100;
@@ -95,6 +99,16 @@ pub enum MissionItem {
     Land(GeoPoint),
     /// A VTOL's landing: fly to the point, transition, descend vertically.
     VtolLand(GeoPoint),
+    /// Point the gimbal `deg` below (negative) the horizon, facing forward.
+    GimbalPitch { deg: f64 },
+    /// Set the time between photos of time-based triggering.
+    CameraTriggerInterval { interval_s: f64 },
+    /// Start (`on`) or stop time-based triggering.
+    CameraTriggerControl { on: bool },
+    /// Fly to a point and hover there `hold_s` seconds.
+    HoldWaypoint { point: GeoPoint, hold_s: f64 },
+    /// Take one photo.
+    ImageStartCapture,
 }
 
 /// A complete mission for one vehicle.
@@ -222,6 +236,43 @@ impl Mission {
                     lon: p.lon,
                     alt: p.alt,
                 },
+                MissionItem::HoldWaypoint { point, hold_s } => MavItem {
+                    command: cmd::NAV_WAYPOINT,
+                    frame: f,
+                    params: [hold_s, 0.0, 0.0, KEEP_HEADING],
+                    lat: point.lat,
+                    lon: point.lon,
+                    alt: point.alt,
+                },
+                // Pointed with DO_GIMBAL_MANAGER_PITCHYAW, not the older
+                // DO_MOUNT_CONTROL: both autopilots run it as a mission item
+                // (ArduPilot from 4.3, whose gimbal page keeps
+                // DO_MOUNT_CONTROL for the mount mode only; PX4 from 1.13
+                // with MNT_MODE_IN "MAVLink gimbal v2", its DO_MOUNT_CONTROL
+                // input being deprecated), and MAVLink deprecated
+                // DO_MOUNT_CONTROL in 2020. Yaw 0 = ahead (flags 0 in param
+                // 5: vehicle frame), rates NaN = unset so the angle rules,
+                // gimbal device 0 = all (param 7).
+                MissionItem::GimbalPitch { deg } => MavItem::action(
+                    cmd::DO_GIMBAL_MANAGER_PITCHYAW,
+                    [deg, 0.0, f64::NAN, f64::NAN],
+                ),
+                // Cycle time in ms; shutter time -1 = unchanged.
+                MissionItem::CameraTriggerInterval { interval_s } => MavItem::action(
+                    cmd::DO_SET_CAM_TRIGG_INTERVAL,
+                    [interval_s * 1000.0, -1.0, 0.0, 0.0],
+                ),
+                // An interval of 0 means "ignore" in MAVLink, not "stop":
+                // time triggering is started and stopped by this (reset
+                // and pause -1 = unchanged).
+                MissionItem::CameraTriggerControl { on } => MavItem::action(
+                    cmd::DO_TRIGGER_CONTROL,
+                    [if on { 1.0 } else { 0.0 }, -1.0, -1.0, 0.0],
+                ),
+                // One image (count 1) from every camera (id 0), sequence 0.
+                MissionItem::ImageStartCapture => {
+                    MavItem::action(cmd::IMAGE_START_CAPTURE, [0.0, 0.0, 1.0, 0.0])
+                }
             })
             .collect()
     }
@@ -229,7 +280,7 @@ impl Mission {
     /// The positions flown, home first, as (lon, lat, alt).
     pub fn waypoints(&self) -> impl Iterator<Item = &GeoPoint> {
         self.items.iter().filter_map(|i| match i {
-            MissionItem::Waypoint(p) => Some(p),
+            MissionItem::Waypoint(p) | MissionItem::HoldWaypoint { point: p, .. } => Some(p),
             _ => None,
         })
     }

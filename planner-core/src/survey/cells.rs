@@ -161,6 +161,22 @@ pub(super) fn decompose_and_cover(
     Ok(best)
 }
 
+/// Lays the request's pattern over every cell's plan: with `crosshatch`, a
+/// second set of lanes across the first (after the terrain, if any, chose
+/// each cell's first set), `spacing` apart in the flyable space `free`.
+pub(super) fn lay_pattern(
+    d: &mut Decomposition,
+    pattern: coverage::Pattern,
+    free: &MultiPolygon<f64>,
+    spacing: f64,
+) -> Result<(), PlanError> {
+    if pattern == coverage::Pattern::Crosshatch {
+        d.plans = coverage::crosshatch_all(&d.plans, &d.cells, free, spacing);
+        crate::cancel::check()?;
+    }
+    Ok(())
+}
+
 /// Candidate slice angles for `auto`: every 15°, and the bearings of the
 /// longest boundary edges (a lane or slice along a long edge saves turns).
 fn auto_candidates(free: &MultiPolygon<f64>) -> Vec<f64> {

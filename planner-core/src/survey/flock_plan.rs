@@ -11,7 +11,8 @@
 
 use geo_types::{Coord, MultiPolygon, Polygon};
 
-use super::cells::Decomposition;
+use super::capture::Capture;
+use super::cells::{Decomposition, dist};
 use super::homes::FlockSetup;
 use super::request::{Flight, PlanError, SurveyParams, cancelled_or};
 use super::terrain_flight::{FlightRules, cell_length_3d, transit_length_3d};
@@ -50,6 +51,8 @@ struct FlockInput<'a> {
     pub terrain: Option<(&'a TerrainModel, FlightRules)>,
     /// A plane's turns, flown between the lanes (flat surveys).
     pub plane: Option<crate::coverage::airframe::PlaneTurns>,
+    /// Length charged for a path's hover stops (see [`Capture::stop_length_m`]).
+    pub stops: &'a dyn Fn(&CellPlan) -> f64,
 }
 
 /// One sortie: its tour and the pieces it flies, in order.
@@ -67,13 +70,15 @@ pub(super) struct FlockOutcome {
 
 impl FlockInput<'_> {
     /// The 3D length flown along a cell's (or piece's) path.
+    /// With hover photos, the length flown in the time their stops take.
     fn cell_length_3d(&self, plan: &CellPlan) -> f64 {
-        match &self.terrain {
-            Some((model, rules)) => cell_length_3d(model, plan, rules),
-            None => self
-                .plane
-                .map_or_else(|| plan.length_m(), |t| t.plan_length(plan)),
-        }
+        (self.stops)(plan)
+            + match &self.terrain {
+                Some((model, rules)) => cell_length_3d(model, plan, rules),
+                None => self
+                    .plane
+                    .map_or_else(|| plan.length_m(), |t| t.plan_length(plan)),
+            }
     }
 }
 
@@ -102,6 +107,19 @@ pub(super) fn share_cells(
     over_dem: Option<&OverDem>,
 ) -> Result<FlockOutcome, PlanError> {
     let pointer = |i: usize, field: &str| setup.pointer(i, field);
+    // Hover stops priced at the fastest UAV's speed: no UAV's time is
+    // under-charged (exact when all fly at one speed), so no sortie
+    // outlasts its battery.
+    let fastest = setup
+        .specs
+        .iter()
+        .filter_map(|u| u.speed_m_s)
+        .fold(params.speed_m_s, f64::max);
+    let capture = Capture::new(params, &flight.geometry, fastest);
+    let stops = |plan: &CellPlan| {
+        let lanes = plan.lanes.iter().map(|l| dist(l.start, l.end));
+        capture.stop_length_m(lanes, fastest)
+    };
     let input = FlockInput {
         plans: &d.plans,
         cells: &d.cells,
@@ -124,6 +142,7 @@ pub(super) fn share_cells(
         altitude_m: flight.altitude,
         terrain: over_dem.map(|o| (&o.terrain.model, flight.rules)),
         plane: params.plane_turns(),
+        stops: &stops,
     };
     let outcome = share(&input).map_err(cancelled_or)?;
     crate::cancel::check()?;

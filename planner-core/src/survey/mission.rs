@@ -5,6 +5,7 @@
 use geo::{ConvexHull, MultiPoint};
 use geo_types::{Coord, Point, Polygon};
 
+use super::capture::Capture;
 use super::cells::dist;
 use super::flock_plan::SortieTour;
 use super::homes::FlockSetup;
@@ -12,10 +13,10 @@ use super::request::{Flight, PlanError, SurveyParams};
 use super::result::{SortiePlan, UavPlan, UavStats};
 use super::terrain_flight::{UavTerrain, fly_tour};
 use super::terrain_prep::OverDem;
-use crate::coverage::{self, SurveyGeometry};
 use crate::export::{FencePolygon, GeoPoint, Mission, MissionItem};
 use crate::flock::{Piece, Tour, count_turns};
 use crate::geo::{GeoError, SurveyArea, UtmProjection};
+use crate::terrain::Point3;
 
 /// Every UAV's plan from the tours of its sorties (`flights`, one list
 /// per UAV), and every point flown (for the fence).
@@ -40,6 +41,7 @@ pub(super) fn uav_plans(
             crate::cancel::check()?;
             let tour = &sortie.tour;
             let home_amsl = over_dem.map(|o| (o, o.homes_amsl[i]));
+            let capture = Capture::new(params, &flight.geometry, speed);
             let (mission, stats, uav_terrain) = if let Some(plane) = &plane {
                 let home = flock.homes[i];
                 let trigger = flight.geometry.trigger_distance_m;
@@ -49,10 +51,11 @@ pub(super) fn uav_plans(
                 all_paths.extend(path);
                 (mission, stats, None)
             } else {
-                let (mission, length_3d, uav_terrain) =
-                    fly(tour, spec.start, home_amsl, speed, params, flight, proj)?;
+                let (mission, length_3d, uav_terrain) = fly(
+                    tour, spec.start, home_amsl, speed, &capture, params, flight, proj,
+                )?;
                 let path = tour.path();
-                let stats = tour_stats(tour, &path, length_3d, speed, params, &flight.geometry);
+                let stats = tour_stats(tour, &path, length_3d, speed, params, &capture);
                 all_paths.extend(path);
                 (mission, stats, uav_terrain)
             };
@@ -89,11 +92,13 @@ pub(super) fn uav_plans(
 /// One tour flown from `start`: flat at the altitude, or over the DEM
 /// from a home at `home_amsl`. The mission, its 3D length and the flight
 /// over the terrain.
+#[allow(clippy::too_many_arguments)]
 fn fly(
     tour: &Tour,
     start: [f64; 2],
     home_amsl: Option<(&OverDem, f64)>,
     speed: f64,
+    capture: &Capture,
     params: &SurveyParams,
     flight: &Flight,
     proj: &UtmProjection,
@@ -106,8 +111,7 @@ fn fly(
                 lat: start[1],
                 alt: 0.0,
             };
-            let mission =
-                build_mission(tour, home, altitude, speed, &flight.geometry, params, proj)?;
+            let mission = build_mission(tour, home, altitude, speed, capture, params, proj)?;
             // Flat survey: 3D adds the climb after take-off and the
             // descent home.
             (mission, tour.length_m() + 2.0 * altitude, None)
@@ -121,7 +125,7 @@ fn fly(
                 home_amsl,
                 params.altitude_frame,
                 speed,
-                &flight.geometry,
+                capture,
                 proj,
             )?;
             (flown.mission, flown.length_3d_m, Some(flown.terrain))
@@ -136,7 +140,7 @@ fn tour_stats(
     length_3d: f64,
     speed: f64,
     params: &SurveyParams,
-    geometry: &SurveyGeometry,
+    capture: &Capture,
 ) -> UavStats {
     let lane_lengths: Vec<f64> = tour
         .visits
@@ -145,6 +149,7 @@ fn tour_stats(
         .map(|l| dist(l.start, l.end))
         .collect();
     let turns = count_turns(path);
+    let photos = lane_lengths.iter().map(|&len| capture.photos(len)).sum();
     let mut cells: Vec<usize> = tour.visits.iter().map(|v| v.cell_index).collect();
     cells.sort_unstable();
     cells.dedup();
@@ -154,11 +159,10 @@ fn tour_stats(
         survey_length_m: lane_lengths.iter().sum(),
         transit_length_m: tour.transit_length_m(),
         turns,
-        flight_time_s: length_3d / speed + turns as f64 * params.turn_penalty_s,
-        photos: lane_lengths
-            .iter()
-            .map(|&len| coverage::photo_count(len, geometry.trigger_distance_m))
-            .sum(),
+        flight_time_s: length_3d / speed
+            + turns as f64 * params.turn_penalty_s
+            + capture.stop_time_s(photos),
+        photos,
         cells: cells.len(),
         sorties: 1,
     }
@@ -183,7 +187,7 @@ fn build_mission(
     home: GeoPoint,
     altitude: f64,
     speed_m_s: f64,
-    geometry: &SurveyGeometry,
+    capture: &Capture,
     params: &SurveyParams,
     proj: &UtmProjection,
 ) -> Result<Mission, GeoError> {
@@ -199,6 +203,20 @@ fn build_mission(
         MissionItem::Takeoff { alt: altitude },
         MissionItem::ChangeSpeed { speed_m_s },
     ];
+    items.extend(capture.start_items());
+    let to_geo = |p: &Point3| -> Result<GeoPoint, GeoError> {
+        let ll = proj.to_wgs84(p.xy())?;
+        Ok(GeoPoint {
+            lon: ll.x,
+            lat: ll.y,
+            alt: p.z,
+        })
+    };
+    let at_altitude = |c: Coord<f64>| Point3 {
+        x: c.x,
+        y: c.y,
+        z: altitude,
+    };
     let transit =
         |items: &mut Vec<MissionItem>, t: &[Coord<f64>], keep_last: bool| -> Result<(), GeoError> {
             // The first point is where we already are; the last is the next lane
@@ -216,12 +234,8 @@ fn build_mission(
     for (i, visit) in tour.visits.iter().enumerate() {
         transit(&mut items, &tour.transits[i], false)?;
         for (k, lane) in visit.lanes.iter().enumerate() {
-            items.push(wp(lane.start)?);
-            items.push(MissionItem::CameraTriggerDistance {
-                distance_m: geometry.trigger_distance_m,
-            });
-            items.push(wp(lane.end)?);
-            items.push(MissionItem::CameraTriggerDistance { distance_m: 0.0 });
+            let pts = [at_altitude(lane.start), at_altitude(lane.end)];
+            items.extend(capture.lane_items(&pts, false, &to_geo)?.0);
             if let Some(link) = visit.links.get(k) {
                 for &c in link {
                     items.push(wp(c)?);

@@ -14,6 +14,7 @@ use crate::geo::Limits;
 use crate::terrain::Dem;
 
 mod aircraft;
+mod capture;
 mod cells;
 mod corridor;
 mod files;
@@ -27,8 +28,9 @@ mod result;
 mod terrain_flight;
 mod terrain_prep;
 
-pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
 pub use aircraft::{Aircraft, AircraftType};
+pub use capture::{DEFAULT_HOLD_S, Trigger, TriggerMode};
+pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
 pub use files::PlanFile;
 pub use rally::MAX_RALLY_DISTANCE_M;
 pub use request::{
@@ -80,6 +82,12 @@ pub fn plan_survey_over(
             dem, &area, &free, &setup, params, &flight, &mut d,
         )?),
     };
+    cells::lay_pattern(
+        &mut d,
+        params.pattern,
+        &setup.flyable,
+        flight.geometry.line_spacing_m,
+    )?;
     aircraft::order_lanes(&mut d, params);
     let (rally_points, rally_utm) =
         rally::check_rally_points(&params.rally_points, &area, setup.clearance, dem)?;

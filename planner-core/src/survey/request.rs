@@ -196,6 +196,13 @@ pub struct SurveyParams {
     /// Width of a `corridor` (given instead of `roi`), m, in [1, 2000]: lanes run along its line.
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 2000))]
     pub corridor_width_m: Option<f64>,
+    /// `grid` (default) or `crosshatch`: each cell flown a second time with lanes at 90°.
+    pub pattern: crate::coverage::Pattern,
+    /// Camera pitch, degrees in [-90, -30], forward along the lanes; default -90 (nadir, no gimbal command).
+    #[cfg_attr(feature = "openapi", schema(minimum = -90, maximum = -30))]
+    pub camera_pitch_deg: Option<f64>,
+    /// How the camera is triggered along the lanes; default by distance.
+    pub trigger: super::capture::Trigger,
 }
 
 impl Default for SurveyParams {
@@ -224,6 +231,9 @@ impl Default for SurveyParams {
             aircraft: None,
             rally_points: Vec::new(),
             corridor_width_m: None,
+            pattern: crate::coverage::Pattern::Grid,
+            camera_pitch_deg: None,
+            trigger: super::capture::Trigger::default(),
         }
     }
 }
@@ -293,6 +303,7 @@ impl SurveyParams {
             a.check(&mut issues, &p("aircraft"));
         }
         self.check_corridor(&mut issues, &p);
+        self.check_patterns(&mut issues, &p);
         if issues.is_empty() {
             Ok(())
         } else {
@@ -698,13 +709,7 @@ impl SurveyParams {
                 &format!("this GSD needs an altitude of {altitude:.1} m, outside [1, 1000] m"),
             )]));
         }
-        let geometry = coverage::survey_geometry(
-            &camera,
-            altitude,
-            self.side_overlap,
-            self.front_overlap,
-            self.line_spacing_m,
-        );
+        let geometry = self.camera_geometry(&camera, altitude)?;
         let lane_km = free_area_m2 / geometry.line_spacing_m / 1000.0;
         if lane_km > limits.max_lane_km {
             let ptr = if self.line_spacing_m.is_some() {

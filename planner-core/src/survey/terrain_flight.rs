@@ -7,7 +7,7 @@
 use geo_types::Coord;
 use serde::{Deserialize, Serialize};
 
-use crate::coverage::SurveyGeometry;
+use super::capture::Capture;
 use crate::export::{AltitudeFrame, GeoPoint, Mission, MissionItem};
 use crate::flock::Tour;
 use crate::geo::{GeoError, UtmProjection};
@@ -16,7 +16,7 @@ use crate::terrain::{HeightRule, Point3, TerrainModel, length_3d};
 /// Most points in a returned altitude profile (enough for a chart).
 const PROFILE_POINTS: f64 = 1500.0;
 /// Consecutive waypoints closer than this (3D, metres) are written once.
-const SAME_POINT_M: f64 = 0.01;
+pub(super) const SAME_POINT_M: f64 = 0.01;
 
 /// What a stretch of the flight is for.
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -178,7 +178,7 @@ pub(super) fn fly_tour(
     home_amsl_m: f64,
     frame: AltitudeFrame,
     speed_m_s: f64,
-    geometry: &SurveyGeometry,
+    capture: &Capture,
     proj: &UtmProjection,
 ) -> Result<TerrainFlight, GeoError> {
     let legs = legs_3d(tour, model, rules);
@@ -218,23 +218,21 @@ pub(super) fn fly_tour(
         },
         MissionItem::ChangeSpeed { speed_m_s },
     ];
+    items.extend(capture.start_items());
     // The take-off climbs to the first point (above home): not written again.
     let mut previous = first;
     for (kind, pts) in &legs {
-        let n = pts.len();
-        for (i, p) in pts.iter().enumerate() {
-            let same = dist3(p, &previous) < SAME_POINT_M;
-            if !same {
+        if *kind == LegKind::Lane && !pts.is_empty() {
+            let skip_first = dist3(&pts[0], &previous) < SAME_POINT_M;
+            let (lane, last) = capture.lane_items(pts, skip_first, &to_geo)?;
+            items.extend(lane);
+            previous = last.unwrap_or(previous);
+            continue;
+        }
+        for p in pts {
+            if dist3(p, &previous) >= SAME_POINT_M {
                 items.push(MissionItem::Waypoint(to_geo(p)?));
                 previous = *p;
-            }
-            if *kind == LegKind::Lane && i == 0 {
-                items.push(MissionItem::CameraTriggerDistance {
-                    distance_m: geometry.trigger_distance_m,
-                });
-            }
-            if *kind == LegKind::Lane && i + 1 == n {
-                items.push(MissionItem::CameraTriggerDistance { distance_m: 0.0 });
             }
         }
     }
@@ -455,6 +453,6 @@ fn measure(
     )
 }
 
-fn dist3(a: &Point3, b: &Point3) -> f64 {
+pub(super) fn dist3(a: &Point3, b: &Point3) -> f64 {
     ((b.x - a.x).powi(2) + (b.y - a.y).powi(2) + (b.z - a.z).powi(2)).sqrt()
 }

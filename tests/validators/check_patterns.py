@@ -1,0 +1,240 @@
+"""Independent check of a terraplan survey's pattern, camera pitch and
+trigger (issue 20), written against pymavlink, shapely, pyproj and numpy
+only (none of terraplan's code).
+
+From every sortie's `.waypoints` (read by pymavlink's MAVWPLoader):
+
+- lanes are rebuilt from the camera commands: DO_SET_CAM_TRIGG_DIST d > 0
+  … 0 (distance), DO_TRIGGER_CONTROL 1 … 0 (time, the interval from
+  DO_SET_CAM_TRIGG_INTERVAL); in hover mode every IMAGE_START_CAPTURE must
+  follow a held NAV_WAYPOINT;
+- photos: per lane floor(length / spacing) + 1 (spacing = the trigger
+  distance, or interval × the DO_CHANGE_SPEED speed), or one per
+  IMAGE_START_CAPTURE of count 1 in hover; the sum must equal plan.json's;
+- the gimbal: DO_GIMBAL_MANAGER_PITCHYAW before the first lane with the
+  requested pitch (none when the request sets none);
+- crosshatch: each lane is given to the cell holding its midpoint; it is of
+  the first set when along the cell's lane bearing, of the second when at
+  90° ± 1° to it (anything else fails); each set alone must sweep (flat
+  capped strips footprint_side_m wide) >= 99.5 % of the free area;
+- oblique: the footprint is computed by casting the four corner rays of a
+  pinhole camera rotated by the pitch and meeting them with the ground
+  plane; its near-edge width and along-track extent, and the spacing and
+  trigger distance they give with the requested overlaps, must match
+  plan.json's within 1 %.
+
+usage: check_patterns.py OUT_DIR PARAMS.json ROI.geojson [NFZ.geojson ...]
+Prints a JSON summary; exits 1 with a message on the first failed check.
+"""
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+from pymavlink import mavutil, mavwp
+from pyproj import Transformer
+from shapely.geometry import LineString, Point, shape
+import shapely
+from shapely.ops import unary_union
+
+ML = mavutil.mavlink
+DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
+                  "image_width_px": 5472, "image_height_px": 3648}
+REL_TOL = 0.01
+
+
+def fail(msg):
+    print(f"check_patterns: FAIL: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
+def areas(path):
+    doc = json.loads(Path(path).read_text())
+    feats = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
+    geoms = []
+    for f in feats:
+        g = shape(f["geometry"] if f.get("type") == "Feature" else f)
+        geoms.append(g if g.is_valid else g.buffer(0))
+    return unary_union(geoms)
+
+
+def items(path):
+    loader = mavwp.MAVWPLoader()
+    loader.load(str(path))
+    return [loader.wp(i) for i in range(loader.count())]
+
+
+def lanes_of(wps, fwd):
+    """Lanes (lists of UTM points; none in hover mode), photos, and the
+    gimbal commands as (index, pitch, yaw)."""
+    lanes, photos, pitches = [], 0, []
+    speed = None
+    current, spacing, last_pos = None, None, None
+    for i, w in enumerate(wps[1:], start=1):
+        cmd = w.command
+        pos = None
+        if cmd == ML.MAV_CMD_NAV_WAYPOINT:
+            pos = fwd(w.y, w.x)
+        if cmd == ML.MAV_CMD_DO_CHANGE_SPEED:
+            speed = w.param2
+        elif cmd == ML.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW:
+            pitches.append((i, w.param1, w.param2))
+        elif cmd == ML.MAV_CMD_DO_SET_CAM_TRIGG_DIST:
+            if w.param1 > 0:
+                current, spacing = [last_pos], w.param1
+            else:
+                lanes.append(current)
+                photos += math.floor(length(current) / spacing + 1e-9) + 1
+                current = None
+        elif cmd == ML.MAV_CMD_DO_SET_CAM_TRIGG_INTERVAL:
+            spacing = w.param1 / 1000.0 * speed
+        elif cmd == ML.MAV_CMD_DO_TRIGGER_CONTROL:
+            if w.param1 == 1:
+                current = [last_pos]
+            else:
+                lanes.append(current)
+                photos += math.floor(length(current) / spacing + 1e-9) + 1
+                current = None
+        elif cmd == ML.MAV_CMD_IMAGE_START_CAPTURE:
+            prev = wps[i - 1]
+            if prev.command != ML.MAV_CMD_NAV_WAYPOINT or prev.param1 <= 0:
+                fail(f"item {i}: IMAGE_START_CAPTURE not after a held waypoint")
+            if w.param3 != 1:
+                fail(f"item {i}: IMAGE_START_CAPTURE of {w.param3} images, not 1")
+            photos += 1
+        if pos is not None:
+            if current is not None:
+                current.append(pos)
+            last_pos = pos
+    return [lane for lane in lanes if lane and len(lane) >= 2], photos, pitches
+
+
+def length(pts):
+    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
+
+
+def bearing(a, b):
+    return math.degrees(math.atan2(b[0] - a[0], b[1] - a[1])) % 180.0
+
+
+def gap(a, b):
+    d = (a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+def ray_footprint(cam, h, pitch):
+    """Corners (across, along) of the footprint by ray casting: rays of the
+    nadir camera rotated about the across-track axis by the tilt."""
+    tilt = math.radians(90.0 + pitch)
+    rot = np.array([[1, 0, 0],
+                    [0, math.cos(tilt), -math.sin(tilt)],
+                    [0, math.sin(tilt), math.cos(tilt)]])
+    w, hh, f = cam["sensor_width_mm"] / 2, cam["sensor_height_mm"] / 2, cam["focal_length_mm"]
+    if cam.get("orientation") == "portrait":
+        w, hh = hh, w
+    corners = []
+    for sx, sy in [(-w, -hh), (w, -hh), (w, hh), (-w, hh)]:
+        ray = rot @ np.array([sx, sy, -f])
+        if ray[2] >= 0:
+            fail("a corner ray does not meet the ground")
+        k = h / -ray[2]
+        corners.append((ray[0] * k, ray[1] * k))
+    return corners
+
+
+def close(got, want, what):
+    if abs(got - want) > REL_TOL * abs(want):
+        fail(f"{what}: plan {got}, independent {want}")
+
+
+def main():
+    out = Path(sys.argv[1])
+    params = json.loads(Path(sys.argv[2]).read_text())
+    roi_ll = areas(sys.argv[3])
+    nfz_ll = unary_union([areas(p) for p in sys.argv[4:]]) if len(sys.argv) > 4 else None
+    plan = json.loads((out / "plan.json").read_text())
+    stats = plan["stats"]
+    to_utm = Transformer.from_crs("EPSG:4326", f"EPSG:{plan['utm_epsg']}", always_xy=True)
+
+    def fwd(lon, lat):
+        return to_utm.transform(lon, lat)
+
+    def project(g):
+        return shapely.transform(g, lambda x, y: to_utm.transform(x, y), interleaved=False)
+
+    free = project(roi_ll)
+    if nfz_ll is not None:
+        free = free.difference(project(nfz_ll))
+    summary = {"sorties": 0, "lanes": 0, "photos": 0}
+    all_lanes = []
+    pitch = params.get("camera_pitch_deg")
+    for uav in plan["uavs"]:
+        for sortie in uav["sorties"]:
+            wps = items(out / f"{sortie['file_stem']}.waypoints")
+            lanes, photos, pitches = lanes_of(wps, fwd)
+            if photos != sortie["stats"]["photos"]:
+                fail(f"{sortie['file_stem']}: {photos} photos in the mission, "
+                     f"{sortie['stats']['photos']} in the plan")
+            if pitch is None and pitches:
+                fail(f"{sortie['file_stem']}: a gimbal command without camera_pitch_deg")
+            if pitch is not None:
+                if len(pitches) != 1 or abs(pitches[0][1] - pitch) > 1e-6 or pitches[0][2] != 0:
+                    fail(f"{sortie['file_stem']}: gimbal commands {pitches}, want one at {pitch}")
+            summary["sorties"] += 1
+            summary["lanes"] += len(lanes)
+            summary["photos"] += photos
+            all_lanes.extend(lanes)
+    if summary["photos"] != stats["photos"]:
+        fail(f"{summary['photos']} photos in the missions, {stats['photos']} in the plan")
+
+    side = stats["footprint_side_m"]
+    hover = params.get("trigger", {}).get("mode") == "hover"
+    if params.get("pattern") == "crosshatch" and not hover:
+        # plan.json lists the cells; the service's answer holds them as GeoJSON.
+        cells = plan["cells"]
+        if isinstance(cells, dict):
+            cells = [dict(f["properties"], polygon=f["geometry"]) for f in cells["features"]]
+        cells = [(project(shape(c["polygon"])), c["lane_bearing_deg"]) for c in cells]
+        sets = ([], [])
+        worst = 0.0
+        for lane in all_lanes:
+            a, b = lane[0], lane[-1]
+            mid = Point((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+            poly, cb = min(cells, key=lambda c: c[0].distance(mid))
+            lb = bearing(a, b)
+            if gap(lb, cb) < 1.0:
+                sets[0].append(lane)
+            elif abs(gap(lb, cb) - 90.0) <= 1.0:
+                sets[1].append(lane)
+                worst = max(worst, abs(gap(lb, cb) - 90.0))
+            else:
+                fail(f"lane at {lb:.2f}° in a cell of lanes at {cb:.2f}°: neither set")
+        for k, lanes in enumerate(sets):
+            strips = unary_union([LineString([l[0], l[-1]]).buffer(side / 2, cap_style="flat")
+                                  for l in lanes])
+            ratio = free.intersection(strips).area / free.area
+            summary[f"set{k + 1}_coverage"] = ratio
+            summary[f"set{k + 1}_lanes"] = len(lanes)
+            if ratio < 0.995:
+                fail(f"lane set {k + 1} alone covers {ratio:.4f} of the free area")
+        summary["worst_right_angle_error_deg"] = worst
+
+    if pitch is not None:
+        cam = params.get("camera", DEFAULT_CAMERA)
+        c = ray_footprint(cam, stats["altitude_m"], pitch)
+        near = c[1][0] - c[0][0]
+        along = c[2][1] - c[1][1]
+        close(stats["footprint_side_m"], near, "near-edge width")
+        close(stats["footprint_front_m"], along, "along-track extent")
+        if "line_spacing_m" not in params:
+            close(stats["line_spacing_m"], near * (1 - params.get("side_overlap", 0.7)), "spacing")
+        close(stats["trigger_distance_m"], along * (1 - params.get("front_overlap", 0.8)),
+              "trigger distance")
+        summary["footprint"] = {"near_width_m": near, "along_m": along,
+                                "far_width_m": c[2][0] - c[3][0]}
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
