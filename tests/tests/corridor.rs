@@ -304,6 +304,11 @@ fn service_plans_the_same_corridor_and_names_its_faults() {
             "/corridor/type",
             "not a line",
         ),
+        (
+            json!({"corridor": line, "corridor_width_m": 50, "aircraft": {"type": "fixed_wing"}}),
+            "/aircraft/type",
+            "multirotor",
+        ),
         // 55 km long and 2 km wide: over the 100 km² limit.
         (
             json!({"corridor": {"type": "LineString", "coordinates": [[6.1, 51.5], [6.9, 51.5]]},
