@@ -431,10 +431,15 @@ fn openapi_document_and_docs_page() {
         );
     }
     let params = &doc["components"]["schemas"]["CreateSurvey"]["properties"];
+    // The area is `roi` or `corridor`: neither is required alone (the
+    // planner answers 422 at both pointers when both or neither are given).
     assert_eq!(
         doc["components"]["schemas"]["CreateSurvey"]["required"],
-        json!(["roi"])
+        Value::Null
     );
+    assert_eq!(params["roi"]["type"], "object");
+    assert_eq!(params["corridor"]["type"], "object");
+    assert_eq!(params["corridor_width_m"]["maximum"], 2000.0);
     assert_eq!(params["side_overlap"]["maximum"], 0.95);
     assert_eq!(params["side_overlap"]["default"], 0.7);
     // A DEM's CRS carries its PROJ.4 definition for the web page.
