@@ -46,6 +46,11 @@ export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/uavs', field: 'uavs', label: 'UAVs' },
   { prefix: '/assignment', field: 'uavs', label: 'Assignment' },
   { prefix: '/rally_points', field: 'rally', label: 'Rally points' },
+  { prefix: '/pattern', field: 'pattern', label: 'Pattern' },
+  { prefix: '/camera_pitch_deg', field: 'pattern', label: 'Camera pitch', control: 'camera-pitch' },
+  { prefix: '/trigger/interval_s', field: 'pattern', label: 'Photo interval', control: 'trigger-interval' },
+  { prefix: '/trigger/hold_s', field: 'pattern', label: 'Hover per photo', control: 'trigger-hold' },
+  { prefix: '/trigger', field: 'pattern', label: 'Trigger', control: 'trigger-mode' },
 ];
 
 export const COSTMAP_FIELDS: FieldRule[] = [

@@ -4,6 +4,7 @@
 
 import type { Camera, LonLat } from './api';
 import { corridorFromRequest, corridorMembers, type CorridorValues } from './corridor-fields';
+import { PATTERN_MEMBERS, patternFromRequest, patternMembers, type PatternValues } from './pattern-fields';
 import { polygonsOf, type PolygonRings } from './geo-import';
 import type { FieldMessage } from './problems';
 
@@ -34,6 +35,8 @@ export interface SurveyFormValues {
   roi: PolygonRings | null;
   /** A corridor along a line, surveyed instead of the ROI when given. */
   corridor?: CorridorValues | null;
+  /** Crosshatch, camera pitch and trigger mode (absent: the API's defaults). */
+  patterns?: PatternValues;
   noFlyZones: PolygonRings[];
   demId: string | null;
   allowPartialDem: boolean;
@@ -74,6 +77,8 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   const errors: FieldMessage[] = [];
   const corridor = v.corridor ? corridorMembers(v.corridor) : null;
   if (corridor && 'error' in corridor) errors.push({ field: 'corridor', text: corridor.error, control: 'corridor-width' });
+  const patterns = v.patterns ? patternMembers(v.patterns) : { members: {} };
+  if ('error' in patterns) errors.push({ field: 'pattern', text: patterns.error, control: patterns.control });
   if (!v.roi && !corridor) errors.push({ field: 'roi', text: 'Survey area: draw it on the map or import a file first.' });
   if (v.altitudeFrame !== 'relative' && !v.demId) {
     errors.push({ field: 'altitude-frame', text: `Altitude frame: “${v.altitudeFrame}” needs a terrain model (DEM); choose one or use “relative”.` });
@@ -121,6 +126,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     nfz_clearance_m: v.nfzClearanceM,
     altitude_frame: v.altitudeFrame,
     assignment: v.assignment,
+    ...('members' in patterns ? patterns.members : {}),
   };
   if (v.name.trim()) body.name = v.name.trim();
   if (v.heightMode === 'gsd') body.gsd_cm_px = v.gsdCmPx;
@@ -292,6 +298,7 @@ export const FORM_DEFAULTS = {
 const FORM_MEMBERS = new Set([
   'name', 'project_id', 'roi', 'corridor', 'corridor_width_m', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
   'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'nfz_clearance_m', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
+  ...PATTERN_MEMBERS,
 ]);
 
 export interface RestoredForm {
@@ -355,6 +362,7 @@ export function formFromRequest(
       name: name ?? '',
       roi: rois[0] ?? null,
       ...(corridor ? { corridor } : {}),
+      ...(PATTERN_MEMBERS.some((k) => r[k] != null) ? { patterns: patternFromRequest(r) } : {}),
       noFlyZones,
       demId: typeof r.dem_id === 'string' ? r.dem_id : null,
       allowPartialDem: r.allow_partial_dem === true,

@@ -4,6 +4,7 @@
 
 import { api, type CameraPreset, type LonLat, type Survey } from './api';
 import { CorridorFields } from './corridor-fields';
+import { PATTERN_DEFAULTS, readPatternFields, showPatternFields } from './pattern-fields';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue, swatch } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
@@ -304,6 +305,7 @@ export class SurveyPanel {
       name: val('survey-name'),
       roi: this.roi,
       corridor: this.corridor.values(),
+      patterns: readPatternFields(),
       noFlyZones: this.noFlyZones,
       demId: follow ? (this.dem.current?.id ?? null) : null,
       allowPartialDem: byId<HTMLInputElement>('allow-partial-dem').checked,
@@ -393,6 +395,7 @@ export class SurveyPanel {
       this.map.addNoFlyZones(v.noFlyZones);
       this.map.setRoi(v.roi);
       this.corridor.restore(v.corridor ?? null);
+      showPatternFields(v.patterns ?? PATTERN_DEFAULTS);
 
       const select = byId<HTMLSelectElement>('camera');
       if (v.camera !== 'custom' && ![...select.options].some((o) => o.value === v.camera)) {
