@@ -22,6 +22,8 @@ use crate::geo::{Issue, UtmProjection};
 const CHECK_STEP: f64 = 0.13;
 /// Lane ends are pulled back in steps of this share of the turn radius.
 const TRIM_STEP: f64 = 0.25;
+/// The shortest lead-in or overshoot by a no-fly zone, in turn radii.
+const MIN_RUN: f64 = 0.15;
 /// A lane shorter than this after trimming is left out, m.
 const MIN_LANE_M: f64 = 1.0;
 
@@ -49,8 +51,6 @@ pub(super) struct PlaneSortie {
     pub stats: UavStats,
     /// Every point of the rounded path (for the fence).
     pub points: Vec<Coord<f64>>,
-    /// Lane length pulled back from no-fly zones, m.
-    pub trimmed_m: f64,
 }
 
 impl<'a> PlaneFlight<'a> {
@@ -218,44 +218,53 @@ impl<'a> PlaneFlight<'a> {
         best.map(|(_, w)| w)
     }
 
-    /// The lane pulled back at either end until the run beyond it (the
-    /// overshoot or lead-in and a turn radius) is clear; `None` when
-    /// nothing of it is left.
-    fn trim(&self, lane: &Lane) -> Option<Lane> {
+    /// The lane pulled back at either end until the run beyond it is
+    /// clear: the straight (the full lead-in or overshoot, else half, else
+    /// [`MIN_RUN`]) and then a half turn to either side; the least pulled back,
+    /// then the longest straight. `None` when nothing of it is left.
+    fn trim(&self, lane: &Lane) -> Option<Entered> {
         let len = dist(lane.start, lane.end);
         let (start, end) = lane_poses(lane);
         let step = (self.radius * TRIM_STEP).max(1.0);
-        // Room beyond the lane: the straight run, then a half turn to
-        // either side (a lane start's run is looked at backwards).
+        // From `pose` (facing away from the lane) the straight run, then a
+        // half turn to either side.
         let room = |pose: Pose, run: f64| {
             let beyond = pose.ahead(run);
-            let facing = if run < 0.0 {
-                Pose::new(beyond.at, beyond.heading + std::f64::consts::PI)
-            } else {
-                beyond
-            };
             self.obstacles.is_clear(pose.at, beyond.at)
                 && [1.0, -1.0]
                     .iter()
-                    .any(|&side| self.clear(&self.half_turn(facing, side)))
+                    .any(|&side| self.clear(&self.half_turn(beyond, side)))
         };
-        let pull = |pose: Pose, run: f64, sign: f64| -> Option<f64> {
+        let pull = |pose: Pose, full: f64, sign: f64| -> Option<(f64, f64)> {
             let mut t = 0.0;
             while t <= len {
-                if room(pose.ahead(sign * t), run) {
-                    return Some(t);
+                let at = pose.ahead(sign * t);
+                // Backwards from a start: the facing pose is turned round.
+                let probe = if sign > 0.0 {
+                    Pose::new(at.at, at.heading + std::f64::consts::PI)
+                } else {
+                    at
+                };
+                // The shortest run still leaves room for the first corner of
+                // the turn's polygon (the turn rule).
+                for run in [full, full / 2.0, (MIN_RUN * self.radius).min(full)] {
+                    if room(probe, run) {
+                        return Some((t, run));
+                    }
                 }
                 t += step;
             }
             None
         };
-        let ahead = self.turns.overshoot_m;
-        let behind = self.turns.lead_in_m;
-        let cut_end = pull(end, ahead, -1.0)?;
-        let cut_start = pull(start, -behind, 1.0)?;
-        (len - cut_end - cut_start >= MIN_LANE_M).then(|| Lane {
-            start: start.ahead(cut_start).at,
-            end: end.ahead(-cut_end).at,
+        let (cut_end, over) = pull(end, self.turns.overshoot_m, -1.0)?;
+        let (cut_start, lead) = pull(start, self.turns.lead_in_m, 1.0)?;
+        (len - cut_end - cut_start >= MIN_LANE_M).then(|| Entered {
+            lane: Lane {
+                start: start.ahead(cut_start).at,
+                end: end.ahead(-cut_end).at,
+            },
+            lead,
+            over,
         })
     }
 
@@ -278,25 +287,35 @@ impl<'a> PlaneFlight<'a> {
     /// The way from the end of lane `a` to the start of lane `b`: the
     /// shortest clear turn, else a transit from the overshoot's end to the
     /// lead-in's start.
-    fn lane_turn(&self, a: &Lane, b: &Lane) -> Result<Vec<Piece>, PlanError> {
-        if let Some(t) = self
-            .turns
-            .between(a, b)
+    fn lane_turn(&self, a: &Entered, b: &Entered) -> Result<Vec<Piece>, PlanError> {
+        let turns = PlaneTurns {
+            overshoot_m: a.over,
+            lead_in_m: b.lead,
+            ..self.turns
+        };
+        if let Some(t) = turns
+            .between(&a.lane, &b.lane)
             .into_iter()
             .find(|t| self.all_clear(t))
         {
             return Ok(t);
         }
-        let (_, end) = lane_poses(a);
-        let (start, _) = lane_poses(b);
-        self.around(end, start)
+        let (_, end) = lane_poses(&a.lane);
+        let (start, _) = lane_poses(&b.lane);
+        self.around(end, a.over, start, b.lead)
     }
 
     /// Overshoot, transit, lead-in from a lane's end pose to a lane's
     /// start pose.
-    fn around(&self, end: Pose, start: Pose) -> Result<Vec<Piece>, PlanError> {
-        let out = end.ahead(self.turns.overshoot_m);
-        let lead = start.ahead(-self.turns.lead_in_m);
+    fn around(
+        &self,
+        end: Pose,
+        over: f64,
+        start: Pose,
+        lead_in: f64,
+    ) -> Result<Vec<Piece>, PlanError> {
+        let out = end.ahead(over);
+        let lead = start.ahead(-lead_in);
         let mut pieces = vec![Piece::Line {
             from: end.at,
             to: out.at,
@@ -311,21 +330,14 @@ impl<'a> PlaneFlight<'a> {
     }
 
     /// The pieces of `tour` flown from `home` and back, and the lengths
-    /// (lanes, transits) and trimmed lane length.
+    /// (lanes, transits).
     fn pieces(&self, tour: &Tour, home: Coord<f64>) -> Result<Flight, PlanError> {
         let mut f = Flight::default();
-        let mut lanes: Vec<Vec<Lane>> = Vec::new();
+        let mut lanes: Vec<Vec<Entered>> = Vec::new();
         for visit in &tour.visits {
             let mut kept = Vec::new();
             for lane in &visit.lanes {
-                let full = dist(lane.start, lane.end);
-                match self.trim(lane) {
-                    Some(l) => {
-                        f.trimmed_m += full - dist(l.start, l.end);
-                        kept.push(l);
-                    }
-                    None => f.trimmed_m += full,
-                }
+                kept.extend(self.trim(lane));
             }
             if !kept.is_empty() {
                 lanes.push(kept);
@@ -335,7 +347,7 @@ impl<'a> PlaneFlight<'a> {
         let first_target = lanes
             .first()
             .and_then(|c| c.first())
-            .map_or(home, |l| l.start);
+            .map_or(home, |l| l.lane.start);
         let heading = if dist(home, first_target) > 1e-9 {
             Pose::towards(home, first_target).heading
         } else {
@@ -349,15 +361,16 @@ impl<'a> PlaneFlight<'a> {
             to: climb_out.at,
         }]);
         let mut at = climb_out;
-        let mut from_lane = false;
+        // The overshoot after the lane last flown, if any.
+        let mut from_lane: Option<f64> = None;
         for cell in &lanes {
-            for (k, lane) in cell.iter().enumerate() {
-                let (start, end) = lane_poses(lane);
+            for (k, entered) in cell.iter().enumerate() {
+                let (start, end) = lane_poses(&entered.lane);
                 if k == 0 {
-                    let way = if from_lane {
-                        self.around(at, start)?
+                    let way = if let Some(over) = from_lane {
+                        self.around(at, over, start, entered.lead)?
                     } else {
-                        let lead = start.ahead(-self.turns.lead_in_m);
+                        let lead = start.ahead(-entered.lead);
                         let mut w = self.connect(at, lead)?;
                         w.push(Piece::Line {
                             from: lead.at,
@@ -367,16 +380,16 @@ impl<'a> PlaneFlight<'a> {
                     };
                     f.push_transit(way);
                 } else {
-                    f.push_turn(self.lane_turn(&cell[k - 1], lane)?);
+                    f.push_turn(self.lane_turn(&cell[k - 1], entered)?);
                 }
-                f.push_lane(lane);
+                f.push_lane(&entered.lane);
                 at = end;
-                from_lane = true;
+                from_lane = Some(entered.over);
             }
         }
         let landing = self.landing(home, at)?;
-        let way = if from_lane {
-            let out = at.ahead(self.turns.overshoot_m);
+        let way = if let Some(over) = from_lane {
+            let out = at.ahead(over);
             let mut w = vec![Piece::Line {
                 from: at.at,
                 to: out.at,
@@ -484,7 +497,6 @@ impl<'a> PlaneFlight<'a> {
             items,
             stats,
             points,
-            trimmed_m: f.trimmed_m,
         })
     }
 
@@ -532,13 +544,20 @@ impl<'a> PlaneFlight<'a> {
     }
 }
 
+/// A lane as flown (pulled back from the NFZs it faces) and the straight
+/// runs before and after it.
+struct Entered {
+    lane: Lane,
+    lead: f64,
+    over: f64,
+}
+
 /// The pieces of a sortie and what they add up to.
 #[derive(Default)]
 struct Flight {
     path: Vec<Flown>,
     lanes: Vec<f64>,
     transit_m: f64,
-    trimmed_m: f64,
 }
 
 impl Flight {

@@ -1,0 +1,276 @@
+//! Planes (issue 20, aircraft part) end to end: `terraplan survey` and the
+//! service with `aircraft` fixed_wing and vtol on real fields with NFZs,
+//! each mission checked independently by tests/validators/check_aircraft.py
+//! (turn rule at every waypoint, the rounded path's NFZ clearance and
+//! fence containment, climb angles, camera off outside straight lanes,
+//! photo footprint coverage) and loaded by pymavlink, MAVProxy and MAVSDK
+//! (check_missions.py); a multirotor given explicitly plans byte for byte
+//! as without the member.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{Value, json};
+use terraplan_e2e::{
+    Server, assert_invalid_at, check_missions, post_json, shared_data, terraplan, text, validator,
+    workspace,
+};
+
+fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
+    p
+}
+
+fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
+    json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
+}
+
+/// Two NFZs inside the Illinois fields of Fields2Cover's two-cell test
+/// (one straddling the cells' shared edge region, one in the south-east).
+fn illinois_nfz(dir: &Path) -> PathBuf {
+    write(
+        dir,
+        "nfz.geojson",
+        &json!({"type": "FeatureCollection", "features": [
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1375, 41.4710, -90.1365, 41.4717)},
+            {"type": "Feature", "properties": {}, "geometry": rect(-90.1315, 41.4650, -90.1280, 41.4660)}
+        ]}),
+    )
+}
+
+/// Plans with the CLI into `dir/out`; returns plan.json.
+fn plan_cli(dir: &Path, roi: &Path, nfz: &[&Path], params: &Value) -> (PathBuf, Value) {
+    let params_path = write(dir, "params.json", params);
+    let out = dir.join("out");
+    let _ = std::fs::remove_dir_all(&out);
+    let mut args = vec!["survey", "--roi", roi.to_str().unwrap()];
+    for n in nfz {
+        args.extend(["--no-fly", n.to_str().unwrap()]);
+    }
+    args.extend([
+        "--params",
+        params_path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let o = terraplan(&args);
+    assert!(o.status.success(), "terraplan failed: {}", text(&o.stderr));
+    let plan: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    (out, plan)
+}
+
+/// check_aircraft.py on `out`; its summary.
+#[allow(clippy::too_many_arguments)]
+fn check_aircraft(
+    out: &Path,
+    roi: &Path,
+    nfz: &[&Path],
+    kind: &str,
+    radius: f64,
+    climb: f64,
+    altitude: f64,
+) -> Value {
+    let mut args: Vec<PathBuf> = vec![out.to_path_buf(), roi.to_path_buf()];
+    args.extend(nfz.iter().map(|p| p.to_path_buf()));
+    let flags = [
+        ("--type", kind.to_string()),
+        ("--radius", radius.to_string()),
+        ("--climb", climb.to_string()),
+        ("--clearance", "5".to_string()),
+        ("--lead-in", radius.to_string()),
+        ("--altitude", altitude.to_string()),
+    ];
+    for (k, v) in flags {
+        args.push(PathBuf::from(k));
+        args.push(PathBuf::from(v));
+    }
+    let refs: Vec<&Path> = args.iter().map(PathBuf::as_path).collect();
+    let v = validator("check_aircraft.py", &refs);
+    assert!(
+        v.status.success(),
+        "check_aircraft: {}{}",
+        text(&v.stdout),
+        text(&v.stderr)
+    );
+    serde_json::from_slice(&v.stdout).unwrap()
+}
+
+/// What every plane's plan must show: the flight time is the flown 3D
+/// length at the cruise speed (no turn penalty), the flown length is
+/// longer than the lanes, and the camera is on for exactly the lanes.
+fn check_figures(plan: &Value, summary: &Value, speed: f64) {
+    let uav = &plan["uavs"][0];
+    let s = &uav["sorties"][0]["stats"];
+    let (len, len3, time) = (
+        s["length_m"].as_f64().unwrap(),
+        s["length_3d_m"].as_f64().unwrap(),
+        s["flight_time_s"].as_f64().unwrap(),
+    );
+    assert!(
+        (time - len3 / speed).abs() < 1e-6,
+        "{time} vs {len3}/{speed}"
+    );
+    assert!(len > s["survey_length_m"].as_f64().unwrap() * 1.05);
+    assert_eq!(uav["speed_m_s"], json!(speed));
+    let lanes = summary["lanes"].as_u64().unwrap();
+    assert!(lanes >= 8, "{summary}");
+    // Lead-ins and overshoots are shortened only by no-fly zones.
+    for m in summary["missions"].as_object().unwrap().values() {
+        let (full, runs) = (
+            m["full_runs"].as_f64().unwrap(),
+            m["runs"].as_f64().unwrap(),
+        );
+        assert!(full >= 0.75 * runs, "{m}");
+    }
+}
+
+#[test]
+fn fixed_wing_on_the_illinois_fields_with_nfzs() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test_2_cell.json");
+    let nfz = illinois_nfz(dir.path());
+    let params = json!({"altitude_m": 100, "side_overlap": 0.6,
+                        "aircraft": {"type": "fixed_wing", "turn_radius_m": 40}});
+    let (out, plan) = plan_cli(dir.path(), &roi, &[&nfz], &params);
+    let summary = check_aircraft(&out, &roi, &[&nfz], "fixed_wing", 40.0, 10.0, 100.0);
+    assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
+    check_figures(&plan, &summary, 16.0);
+    check_missions(&out);
+    // The same survey flown by a multirotor: shorter, no arcs.
+    let multi = json!({"altitude_m": 100, "side_overlap": 0.6});
+    let (_, mplan) = plan_cli(dir.path(), &roi, &[&nfz], &multi);
+    let fw_len = plan["stats"]["length_m"].as_f64().unwrap();
+    let mr_len = mplan["stats"]["length_m"].as_f64().unwrap();
+    assert!(fw_len > mr_len, "{fw_len} vs {mr_len}");
+}
+
+#[test]
+fn vtol_on_the_dutch_field_with_its_nfzs() {
+    let dir = tempfile::tempdir().unwrap();
+    let ex = workspace().join("examples");
+    let (roi, nfz) = (ex.join("field.geojson"), ex.join("field-nfz.geojson"));
+    let params = json!({"altitude_m": 70, "side_overlap": 0.6,
+                        "uavs": [{"id": "q", "start": [6.0620, 51.5110]}],
+                        "aircraft": {"type": "vtol", "turn_radius_m": 30, "max_climb_angle_deg": 6}});
+    let (out, plan) = plan_cli(dir.path(), &roi, &[&nfz], &params);
+    let summary = check_aircraft(&out, &roi, &[&nfz], "vtol", 30.0, 6.0, 70.0);
+    assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
+    check_figures(&plan, &summary, 20.0);
+    check_missions(&out);
+}
+
+/// Racetrack order where lanes are closer than two turn radii: fewer
+/// metres than flying them in turn with loop turns, and every lane still
+/// flown once (the checker sees each lane bracketed by the camera).
+#[test]
+fn close_lanes_are_flown_skipping() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test.json");
+    let params = json!({"altitude_m": 60, "line_spacing_m": 25,
+                        "aircraft": {"type": "fixed_wing", "turn_radius_m": 35}});
+    let (out, plan) = plan_cli(dir.path(), &roi, &[], &params);
+    let summary = check_aircraft(&out, &roi, &[], "fixed_wing", 35.0, 10.0, 60.0);
+    assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
+    assert_eq!(
+        summary["lanes"].as_u64().unwrap(),
+        plan["stats"]["lane_count"].as_u64().unwrap()
+    );
+}
+
+#[test]
+fn an_explicit_multirotor_plans_byte_for_byte_as_before() {
+    let dir = tempfile::tempdir().unwrap();
+    let ex = workspace().join("examples");
+    let (roi, nfz) = (ex.join("field.geojson"), ex.join("field-nfz.geojson"));
+    let base = json!({"altitude_m": 60, "uavs": [{"id": "m", "start": [6.0620, 51.5110]}]});
+    let (out_a, _) = plan_cli(dir.path(), &roi, &[&nfz], &base);
+    let kept = dir.path().join("before");
+    std::fs::rename(&out_a, &kept).unwrap();
+    let mut with = base.clone();
+    with["aircraft"] = json!({"type": "multirotor"});
+    let (out_b, _) = plan_cli(dir.path(), &roi, &[&nfz], &with);
+    let mut names: Vec<_> = std::fs::read_dir(&kept)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    names.sort();
+    assert!(names.len() >= 5);
+    for n in names {
+        let (a, b) = (
+            std::fs::read(kept.join(&n)).unwrap(),
+            std::fs::read(out_b.join(&n)).unwrap(),
+        );
+        assert!(a == b, "{n:?} differs");
+    }
+}
+
+#[test]
+fn service_plans_a_fixed_wing_and_names_the_faults() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tempfile::tempdir().unwrap();
+    let server = Server::start(data.path(), &[]);
+    let url = server.url("/api/v1/surveys");
+    let field = shared_data("polygons/fields2cover__test.json");
+    let roi: Value = serde_json::from_str(&std::fs::read_to_string(&field).unwrap()).unwrap();
+    let params = json!({"altitude_m": 80, "aircraft": {"type": "fixed_wing"}});
+    let mut body = params.clone();
+    body["roi"] = roi.clone();
+    let r = post_json(&url, &body);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let survey = r.json();
+    let (_, cli) = plan_cli(dir.path(), &field, &[], &params);
+    for k in ["lane_count", "photos", "length_m", "flight_time_s"] {
+        assert_eq!(survey["stats"][k], cli["stats"][k], "{k}");
+    }
+    // Out of range, and plane-only members on a multirotor.
+    let cases = [
+        (
+            json!({"aircraft": {"type": "fixed_wing", "turn_radius_m": 2}}),
+            "/aircraft/turn_radius_m",
+            "[5, 1000]",
+        ),
+        (
+            json!({"aircraft": {"type": "vtol", "max_climb_angle_deg": 60}}),
+            "/aircraft/max_climb_angle_deg",
+            "(0, 45]",
+        ),
+        (
+            json!({"aircraft": {"type": "fixed_wing", "cruise_speed_m_s": 0}}),
+            "/aircraft/cruise_speed_m_s",
+            "(0, 50]",
+        ),
+        (
+            json!({"aircraft": {"type": "multirotor", "turn_radius_m": 30}}),
+            "/aircraft/turn_radius_m",
+            "only planes",
+        ),
+        (
+            json!({"aircraft": {"type": "glider"}}),
+            "/aircraft/type",
+            "glider",
+        ),
+    ];
+    for (mut body, pointer, says) in cases {
+        body["roi"] = roi.clone();
+        let r = post_json(&url, &body);
+        assert_invalid_at(&r, &body.to_string(), pointer, says);
+    }
+    // The CLI refuses the same with exit status 2.
+    let bad = write(
+        dir.path(),
+        "bad.json",
+        &json!({"aircraft": {"type": "fixed_wing", "turn_radius_m": 2}}),
+    );
+    let o = terraplan(&[
+        "survey",
+        "--roi",
+        field.to_str().unwrap(),
+        "--params",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.path().join("bad").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("/aircraft/turn_radius_m"));
+}
