@@ -295,3 +295,68 @@ fn service_and_refusals() {
     );
     assert!(summary["set2_coverage"].as_f64().unwrap() >= 0.995);
 }
+
+/// Terrain following with the patterns: an oblique crosshatch hovered for
+/// each photo over the opengeos DSM; the heights above the DEM checked by
+/// GDAL (check_terrain.py), the photos and the gimbal by check_patterns.py.
+#[test]
+fn crosshatch_hover_over_a_dem() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let dem = shared_data("dems/opengeos_data__elevation_dsm.tif");
+    let info = terraplan(&["dem-info", dem.to_str().unwrap()]);
+    assert!(info.status.success(), "{}", text(&info.stderr));
+    let info: Value = serde_json::from_slice(&info.stdout).unwrap();
+    let b: Vec<f64> = serde_json::from_value(info["bounds_wgs84"].clone()).unwrap();
+    let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
+    let (hx, hy) = ((b[2] - b[0]) / 5.0, (b[3] - b[1]) / 5.0);
+    let roi = write(d, "roi.json", &rect(cx - hx, cy - hy, cx + hx, cy + hy));
+    let nfz = write(
+        d,
+        "nfz.geojson",
+        &rect(cx - hx / 4.0, cy - hy / 4.0, cx + hx / 4.0, cy + hy / 4.0),
+    );
+    let params = json!({"altitude_m": 40, "agl_tolerance_m": 4, "altitude_frame": "terrain",
+                        "pattern": "crosshatch", "camera_pitch_deg": -75,
+                        "trigger": {"mode": "hover", "hold_s": 1},
+                        "uavs": [{"id": "t1", "start": [cx - hx, cy - hy]}]});
+    let params_path = write(d, "params.json", &params);
+    let out = d.join("out");
+    let o = terraplan(&[
+        "survey",
+        "--roi",
+        roi.to_str().unwrap(),
+        "--no-fly",
+        nfz.to_str().unwrap(),
+        "--params",
+        params_path.to_str().unwrap(),
+        "--dem",
+        dem.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let check = std::process::Command::new("/usr/bin/python3")
+        .arg(terraplan_e2e::workspace().join("tests/validators/check_terrain.py"))
+        .arg(&dem)
+        .arg(out.join("plan.json"))
+        .arg("t1")
+        .arg(out.join("t1.waypoints"))
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "{}{}",
+        text(&check.stdout),
+        text(&check.stderr)
+    );
+    let params_checked = write(d, "checked.json", &params);
+    let v = validator(
+        "check_patterns.py",
+        &[&out, &params_checked, &roi, nfz.as_path()],
+    );
+    assert!(v.status.success(), "{}{}", text(&v.stdout), text(&v.stderr));
+    let summary: Value = serde_json::from_slice(&v.stdout).unwrap();
+    assert!(summary["photos"].as_u64().unwrap() > 10, "{summary}");
+    check_missions(&out);
+}

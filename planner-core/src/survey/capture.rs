@@ -181,6 +181,36 @@ impl Capture {
         self.stop_time_s(photos) * speed
     }
 
+    /// A lane's flown points with its hover photo stations among them (the
+    /// stations lie on the lane's segments: the flight is the same, and
+    /// every waypoint the mission writes is one of these points).
+    pub(super) fn lane_points(&self, pts: &[Point3]) -> Vec<Point3> {
+        if self.mode != TriggerMode::Hover || pts.is_empty() {
+            return pts.to_vec();
+        }
+        let stations = photo_stations(pts, self.spacing_m, self.photos(length_2d(pts)));
+        let mut out: Vec<Point3> = Vec::with_capacity(pts.len() + stations.len());
+        let mut next = 0;
+        for (i, p) in pts.iter().enumerate() {
+            let s = distance_along(pts, i);
+            while next < stations.len() && stations[next].0 < s - SAME_POINT_M {
+                out.push(stations[next].1);
+                next += 1;
+            }
+            while next < stations.len() && stations[next].0 <= s + SAME_POINT_M {
+                next += 1; // on this vertex
+            }
+            out.push(*p);
+        }
+        out.extend(stations[next..].iter().map(|(_, p)| *p));
+        out
+    }
+
+    /// Whether a lane's first point is a photo stop (hover mode).
+    pub(super) fn holds_at_start(&self) -> bool {
+        self.mode == TriggerMode::Hover
+    }
+
     /// Items at the start of the mission, after the take-off: the gimbal's
     /// pitch when the request sets one.
     pub(super) fn start_items(&self) -> Option<MissionItem> {
@@ -429,6 +459,12 @@ mod tests {
         assert_eq!(last, Some(p(50., 0., 65.)));
         // Each stop: the hold and a turn's penalty (2 s).
         assert_eq!(c.stop_time_s(3), 15.0);
+        // The stations among the lane's points: the points written.
+        let merged = c.lane_points(&pts);
+        let xs: Vec<f64> = merged.iter().map(|q| q.x).collect();
+        assert_eq!(xs, vec![0.0, 20.0, 30.0, 40.0, 50.0]);
+        let (again, _) = c.lane_items(&merged, true, &geo).unwrap();
+        assert_eq!(again, items);
     }
 
     #[test]

@@ -181,7 +181,13 @@ pub(super) fn fly_tour(
     capture: &Capture,
     proj: &UtmProjection,
 ) -> Result<TerrainFlight, GeoError> {
-    let legs = legs_3d(tour, model, rules);
+    let legs: Vec<(LegKind, Vec<Point3>)> = legs_3d(tour, model, rules)
+        .into_iter()
+        .map(|(kind, pts)| match kind {
+            LegKind::Lane => (kind, capture.lane_points(&pts)),
+            _ => (kind, pts),
+        })
+        .collect();
     let alt_in_frame = |p: &Point3| -> f64 {
         match frame {
             AltitudeFrame::Amsl => p.z,
@@ -223,7 +229,16 @@ pub(super) fn fly_tour(
     let mut previous = first;
     for (kind, pts) in &legs {
         if *kind == LegKind::Lane && !pts.is_empty() {
-            let skip_first = dist3(&pts[0], &previous) < SAME_POINT_M;
+            let mut skip_first = dist3(&pts[0], &previous) < SAME_POINT_M;
+            // A hover lane holds and shoots at its start: the waypoint
+            // already written there becomes the held one.
+            if skip_first
+                && capture.holds_at_start()
+                && matches!(items.last(), Some(MissionItem::Waypoint(_)))
+            {
+                items.pop();
+                skip_first = false;
+            }
             let (lane, last) = capture.lane_items(pts, skip_first, &to_geo)?;
             items.extend(lane);
             previous = last.unwrap_or(previous);
