@@ -8,6 +8,8 @@ plan.json. For every sortie's `.waypoints` (read by pymavlink):
 - away from home every flown segment keeps nfz_clearance_m from the no-fly
   zones and stays that far inside the .plan's inclusion fence
   (clearance.py);
+- no two consecutive waypoints at one place (a lane going on round a bend
+  is not written twice);
 - the survey lanes (waypoints flown with the camera triggering, from a
   DO_SET_CAM_TRIGG_DIST > 0 to the next = 0) stay in the corridor and run
   along the centre line: every lane segment whose middle lies beside a
@@ -139,6 +141,11 @@ def main():
             home = items[0]
             wps = [it for it in items[1:] if it.command == CMD_WAYPOINT]
             pts = [fwd(home.y, home.x)] + [fwd(w.y, w.x) for w in wps] + [fwd(home.y, home.x)]
+            for w, v in zip(wps, wps[1:]):
+                a, b = fwd(w.y, w.x), fwd(v.y, v.x)
+                if math.dist(a, b) < 1e-3 and abs(w.z - v.z) < 1e-3:
+                    fail(f"{wp_path}: two consecutive waypoints at {a}, {w.z} m (a lane going on "
+                         f"round a bend is written once)")
             try:
                 d_nfz, _ = clearance_check(clearance, pts, nfz,
                                            inclusion_rings(out / f"{uid}.plan", fwd), wp_path)

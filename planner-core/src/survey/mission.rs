@@ -234,8 +234,11 @@ fn build_mission(
     for (i, visit) in tour.visits.iter().enumerate() {
         transit(&mut items, &tour.transits[i], false)?;
         for (k, lane) in visit.lanes.iter().enumerate() {
+            // A corridor's lane going on round a bend: the UAV is there already.
+            let goes_on =
+                k > 0 && visit.lanes[k - 1].end == lane.start && visit.links[k - 1].is_empty();
             let pts = [at_altitude(lane.start), at_altitude(lane.end)];
-            items.extend(capture.lane_items(&pts, false, &to_geo)?.0);
+            items.extend(capture.lane_items(&pts, goes_on, &to_geo)?.0);
             if let Some(link) = visit.links.get(k) {
                 for &c in link {
                     items.push(wp(c)?);
