@@ -178,6 +178,61 @@ fn close_lanes_are_flown_skipping() {
     );
 }
 
+/// Both planes over the Copernicus DSM (rolling hills west of Grenoble,
+/// ~150 m of relief) with an NFZ: climbs and descents within the climb
+/// angle along the whole track (relative frame), lanes split into
+/// collinear legs that follow the ground, every other check as flat.
+#[test]
+fn planes_over_a_real_dem() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = write(
+        dir.path(),
+        "roi.geojson",
+        &rect(5.2950, 45.2960, 5.3080, 45.3030),
+    );
+    let nfz = write(
+        dir.path(),
+        "nfz.geojson",
+        &rect(5.3000, 45.2985, 5.3015, 45.2995),
+    );
+    let dem = shared_data("dems/demcompare__Copernicus_DSM_10_N45_00_E005_00_DEM.tif");
+    for (kind, climb) in [("fixed_wing", 10.0), ("vtol", 8.0)] {
+        let params = json!({"altitude_m": 100, "side_overlap": 0.6,
+                            "uavs": [{"id": "d", "start": [5.2945, 45.2955]}],
+                            "aircraft": {"type": kind, "turn_radius_m": 35}});
+        let params_path = write(dir.path(), "params.json", &params);
+        let out = dir.path().join(kind);
+        let o = terraplan(&[
+            "survey",
+            "--roi",
+            roi.to_str().unwrap(),
+            "--no-fly",
+            nfz.to_str().unwrap(),
+            "--dem",
+            dem.to_str().unwrap(),
+            "--params",
+            params_path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{kind}: {}", text(&o.stderr));
+        let summary = check_aircraft(&out, &roi, &[&nfz], kind, 35.0, climb, 100.0);
+        assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
+        let m = &summary["missions"]["d.waypoints"];
+        // The hills make it climb and descend, up to the limit.
+        let steepest = m["steepest_deg"].as_f64().unwrap();
+        assert!(
+            steepest > climb * 0.5 && steepest <= climb + 0.01,
+            "{kind}: {steepest}"
+        );
+        let plan: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+        let s = &plan["uavs"][0]["sorties"][0]["stats"];
+        assert!(s["length_3d_m"].as_f64().unwrap() > s["length_m"].as_f64().unwrap());
+        check_missions(&out);
+    }
+}
+
 #[test]
 fn an_explicit_multirotor_plans_byte_for_byte_as_before() {
     let dir = tempfile::tempdir().unwrap();

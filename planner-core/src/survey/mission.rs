@@ -46,8 +46,9 @@ pub(super) fn uav_plans(
                 let home = flock.homes[i];
                 let trigger = flight.geometry.trigger_distance_m;
                 let frame = params.altitude_frame;
-                let (mission, stats, path) =
-                    plane.sortie(tour, home, spec.start, speed, trigger, frame, proj)?;
+                let terrain = home_amsl.map(|(o, h)| (&o.terrain.model, &flight.rules, h));
+                let (mission, stats, path) = plane
+                    .sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
                 all_paths.extend(path);
                 (mission, stats, None)
             } else {

@@ -22,6 +22,7 @@ mod flock_plan;
 mod homes;
 mod mission;
 mod plane_flight;
+mod plane_heights;
 mod rally;
 mod request;
 mod result;

@@ -7,15 +7,18 @@
 use geo_types::Coord;
 
 use super::aircraft::{Aircraft, AircraftType};
+use super::plane_heights::{heights, split_lanes};
 use super::request::PlanError;
 use super::result::UavStats;
+use super::terrain_flight::FlightRules;
 use crate::coverage::airframe::{PlaneTurns, lane_poses};
 use crate::coverage::arcs::{self, ARC_SLACK, Flown, Mark, Waypoint};
 use crate::coverage::dubins::{Piece, Pose, dubins_paths};
 use crate::coverage::{Lane, photo_count};
-use crate::export::{GeoPoint, MissionItem};
+use crate::export::{AltitudeFrame, GeoPoint, MissionItem};
 use crate::flock::{ObstacleMap, Tour};
 use crate::geo::{Issue, UtmProjection};
+use crate::terrain::TerrainModel;
 
 /// Arc samples for clearance checks, radians (the polygon corners are
 /// never wider than 15°).
@@ -442,6 +445,7 @@ impl<'a> PlaneFlight<'a> {
         home: Coord<f64>,
         speed_m_s: f64,
         trigger_distance_m: f64,
+        over: Option<&Over>,
         to_geo: &dyn Fn(Coord<f64>, f64) -> Result<GeoPoint, PlanError>,
     ) -> Result<PlaneSortie, PlanError> {
         let f = self.pieces(tour, home)?;
@@ -456,16 +460,24 @@ impl<'a> PlaneFlight<'a> {
                 return Err(self.fault(w[0], "the rounded path"));
             }
         }
-        let alt = self.altitude;
-        let items = self.items(&wps, alt, speed_m_s, trigger_distance_m, to_geo)?;
         let length_m = arcs::rounded_length(&pts, self.radius);
         let angle = self.climb_angle_deg.to_radians();
-        let vertical = match self.kind {
-            AircraftType::Vtol => 2.0 * alt,
-            // The climb at the take-off pitch, and the final's slope.
-            _ => alt / angle.sin() + (self.final_m.hypot(alt) - self.final_m),
+        let (wps, alts, length_3d_m) = match over {
+            None => {
+                let alt = self.altitude;
+                let mut alts = vec![alt; wps.len()];
+                alts[0] = 0.0;
+                alts[wps.len() - 1] = 0.0;
+                let vertical = match self.kind {
+                    AircraftType::Vtol => 2.0 * alt,
+                    // The climb at the take-off pitch, and the final's slope.
+                    _ => alt / angle.sin() + (self.final_m.hypot(alt) - self.final_m),
+                };
+                (wps, alts, length_m + vertical)
+            }
+            Some(o) => self.over_terrain(&wps, o, length_m)?,
         };
-        let length_3d_m = length_m + vertical;
+        let items = self.items(&wps, &alts, speed_m_s, trigger_distance_m, to_geo)?;
         let turns = f
             .path
             .iter()
@@ -505,11 +517,12 @@ impl<'a> PlaneFlight<'a> {
     fn items(
         &self,
         wps: &[Waypoint],
-        alt: f64,
+        alts: &[f64],
         speed_m_s: f64,
         trigger_distance_m: f64,
         to_geo: &dyn Fn(Coord<f64>, f64) -> Result<GeoPoint, PlanError>,
     ) -> Result<Vec<MissionItem>, PlanError> {
+        let alt = alts[1.min(alts.len() - 1)];
         let mut items = vec![
             match self.kind {
                 AircraftType::Vtol => MissionItem::VtolTakeoff { alt },
@@ -520,13 +533,15 @@ impl<'a> PlaneFlight<'a> {
             },
             MissionItem::ChangeSpeed { speed_m_s },
         ];
-        let inner = &wps[1..wps.len().saturating_sub(1)];
-        for (i, w) in inner.iter().enumerate() {
-            if i + 1 == inner.len() {
+        let inner = 1..wps.len().saturating_sub(1);
+        let last = inner.end.saturating_sub(1);
+        for i in inner {
+            let w = &wps[i];
+            if i == last {
                 // The landing sequence: the last waypoint is its approach.
                 items.push(MissionItem::LandStart);
             }
-            items.push(MissionItem::Waypoint(to_geo(w.at, alt)?));
+            items.push(MissionItem::Waypoint(to_geo(w.at, alts[i])?));
             match w.mark {
                 Mark::LaneStart => items.push(MissionItem::CameraTriggerDistance {
                     distance_m: trigger_distance_m,
@@ -535,12 +550,78 @@ impl<'a> PlaneFlight<'a> {
                 Mark::Point | Mark::Corner => {}
             }
         }
-        let home = to_geo(wps[wps.len() - 1].at, 0.0)?;
+        let home = to_geo(wps[wps.len() - 1].at, alts[alts.len() - 1])?;
         items.push(match self.kind {
             AircraftType::Vtol => MissionItem::VtolLand(home),
             _ => MissionItem::Land(home),
         });
         Ok(items)
+    }
+}
+
+/// The terrain a sortie is flown over and the mission's altitude frame.
+pub(super) struct Over<'a> {
+    model: &'a TerrainModel,
+    rules: &'a FlightRules,
+    home_amsl: f64,
+    frame: AltitudeFrame,
+}
+
+impl PlaneFlight<'_> {
+    /// The waypoints over the terrain (lanes split to follow it), their
+    /// altitudes in the mission's frame and the 3D length flown (`length_m`
+    /// the horizontal one).
+    fn over_terrain(
+        &self,
+        wps: &[Waypoint],
+        o: &Over,
+        length_m: f64,
+    ) -> Result<(Vec<Waypoint>, Vec<f64>, f64), PlanError> {
+        let wps = split_lanes(wps);
+        // A hair under the limit, against rounding in the mission files.
+        let tan = self.climb_angle_deg.to_radians().tan() * (1.0 - 1e-6);
+        let landing = self.kind != AircraftType::Vtol;
+        let z = heights(&wps, o.model, o.rules, o.home_amsl, tan, landing).map_err(|slope| {
+            PlanError::Invalid(vec![Issue::new(
+                "/aircraft/max_climb_angle_deg",
+                &format!(
+                    "the terrain under the landing approach needs a descent of {:.1}°, steeper \
+                     than max_climb_angle_deg: move the start or fly lower",
+                    slope.atan().to_degrees()
+                ),
+            )])
+        })?;
+        let alts = wps
+            .iter()
+            .zip(&z)
+            .map(|(w, &h)| match o.frame {
+                AltitudeFrame::Amsl => h,
+                AltitudeFrame::Relative => h - o.home_amsl,
+                AltitudeFrame::Terrain => {
+                    h - o
+                        .model
+                        .terrain(w.at)
+                        .or_else(|| o.model.safe_terrain(w.at))
+                        .unwrap_or(o.home_amsl)
+                }
+            })
+            .collect();
+        // 3D: the horizontal length with each leg's climb; the take-off's
+        // climb (at its pitch) or a VTOL's vertical climb and descent.
+        let n = wps.len();
+        let extra: f64 = (0..n - 1)
+            .map(|k| {
+                let d = dist(wps[k].at, wps[k + 1].at);
+                let dz = if k == 0 { 0.0 } else { z[k + 1] - z[k] };
+                d.hypot(dz) - d
+            })
+            .sum();
+        let climb = z[1.min(n - 1)] - o.home_amsl;
+        let vertical = match self.kind {
+            AircraftType::Vtol => climb + (z[n.saturating_sub(2)] - o.home_amsl),
+            _ => climb / self.climb_angle_deg.to_radians().sin(),
+        };
+        Ok((wps, alts, length_m + extra + vertical))
     }
 }
 
@@ -603,7 +684,8 @@ fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
 impl PlaneFlight<'_> {
     /// The mission of one sortie flown from UAV home `home` (planning
     /// coordinates; `start` the same in lon/lat), its statistics and the
-    /// points flown (for the fence). Flat surveys only.
+    /// points flown (for the fence); over `terrain` (the model, the height
+    /// rules and the DEM height at home) when given.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn sortie(
         &self,
@@ -612,9 +694,16 @@ impl PlaneFlight<'_> {
         start: [f64; 2],
         speed_m_s: f64,
         trigger_distance_m: f64,
-        frame: crate::export::AltitudeFrame,
+        frame: AltitudeFrame,
+        terrain: Option<(&TerrainModel, &FlightRules, f64)>,
         proj: &UtmProjection,
     ) -> Result<(crate::export::Mission, UavStats, Vec<Coord<f64>>), PlanError> {
+        let over = terrain.map(|(model, rules, home_amsl)| Over {
+            model,
+            rules,
+            home_amsl,
+            frame,
+        });
         let to_geo = |c: Coord<f64>, alt: f64| -> Result<GeoPoint, PlanError> {
             let ll = proj.to_wgs84(c)?;
             Ok(GeoPoint {
@@ -623,17 +712,24 @@ impl PlaneFlight<'_> {
                 alt,
             })
         };
-        let flown = self.fly(tour, home, speed_m_s, trigger_distance_m, &to_geo)?;
+        let flown = self.fly(
+            tour,
+            home,
+            speed_m_s,
+            trigger_distance_m,
+            over.as_ref(),
+            &to_geo,
+        )?;
         let mission = crate::export::Mission {
             home: GeoPoint {
                 lon: start[0],
                 lat: start[1],
-                alt: 0.0,
+                alt: over.as_ref().map_or(0.0, |o| o.home_amsl),
             },
             frame,
             cruise_speed_m_s: speed_m_s,
             items: flown.items,
-            over_terrain: false,
+            over_terrain: over.is_some(),
         };
         Ok((mission, flown.stats, flown.points))
     }
