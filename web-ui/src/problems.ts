@@ -51,6 +51,11 @@ export const SURVEY_FIELDS: FieldRule[] = [
   { prefix: '/trigger/interval_s', field: 'pattern', label: 'Photo interval', control: 'trigger-interval' },
   { prefix: '/trigger/hold_s', field: 'pattern', label: 'Hover per photo', control: 'trigger-hold' },
   { prefix: '/trigger', field: 'pattern', label: 'Trigger', control: 'trigger-mode' },
+  { prefix: '/aircraft/turn_radius_m', field: 'aircraft', label: 'Turn radius', control: 'aircraft-turn-radius' },
+  { prefix: '/aircraft/max_climb_angle_deg', field: 'aircraft', label: 'Climb angle', control: 'aircraft-climb-angle' },
+  { prefix: '/aircraft/cruise_speed_m_s', field: 'aircraft', label: 'Cruise speed', control: 'aircraft-cruise-speed' },
+  { prefix: '/aircraft/lead_in_m', field: 'aircraft', label: 'Lead-in', control: 'aircraft-lead-in' },
+  { prefix: '/aircraft', field: 'aircraft', label: 'Aircraft', control: 'aircraft-type' },
 ];
 
 export const COSTMAP_FIELDS: FieldRule[] = [

@@ -3,6 +3,7 @@
 // unit-tested.
 
 import type { Camera, LonLat } from './api';
+import { aircraftFromRequest, aircraftMember, type AircraftValues } from './aircraft-fields';
 import { corridorFromRequest, corridorMembers, type CorridorValues } from './corridor-fields';
 import { PATTERN_MEMBERS, patternFromRequest, patternMembers, type PatternValues } from './pattern-fields';
 import { polygonsOf, type PolygonRings } from './geo-import';
@@ -37,6 +38,8 @@ export interface SurveyFormValues {
   corridor?: CorridorValues | null;
   /** Crosshatch, camera pitch and trigger mode (absent: the API's defaults). */
   patterns?: PatternValues;
+  /** The airframe (absent: a multirotor, the API's default). */
+  aircraft?: AircraftValues;
   noFlyZones: PolygonRings[];
   demId: string | null;
   allowPartialDem: boolean;
@@ -79,6 +82,8 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
   if (corridor && 'error' in corridor) errors.push({ field: 'corridor', text: corridor.error, control: 'corridor-width' });
   const patterns = v.patterns ? patternMembers(v.patterns) : { members: {} };
   if ('error' in patterns) errors.push({ field: 'pattern', text: patterns.error, control: patterns.control });
+  const aircraft = v.aircraft ? aircraftMember(v.aircraft) : { member: null };
+  if ('error' in aircraft) errors.push({ field: 'aircraft', text: aircraft.error, control: aircraft.control });
   if (!v.roi && !corridor) errors.push({ field: 'roi', text: 'Survey area: draw it on the map or import a file first.' });
   if (v.altitudeFrame !== 'relative' && !v.demId) {
     errors.push({ field: 'altitude-frame', text: `Altitude frame: “${v.altitudeFrame}” needs a terrain model (DEM); choose one or use “relative”.` });
@@ -127,6 +132,7 @@ export function buildSurveyRequest(v: SurveyFormValues): SurveyRequest {
     altitude_frame: v.altitudeFrame,
     assignment: v.assignment,
     ...('members' in patterns ? patterns.members : {}),
+    ...('member' in aircraft && aircraft.member ? { aircraft: aircraft.member } : {}),
   };
   if (v.name.trim()) body.name = v.name.trim();
   if (v.heightMode === 'gsd') body.gsd_cm_px = v.gsdCmPx;
@@ -299,6 +305,7 @@ const FORM_MEMBERS = new Set([
   'name', 'project_id', 'roi', 'corridor', 'corridor_width_m', 'no_fly_zones', 'dem_id', 'allow_partial_dem', 'camera', 'camera_preset', 'altitude_m', 'gsd_cm_px',
   'front_overlap', 'side_overlap', 'slice_angle_deg', 'speed_m_s', 'nfz_clearance_m', 'altitude_frame', 'assignment', 'uavs', 'rally_points',
   ...PATTERN_MEMBERS,
+  'aircraft',
 ]);
 
 export interface RestoredForm {
@@ -363,6 +370,7 @@ export function formFromRequest(
       roi: rois[0] ?? null,
       ...(corridor ? { corridor } : {}),
       ...(PATTERN_MEMBERS.some((k) => r[k] != null) ? { patterns: patternFromRequest(r) } : {}),
+      ...(r.aircraft != null ? { aircraft: aircraftFromRequest(r) } : {}),
       noFlyZones,
       demId: typeof r.dem_id === 'string' ? r.dem_id : null,
       allowPartialDem: r.allow_partial_dem === true,

@@ -5,6 +5,7 @@
 import { api, type CameraPreset, type LonLat, type Survey } from './api';
 import { CorridorFields } from './corridor-fields';
 import { PATTERN_DEFAULTS, readPatternFields, showPatternFields } from './pattern-fields';
+import { AIRCRAFT_DEFAULTS, readAircraftFields, showAircraftFields } from './aircraft-fields';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue, swatch } from './dom';
 import { ErrorSlots } from './errors-ui';
 import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, formatPercent } from './format';
@@ -306,6 +307,7 @@ export class SurveyPanel {
       roi: this.roi,
       corridor: this.corridor.values(),
       patterns: readPatternFields(),
+      aircraft: readAircraftFields(),
       noFlyZones: this.noFlyZones,
       demId: follow ? (this.dem.current?.id ?? null) : null,
       allowPartialDem: byId<HTMLInputElement>('allow-partial-dem').checked,
@@ -396,6 +398,7 @@ export class SurveyPanel {
       this.map.setRoi(v.roi);
       this.corridor.restore(v.corridor ?? null);
       showPatternFields(v.patterns ?? PATTERN_DEFAULTS);
+      showAircraftFields(v.aircraft ?? AIRCRAFT_DEFAULTS);
 
       const select = byId<HTMLSelectElement>('camera');
       if (v.camera !== 'custom' && ![...select.options].some((o) => o.value === v.camera)) {
