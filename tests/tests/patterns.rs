@@ -146,9 +146,10 @@ fn crosshatch_oblique_on_a_field_with_nfzs() {
     );
 }
 
-/// Time and hover triggering, with two UAVs sharing the field in battery
-/// sorties: the photo counts of the missions equal the plan's, hover holds
-/// at every photo and its flight time carries the holds.
+/// Time triggering over a crosshatch and hover triggering, with two UAVs
+/// sharing the field in battery sorties: the photo counts of the missions
+/// equal the plan's, each crosshatch set covers the free area alone, hover
+/// holds at every photo and its flight time carries the holds.
 #[test]
 fn trigger_modes_with_a_flock_in_sorties() {
     let dir = tempfile::tempdir().unwrap();
@@ -168,9 +169,21 @@ fn trigger_modes_with_a_flock_in_sorties() {
     let (dist_out, dist) = plan(d, "distance", &base);
     check_patterns(d, &dist_out, &base);
 
-    let time = with(json!({"trigger": {"mode": "time", "interval_s": 2.5}}));
+    // Time triggering over a crosshatch: both sets shared by the flock and
+    // cut into sorties, each set's photos alone seeing the free area.
+    let time =
+        with(json!({"trigger": {"mode": "time", "interval_s": 2.5}, "pattern": "crosshatch"}));
     let (time_out, time_plan) = plan(d, "time", &time);
-    check_patterns(d, &time_out, &time);
+    let summary = check_patterns(d, &time_out, &time);
+    assert!(
+        summary["set1_coverage"].as_f64().unwrap() >= 0.995,
+        "{summary}"
+    );
+    assert!(
+        summary["set2_coverage"].as_f64().unwrap() >= 0.995,
+        "{summary}"
+    );
+    assert!(time_plan["stats"]["sorties"].as_u64().unwrap() > 2);
     check_missions(&time_out);
     // 2.5 s at 10 and at 8 m/s: 25 and 20 m between photos, against the
     // 40 m trigger distance (100 m footprint, 60 % front overlap): more.

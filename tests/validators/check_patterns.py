@@ -13,10 +13,12 @@ From every sortie's `.waypoints` (read by pymavlink's MAVWPLoader):
   IMAGE_START_CAPTURE of count 1 in hover; the sum must equal plan.json's;
 - the gimbal: DO_GIMBAL_MANAGER_PITCHYAW before the first lane with the
   requested pitch (none when the request sets none);
-- crosshatch: each lane is given to the cell holding its midpoint; it is of
-  the first set when along the cell's lane bearing, of the second when at
-  90° ± 1° to it (anything else fails); each set alone must sweep (flat
-  capped strips footprint_side_m wide) >= 99.5 % of the free area;
+- crosshatch: each lane belongs to a cell it meets; it is of the first set
+  when along that cell's lane bearing, of the second when at 90° ± 1° to
+  it (anything else fails); each set's photos alone must see >= 99.5 % of
+  the free area (nadir: a footprint_side_m × footprint_front_m rectangle
+  at every photo; oblique: the lanes swept at the near-edge width, as the
+  plan's coverage figure, since oblique photos land ahead of the lane);
 - oblique: the footprint is computed by casting the four corner rays of a
   pinhole camera rotated by the pitch and meeting them with the ground
   plane; its near-edge width and along-track extent, and the spacing and
@@ -34,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from pymavlink import mavutil, mavwp
 from pyproj import Transformer
-from shapely.geometry import LineString, Point, shape
+from shapely.geometry import LineString, Point, Polygon, shape
 import shapely
 from shapely.ops import unary_union
 
@@ -66,8 +68,9 @@ def items(path):
 
 
 def lanes_of(wps, fwd):
-    """Lanes (lists of UTM points; none in hover mode), photos, and the
-    gimbal commands as (index, pitch, yaw)."""
+    """Lanes (lists of UTM points, each with the distance between its
+    photos; none in hover mode), photos, and the gimbal commands as
+    (index, pitch, yaw)."""
     lanes, photos, pitches = [], 0, []
     speed = None
     current, spacing, last_pos = None, None, None
@@ -84,7 +87,7 @@ def lanes_of(wps, fwd):
             if w.param1 > 0:
                 current, spacing = [last_pos], w.param1
             else:
-                lanes.append(current)
+                lanes.append((current, spacing))
                 photos += math.floor(length(current) / spacing + 1e-9) + 1
                 current = None
         elif cmd == ML.MAV_CMD_DO_SET_CAM_TRIGG_INTERVAL:
@@ -93,7 +96,7 @@ def lanes_of(wps, fwd):
             if w.param1 == 1:
                 current = [last_pos]
             else:
-                lanes.append(current)
+                lanes.append((current, spacing))
                 photos += math.floor(length(current) / spacing + 1e-9) + 1
                 current = None
         elif cmd == ML.MAV_CMD_IMAGE_START_CAPTURE:
@@ -107,11 +110,31 @@ def lanes_of(wps, fwd):
             if current is not None:
                 current.append(pos)
             last_pos = pos
-    return [lane for lane in lanes if lane and len(lane) >= 2], photos, pitches
+    return [(lane, d) for lane, d in lanes if lane and len(lane) >= 2], photos, pitches
 
 
 def length(pts):
     return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
+
+
+def seen_by(lane, spacing, side, front, pitch):
+    """The ground a lane's photos see: nadir, the union of side × front
+    rectangles at every photo (every `spacing` from the lane's start);
+    oblique, the lane swept at the footprint's near-edge width (its photos
+    land ahead of it)."""
+    a, b = lane[0], lane[-1]
+    line = LineString([a, b])
+    if pitch is not None and pitch > -90:
+        return line.buffer(side / 2, cap_style="flat")
+    n = math.floor(line.length / spacing + 1e-9) + 1
+    ux, uy = (b[0] - a[0]) / line.length, (b[1] - a[1]) / line.length
+    rects = []
+    for k in range(n):
+        cx, cy = a[0] + ux * k * spacing, a[1] + uy * k * spacing
+        rects.append(Polygon([(cx + ux * f * front / 2 - uy * s * side / 2,
+                               cy + uy * f * front / 2 + ux * s * side / 2)
+                              for f, s in [(-1, -1), (1, -1), (1, 1), (-1, 1)]]))
+    return unary_union(rects)
 
 
 def bearing(a, b):
@@ -199,20 +222,27 @@ def main():
         sets = ([], [])
         worst = 0.0
         for lane in all_lanes:
-            a, b = lane[0], lane[-1]
-            mid = Point((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
-            poly, cb = min(cells, key=lambda c: c[0].distance(mid))
+            a, b = lane[0][0], lane[0][-1]
+            line = LineString([a, b])
             lb = bearing(a, b)
-            if gap(lb, cb) < 1.0:
+            # A lane is its cell's (lanes run on through free space past
+            # their cell): the cells it meets, the nearest first.
+            near = sorted(cells, key=lambda c: c[0].distance(line.interpolate(0.5, normalized=True)))
+            near = [c for c in near if c[0].distance(line) < 1.0] or near[:1]
+            # The nearest of them whose lanes run along or across it.
+            g = next((g for g in (gap(lb, cb) for _, cb in near)
+                      if g < 1.0 or abs(g - 90.0) <= 1.0), None)
+            if g is not None and g < 1.0:
                 sets[0].append(lane)
-            elif abs(gap(lb, cb) - 90.0) <= 1.0:
+            elif g is not None:
                 sets[1].append(lane)
-                worst = max(worst, abs(gap(lb, cb) - 90.0))
+                worst = max(worst, abs(g - 90.0))
             else:
-                fail(f"lane at {lb:.2f}° in a cell of lanes at {cb:.2f}°: neither set")
+                fail(f"lane at {lb:.2f}° in cells of lanes at {[round(c[1], 2) for c in near]}°: "
+                     "neither set")
         for k, lanes in enumerate(sets):
-            strips = unary_union([LineString([l[0], l[-1]]).buffer(side / 2, cap_style="flat")
-                                  for l in lanes])
+            strips = unary_union([seen_by(lane, d, side, stats["footprint_front_m"], pitch)
+                                  for lane, d in lanes])
             ratio = free.intersection(strips).area / free.area
             summary[f"set{k + 1}_coverage"] = ratio
             summary[f"set{k + 1}_lanes"] = len(lanes)

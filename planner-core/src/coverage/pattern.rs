@@ -22,72 +22,100 @@ pub enum Pattern {
     Crosshatch,
 }
 
+/// Cuts a cell into parts monotone along lines of a bearing.
+pub type SplitCell = dyn Fn(&Polygon<f64>, f64) -> Vec<Polygon<f64>> + Sync;
+
 /// Every plan of `plans` (each covering `cells[plan.cell_index]`) with a
 /// second set of lanes across its own, `spacing` apart, laid, clipped and
-/// linked in `free` like the first (see [`crosshatch`]).
+/// linked in `free` like the first (see [`crosshatch`]); `split(cell,
+/// bearing)` cuts a cell into parts monotone along lines of that bearing
+/// (the decomposition at that slice angle).
 pub fn crosshatch_all(
     plans: &[CellPlan],
     cells: &[Polygon<f64>],
     free: &MultiPolygon<f64>,
     spacing: f64,
+    split: &SplitCell,
 ) -> Vec<CellPlan> {
     let free = FreeSpace::new(free);
     let token = crate::cancel::current();
     plans
         .par_iter()
-        .map(|p| token.scope(|| crosshatch(p, &cells[p.cell_index], &free, spacing)))
+        .map(|p| {
+            token.scope(|| {
+                let cell = &cells[p.cell_index];
+                let parts = split(cell, across(p));
+                crosshatch(p, cell, &parts, &free, spacing)
+            })
+        })
         .collect()
 }
 
-/// `plan` followed by a second set of lanes at 90° to its own over `cell`:
-/// the layout of [`CellLayouts::along`] (every piece of every lane line
-/// where the cell is not monotone across), extended and clipped in `free`
-/// as the first set's lanes are. Of the four ways to fly the second set,
-/// the one whose first lane starts nearest the first set's end; the link
-/// between the two sets is routed like any link of the cell. The plan
+/// The bearing of a plan's second set: 90° to its lanes, in [0, 180).
+pub fn across(plan: &CellPlan) -> f64 {
+    (plan.direction_deg + 90.0).rem_euclid(180.0)
+}
+
+/// `plan` followed by a second set of lanes at 90° to its own over `cell`,
+/// laid part by part over `parts` (the cell cut into pieces monotone across
+/// it, so that every lane is one segment whose ends reach the slanted
+/// edges of its strip, as the first set's do), each part's lanes extended
+/// and clipped in `free` and linked as the first set's are. The parts are
+/// flown nearest first, each the way round that starts nearest; the links
+/// between parts and sets are routed like any link of the cell. The plan
 /// unchanged when no second set can be laid (a degenerate cell).
 pub fn crosshatch(
     plan: &CellPlan,
     cell: &Polygon<f64>,
+    parts: &[Polygon<f64>],
     free: &FreeSpace,
     spacing: f64,
 ) -> CellPlan {
-    let Some(last) = plan.lanes.last() else {
-        return plan.clone();
-    };
-    let Some(second) =
-        CellLayouts::along(plan.cell_index, cell, spacing, plan.direction_deg + 90.0)
-            .and_then(|l| l.best_plan(cell, free))
-    else {
-        return plan.clone();
-    };
-    let ways = [(false, false), (false, true), (true, false), (true, true)];
-    let start_of = |(rev, flip): (bool, bool)| {
-        let lane = if rev {
-            second.lanes.last()
-        } else {
-            second.lanes.first()
-        };
-        lane.map(|l| if flip { l.end } else { l.start })
-    };
-    let Some(&(rev, flip)) = ways.iter().min_by(|a, b| {
-        let da = start_of(**a).map_or(f64::INFINITY, |s| dist(last.end, s));
-        let db = start_of(**b).map_or(f64::INFINITY, |s| dist(last.end, s));
-        da.total_cmp(&db)
-    }) else {
-        return plan.clone();
-    };
-    let second = if (rev, flip) == (false, false) {
-        second
-    } else {
-        second.reoriented_in(rev, flip, cell, free)
-    };
+    let bearing = across(plan);
+    let mut pending: Vec<(&Polygon<f64>, CellPlan)> = parts
+        .iter()
+        .filter_map(|part| {
+            let laid = CellLayouts::along(plan.cell_index, part, spacing, bearing)?;
+            Some((part, laid.best_plan(part, free)?))
+        })
+        .filter(|(_, p)| !p.lanes.is_empty())
+        .collect();
     let router = LinkRouter::new(cell, free);
     let mut out = plan.clone();
-    out.links.push(router.link(last, &second.lanes[0]));
-    out.lanes.extend_from_slice(&second.lanes);
-    out.links.extend(second.links);
+    let ways = [(false, false), (false, true), (true, false), (true, true)];
+    while let Some(last) = out.lanes.last().copied() {
+        // The part, and the way round it, that starts nearest.
+        let Some((k, way, _)) = pending
+            .iter()
+            .enumerate()
+            .flat_map(|(k, (_, p))| ways.iter().map(move |&w| (k, w, start_of(p, w))))
+            .map(|(k, w, s)| (k, w, dist(last.end, s)))
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+        else {
+            break;
+        };
+        let (part, second) = pending.swap_remove(k);
+        let second = if way == (false, false) {
+            second
+        } else {
+            second.reoriented_in(way.0, way.1, part, free)
+        };
+        out.links.push(router.link(&last, &second.lanes[0]));
+        out.lanes.extend_from_slice(&second.lanes);
+        out.links.extend(second.links);
+    }
     out
+}
+
+/// Where `plan` starts when flown from its last lane (`rev`) and/or with
+/// every lane the other way round (`flip`).
+fn start_of(plan: &CellPlan, (rev, flip): (bool, bool)) -> geo_types::Coord<f64> {
+    let lane = if rev {
+        plan.lanes[plan.lanes.len() - 1]
+    } else {
+        plan.lanes[0]
+    };
+    if flip { lane.end } else { lane.start }
 }
 
 #[cfg(test)]
@@ -102,6 +130,10 @@ mod tests {
     fn bearing_mod_180(l: &Lane) -> f64 {
         let d = l.end - l.start;
         d.x.atan2(d.y).to_degrees().rem_euclid(180.0)
+    }
+
+    fn split(cell: &Polygon<f64>, bearing: f64) -> Vec<Polygon<f64>> {
+        crate::decompose::decompose(&MultiPolygon(vec![cell.clone()]), bearing).unwrap()
     }
 
     fn same_way(l: &Lane, bearing: f64) -> bool {
@@ -120,7 +152,8 @@ mod tests {
             let Some(plan) = plan_cell_in(i, cell, &prepared, spacing, 30.0) else {
                 continue;
             };
-            let both = crosshatch(&plan, cell, &prepared, spacing);
+            let parts = split(cell, across(&plan));
+            let both = crosshatch(&plan, cell, &parts, &prepared, spacing);
             let n = plan.lanes.len();
             assert!(both.lanes.len() > n, "cell {i}: no second set");
             assert_eq!(both.links.len(), both.lanes.len() - 1);
@@ -155,6 +188,7 @@ mod tests {
             &cells,
             &free,
             spacing,
+            &split,
         );
         // Each set alone covers the field (footprints of a 70 % side overlap).
         for second in [false, true] {

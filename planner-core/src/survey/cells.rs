@@ -171,7 +171,13 @@ pub(super) fn lay_pattern(
     spacing: f64,
 ) -> Result<(), PlanError> {
     if pattern == coverage::Pattern::Crosshatch {
-        d.plans = coverage::crosshatch_all(&d.plans, &d.cells, free, spacing);
+        // Each cell cut into parts monotone across its lanes: every lane
+        // of the second set is then one segment reaching its strip's ends.
+        let split = |cell: &Polygon<f64>, bearing: f64| {
+            decompose::decompose(&MultiPolygon(vec![cell.clone()]), bearing)
+                .unwrap_or_else(|_| vec![cell.clone()])
+        };
+        d.plans = coverage::crosshatch_all(&d.plans, &d.cells, free, spacing, &split);
         crate::cancel::check()?;
     }
     Ok(())
