@@ -12,8 +12,8 @@ plan.json. For every sortie's `.waypoints` (read by pymavlink):
   is not written twice);
 - the survey lanes (waypoints flown with the camera triggering, from a
   DO_SET_CAM_TRIGG_DIST > 0 to the next = 0) stay in the corridor and run
-  along the centre line: every lane segment whose middle lies beside a
-  segment of the line (not round a bend) is parallel to it within 1°;
+  along the centre line: each lane segment keeps its distance from the
+  line within 0.3 m plus 2 % (the chords of arcs round bends);
 - the photos: one where triggering starts and one every trigger distance
   after it along the lane (ArduPilot's and PX4's distance triggering), each
   a footprint_side_m × footprint_front_m rectangle across and along the
@@ -46,7 +46,8 @@ CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
 MIN_COVERAGE = 0.995
 # 5 cm for the lon/lat round trip of points on the corridor's edge.
 GEOM_TOL_M = 0.05
-PARALLEL_TOL_DEG = 1.0
+# The planner draws lanes within 0.25 m of their offset curve.
+PARALLEL_TOL_M = 0.3
 
 
 def fail(msg):
@@ -130,7 +131,6 @@ def main():
     side, front = stats["footprint_side_m"], stats["footprint_front_m"]
     summary = {"uavs": {}, "corridor_area_m2": corridor.area, "free_area_m2": free.area}
     lane_lines, shots = [], []
-    segs = list(zip(centre.coords, list(centre.coords)[1:]))
     for uav in plan["uavs"]:
         for sortie in uav["sorties"]:
             uid = sortie["file_stem"]
@@ -162,7 +162,7 @@ def main():
                 if not grown.contains(line):
                     fail(f"{wp_path}: survey lane {line.wkt} leaves the corridor")
                 for a, b in zip(lane, lane[1:]):
-                    check_parallel(a, b, centre, segs, wp_path)
+                    check_parallel(a, b, centre, wp_path)
                 lane_lines.append(line)
                 shots.extend(photos(lane, trigger, side, front))
             summary["uavs"][uid] = {"items": n, "waypoints": len(wps), "lanes": len(runs)}
@@ -187,24 +187,19 @@ def main():
     print(json.dumps(summary))
 
 
-def check_parallel(a, b, centre, segs, where):
-    """A lane segment beside a straight stretch of the line runs along it."""
+def check_parallel(a, b, centre, where):
+    """A lane segment keeps its distance from the line: sampled along it,
+    the distances differ by at most PARALLEL_TOL_M plus 2 % (the chord of a
+    lane's arc round the outside of a bend, drawn every 20°, dips 1.5 % of
+    the offset towards the line)."""
     if math.dist(a, b) < 1.0:
         return
-    mid = Point((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
-    d = centre.project(mid)
-    run = 0.0
-    for p, q in segs:
-        seg = math.dist(p, q)
-        if run - 1e-6 <= d <= run + seg + 1e-6:
-            if d - run < 1e-3 or run + seg - d < 1e-3:
-                return  # beside a vertex: round a bend
-            ang = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(q[1] - p[1], q[0] - p[0]))
-            ang = abs((ang + 90) % 180 - 90)
-            if ang > PARALLEL_TOL_DEG:
-                fail(f"{where}: lane segment {a} -> {b} is {ang:.2f}° off the centre line")
-            return
-        run += seg
+    d = [centre.distance(Point(a[0] + (b[0] - a[0]) * k / 10, a[1] + (b[1] - a[1]) * k / 10))
+         for k in range(11)]
+    spread = max(d) - min(d)
+    if spread > PARALLEL_TOL_M + 0.02 * max(d):
+        fail(f"{where}: lane segment {a} -> {b} is {min(d):.2f} to {max(d):.2f} m from the "
+             f"centre line: not along it")
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@
 //! straight segments as it does for areas.
 
 use geo::algorithm::buffer::{Buffer, BufferStyle, LineCap, LineJoin};
-use geo::{Area, BooleanOps};
+use geo::{Area, BooleanOps, Simplify};
 use geo_types::{Coord, LineString, MultiLineString, MultiPolygon, Polygon};
 
 use super::links::LinkRouter;
@@ -26,6 +26,12 @@ const LANE_ARC_STEP_RAD: f64 = 0.35;
 /// Lane pieces shorter than this (m) are not flown: slivers cut off by a
 /// no-fly zone's corner.
 const MIN_PIECE_M: f64 = 0.1;
+/// Lanes are drawn with vertices dropped while they stay this close (m)
+/// to the offset curve (Ramer–Douglas–Peucker): a road digitised every few
+/// metres would otherwise give a waypoint (and a camera trigger) for each.
+const LANE_SIMPLIFY_M: f64 = 0.25;
+/// Buffer parts and holes smaller than this (m²) are overlay slivers.
+const SLIVER_M2: f64 = 1e-3;
 /// Lane vertices closer than this (m) are merged.
 const MIN_SEGMENT_M: f64 = 0.01;
 /// Gaps shorter than this (m) between two pieces of one lane are flown
@@ -60,10 +66,24 @@ pub fn corridor_polygon(centre: &LineString<f64>, width_m: f64) -> MultiPolygon<
 }
 
 fn stroke(line: &LineString<f64>, half_width: f64, arc_step: f64) -> MultiPolygon<f64> {
-    line.buffer_with_style(
+    let raw = line.buffer_with_style(
         BufferStyle::new(half_width)
             .line_cap(LineCap::Butt)
             .line_join(LineJoin::Round(arc_step)),
+    );
+    // The overlay leaves slivers of a few square micrometres where nearly
+    // collinear segments meet (a road of thousands of vertices): not area.
+    let real =
+        |ring: &LineString<f64>| Polygon::new(ring.clone(), vec![]).unsigned_area() > SLIVER_M2;
+    MultiPolygon(
+        raw.0
+            .into_iter()
+            .filter(|p| real(p.exterior()))
+            .map(|p| {
+                let (exterior, holes) = p.into_inner();
+                Polygon::new(exterior, holes.into_iter().filter(|h| real(h)).collect())
+            })
+            .collect(),
     )
 }
 
@@ -275,10 +295,12 @@ pub fn corridor_cells(
     let mut lanes: Vec<Vec<Piece>> = Vec::with_capacity(n);
     for offset in lane_offsets(width_m, spacing_m) {
         crate::cancel::check()?;
-        let curve = offset_curve(centre, offset).ok_or(CorridorError::TooTight {
-            width_m,
-            offset_m: offset,
-        })?;
+        let curve = offset_curve(centre, offset)
+            .ok_or(CorridorError::TooTight {
+                width_m,
+                offset_m: offset,
+            })?
+            .simplify(LANE_SIMPLIFY_M);
         let mut pieces: Vec<Piece> = clip_polyline(&curve.0, free_space.region())
             .into_iter()
             .map(|points| {
@@ -417,7 +439,7 @@ pub fn corridor_lane_lines(
     let region = FreeSpace::new(free);
     let mut out = Vec::new();
     for offset in lane_offsets(width_m, spacing_m) {
-        let curve = offset_curve(centre, offset)?;
+        let curve = offset_curve(centre, offset)?.simplify(LANE_SIMPLIFY_M);
         out.extend(
             clip_polyline(&curve.0, region.region())
                 .into_iter()
@@ -458,6 +480,25 @@ mod tests {
         // Flat caps: nothing beyond x < 0 or y > 200.
         for c in p.0[0].exterior().0.iter() {
             assert!(c.x >= -1e-6 && c.y <= 200.0 + 1e-6, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn a_long_wiggly_road_gives_one_curve_per_offset() {
+        // 20 km along x, 2 000 vertices on a sine 222 m high (bends of
+        // 765 m radius): the overlay's slivers at the nearly straight joins
+        // must not count as parts of the buffer.
+        let line = LineString::new(
+            (0..2000)
+                .map(|i| coord! {x: i as f64 * 10.3, y: 222.0 * (i as f64 / 40.0).sin()})
+                .collect(),
+        );
+        let p = corridor_polygon(&line, 200.0);
+        assert_eq!(p.0.len(), 1);
+        assert!(p.0[0].interiors().is_empty());
+        for o in lane_offsets(200.0, 25.0) {
+            let c = offset_curve(&line, o).unwrap_or_else(|| panic!("offset {o}"));
+            assert!(c.0.len() >= 2000 / 2, "{o}: {} vertices", c.0.len());
         }
     }
 

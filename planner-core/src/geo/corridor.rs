@@ -2,12 +2,15 @@
 //! read and checked with precise pointers, and the corridor polygon (its
 //! flat-capped buffer) made the survey area in UTM metres.
 
-use geo::{Centroid, CoordsIter};
-use geo_types::{Coord, Line, LineString, MultiPolygon, Point};
+use geo::{Centroid, Orient, orient::Direction};
+use geo_types::{Coord, Line, LineString, MultiPolygon, Point, Polygon};
 use rstar::{AABB, RTree, RTreeObject};
 use serde_json::Value;
 
-use super::{GeoError, Issue, Limits, ParsedPolygon, SurveyArea, UtmProjection, prepare_area};
+use super::{
+    GeoError, Issue, Limits, ParsedPolygon, SurveyArea, UtmProjection, check_area, limit_issues,
+    polygon_issues_all, zone_width_issues,
+};
 use crate::coverage::corridor_polygon;
 
 /// A corridor's centre line as given, with the JSON pointer of its
@@ -147,9 +150,12 @@ fn crossing_issue(line: &LineString<f64>, pointer: &str) -> Option<Issue> {
 
 /// The corridor as a survey area: the line projected to the UTM zone of
 /// its centroid, its flat-capped buffer `width_m` wide as the ROI, and the
-/// no-fly zones checked and projected as for an area. Faults of the line
-/// or of the corridor (too large, outside UTM) are reported at the line's
-/// pointer. Returns the area and the centre line in its UTM metres.
+/// no-fly zones checked and projected as for an area. The buffer is made
+/// here, not given, so only the line and the zones are checked (a buffer
+/// taken back to lon/lat may touch itself by rounding where arcs meet).
+/// Faults of the line or of the corridor (too large, too wide for a UTM
+/// zone) are reported at the line's pointer. Returns the area and the
+/// centre line in its UTM metres.
 pub fn prepare_corridor(
     centre: &ParsedLine,
     width_m: f64,
@@ -158,52 +164,57 @@ pub fn prepare_corridor(
     limits: &Limits,
 ) -> Result<(SurveyArea, LineString<f64>), GeoError> {
     let ptr = &centre.pointer;
-    let vertices = centre.line.0.len()
-        + no_fly
-            .iter()
-            .map(|p| p.polygon.coords_count())
-            .sum::<usize>();
-    if vertices > limits.max_vertices {
-        return Err(GeoError::Invalid(vec![Issue::new(
-            ptr,
-            &format!(
-                "{vertices} vertices in the corridor's line and the no-fly zones exceed the \
-                 limit of {}",
-                limits.max_vertices
-            ),
-        )]));
+    let as_roi = ParsedPolygon {
+        // Only its vertices are looked at: the count and the zone width.
+        polygon: Polygon::new(centre.line.clone(), vec![]),
+        pointer: ptr.clone(),
+    };
+    let roi = std::slice::from_ref(&as_roi);
+    let mut issues = limit_issues(roi, no_fly, ptr, no_fly_pointer, limits);
+    if issues.is_empty() {
+        issues.extend(polygon_issues_all(&[], no_fly)?);
     }
-    let at_line = |e: GeoError| match e {
+    let centroid = centre.line.centroid().unwrap_or(Point(centre.line.0[0]));
+    let projection = UtmProjection::for_lonlat(centroid.0).map_err(|e| match e {
         GeoError::OutsideUtm { .. } => GeoError::Invalid(vec![Issue::new(ptr, &e.to_string())]),
         other => other,
-    };
-    let centroid = centre.line.centroid().unwrap_or(Point(centre.line.0[0]));
-    let first = UtmProjection::for_lonlat(centroid.0).map_err(at_line)?;
-    let polygon = buffered(&centre.line, width_m, &first)?;
-    let roi: Vec<ParsedPolygon> = polygon
-        .0
-        .iter()
-        .map(|p| {
-            Ok(ParsedPolygon {
-                polygon: first.polygon_to_wgs84(p)?,
-                pointer: ptr.clone(),
-            })
-        })
-        .collect::<Result<_, GeoError>>()?;
-    // The buffer's arcs add vertices the request did not send: the limit
-    // was checked on the line above.
-    let roomy = Limits {
-        max_vertices: usize::MAX,
-        ..limits.clone()
-    };
-    let mut area = prepare_area(&roi, no_fly, ptr, no_fly_pointer, &roomy).map_err(at_line)?;
-    let line_utm = project_line(&centre.line, &area.projection)?;
-    if area.projection.epsg() != first.epsg() {
-        // Buffered again in the zone the area is planned in (a corridor
-        // whose polygon's centroid lies in the next zone).
-        area.roi = buffered(&centre.line, width_m, &area.projection)?;
+    })?;
+    issues.extend(zone_width_issues(roi, &projection));
+    if !issues.is_empty() {
+        return Err(GeoError::Invalid(issues));
     }
-    Ok((area, line_utm))
+    let line = project_line(&centre.line, &projection)?;
+    if line.0.len() < 2 {
+        return Err(GeoError::Invalid(vec![Issue::new(
+            ptr,
+            "the line is shorter than a millimetre",
+        )]));
+    }
+    let corridor = corridor_polygon(&line, width_m);
+    check_area(&corridor, ptr, limits)?;
+    let no_fly_wgs84: Vec<Polygon<f64>> = no_fly
+        .iter()
+        .map(|p| p.polygon.orient(Direction::Default))
+        .collect();
+    let no_fly_utm = no_fly_wgs84
+        .iter()
+        .map(|p| projection.polygon_to_utm(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let roi_wgs84 = MultiPolygon(
+        corridor
+            .0
+            .iter()
+            .map(|p| projection.polygon_to_wgs84(p))
+            .collect::<Result<Vec<_>, _>>()?,
+    );
+    let area = SurveyArea {
+        projection,
+        roi_wgs84,
+        no_fly_wgs84,
+        roi: corridor,
+        no_fly: no_fly_utm,
+    };
+    Ok((area, line))
 }
 
 fn project_line(line: &LineString<f64>, proj: &UtmProjection) -> Result<LineString<f64>, GeoError> {
@@ -215,21 +226,6 @@ fn project_line(line: &LineString<f64>, proj: &UtmProjection) -> Result<LineStri
     // Positions a millimetre apart are one: a segment needs a direction.
     pts.dedup_by(|b, a| (b.x - a.x).hypot(b.y - a.y) < 1e-3);
     Ok(LineString::new(pts))
-}
-
-fn buffered(
-    line: &LineString<f64>,
-    width_m: f64,
-    proj: &UtmProjection,
-) -> Result<MultiPolygon<f64>, GeoError> {
-    let utm = project_line(line, proj)?;
-    if utm.0.len() < 2 {
-        return Err(GeoError::Invalid(vec![Issue::new(
-            "/corridor",
-            "the line is shorter than a millimetre",
-        )]));
-    }
-    Ok(corridor_polygon(&utm, width_m))
 }
 
 #[cfg(test)]
