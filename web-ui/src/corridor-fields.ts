@@ -121,9 +121,9 @@ export function corridorFromRequest(r: Record<string, unknown>): CorridorValues 
 export class CorridorFields {
   private line: LonLat[] | null = null;
 
-  /** `fit` shows the imported line on the map; `changed` marks the plan stale; `fault` shows an import error. */
+  /** `show` puts the line on the map (`fit`: and zooms to it); `changed` marks the plan stale; `fault` shows an import error. */
   constructor(
-    private readonly fit: (line: LonLat[]) => void,
+    private readonly show: (line: LonLat[] | null, fit: boolean) => void,
     private readonly changed: () => void,
     private readonly fault: (text: string) => void,
   ) {
@@ -142,8 +142,16 @@ export class CorridorFields {
     this.set(c?.line ?? null);
   }
 
-  private set(line: LonLat[] | null): void {
+  /** A line drawn on the map (two distinct points at least). */
+  drawn(line: LonLat[]): void {
+    const distinct = line.filter((p, i) => i === 0 || p[0] !== line[i - 1][0] || p[1] !== line[i - 1][1]);
+    if (distinct.length < 2) this.fault('Corridor: draw at least two distinct points.');
+    else this.set(distinct);
+  }
+
+  private set(line: LonLat[] | null, fit = false): void {
     this.line = line;
+    this.show(line, fit);
     byId<HTMLDetailsElement>('corridor-fields').open ||= line !== null;
     this.showStatus();
     this.changed();
@@ -162,9 +170,7 @@ export class CorridorFields {
     input.value = '';
     if (!file) return;
     try {
-      const line = parseLine(await file.text(), file.name);
-      this.set(line);
-      this.fit(line);
+      this.set(parseLine(await file.text(), file.name), true);
     } catch (err) {
       const message = err instanceof ImportError ? err.message : `The file could not be read (${(err as Error).message}).`;
       this.fault(`${file.name}: ${message}`);

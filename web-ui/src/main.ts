@@ -37,6 +37,7 @@ const map = new MapView(byId('map'), byId('map-hint'), {
     else if (mode === 'place-rally') survey.placeRally(at);
     else route.picked(mode, at);
   },
+  lineDrawn: (line) => survey.lineDrawn(line),
   modeChanged: (mode) => survey?.modeChanged(mode),
 });
 

@@ -33,6 +33,7 @@ export type MapMode =
   | 'browse'
   | 'draw-roi'
   | 'draw-nfz'
+  | 'draw-line'
   | 'place-uav'
   | 'place-rally'
   | 'pick-start'
@@ -52,6 +53,8 @@ export interface MapEvents {
   costlierDrawn(areas: PolygonRings[]): void;
   /** A point was picked in one of the click modes. */
   picked(mode: MapMode, at: LonLat): void;
+  /** A corridor's centre line was drawn. */
+  lineDrawn?(line: LonLat[]): void;
   /** The mode changed (a drawing finished, or Escape). */
   modeChanged(mode: MapMode): void;
 }
@@ -67,6 +70,7 @@ const MODE_HINTS: Record<MapMode, string> = {
   browse: BROWSE_HINTS.survey,
   'draw-roi': 'Click the corners of the survey area; click the first corner or double-click to finish. Backspace removes the last corner, Escape cancels.',
   'draw-nfz': 'Click the corners of a no-fly zone; click the first corner or double-click to finish. Escape cancels.',
+  'draw-line': 'Click along the corridor’s centre line; double-click (or Enter) to finish. Backspace removes the last point, Escape cancels.',
   'place-uav': 'Click where each UAV takes off. Escape when done.',
   'place-rally': 'Click each rally point, where a UAV may return instead of home. Escape when done.',
   'pick-start': 'Click the ground route’s start.',
@@ -91,6 +95,9 @@ function costlierStyle(cost: number): Style {
     text: new Text({ text: `cost ${cost}`, font: 'bold 12px system-ui, sans-serif', fill: new Fill({ color: '#6b3000' }), stroke: new Stroke({ color: '#fff', width: 3 }), overflow: true }),
   });
 }
+
+/** A corridor's centre line: the ROI's blue, dashed (the corridor itself comes back with the plan's cells). */
+const corridorLineStyle = new Style({ stroke: new Stroke({ color: '#0050d0', width: 3, lineDash: [10, 6] }) });
 
 const cellStyle = new Style({ stroke: new Stroke({ color: 'rgba(40, 40, 40, 0.8)', width: 1, lineDash: [3, 3] }), fill: new Fill({ color: 'rgba(255, 255, 255, 0.12)' }) });
 
@@ -261,7 +268,15 @@ export class MapView {
     }
     this.mode = mode;
     const kind: AreaKind | null = mode === 'draw-roi' ? 'roi' : mode === 'draw-nfz' ? 'nfz' : mode === 'draw-block' ? 'blocked' : mode === 'draw-costlier' ? 'costlier' : null;
-    if (kind) {
+    if (mode === 'draw-line') {
+      this.draw = new Draw({ type: 'LineString', stopClick: true });
+      this.draw.on('drawend', (e) => {
+        const coords = (e.feature.getGeometry() as LineString).getCoordinates();
+        this.events.lineDrawn?.(coords.map((c) => toLonLat(c) as LonLat));
+        setTimeout(() => this.setMode('browse'));
+      });
+      this.map.addInteraction(this.draw);
+    } else if (kind) {
       // stopClick keeps the finishing double-click from zooming the map.
       this.draw = new Draw({ type: 'Polygon', stopClick: true });
       this.draw.on('drawend', (e) => {
@@ -440,6 +455,12 @@ export class MapView {
     for (const f of this.areaFeatures('roi')) this.areas.removeFeature(f);
     if (rings) this.areas.addFeature(new Feature({ geometry: new Polygon(ringsToMap(rings)), kind: 'roi' }));
     this.emitAreas();
+  }
+
+  /** Shows a corridor's centre line (null: none). */
+  setCorridorLine(line: LonLat[] | null): void {
+    for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'corridor-line')) this.flights.removeFeature(f);
+    if (line) this.flights.addFeature(new Feature({ geometry: new LineString(line.map(toMap)), kind: 'corridor-line', style: corridorLineStyle }));
   }
 
   addNoFlyZones(zones: PolygonRings[]): void {

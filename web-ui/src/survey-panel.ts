@@ -65,8 +65,12 @@ export class SurveyPanel {
     byId('clear-nfz').addEventListener('click', () => this.map.clearNoFlyZones());
     byId<HTMLInputElement>('import-roi').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'roi'));
     byId<HTMLInputElement>('import-nfz').addEventListener('change', (e) => void this.importFile(e.target as HTMLInputElement, 'nfz'));
+    byId('draw-corridor').addEventListener('click', () => this.map.setMode('draw-line'));
     this.corridor = new CorridorFields(
-      (line) => this.map.fitLonLat(extentOf([line])),
+      (line, fit) => {
+        this.map.setCorridorLine(line);
+        if (line && fit) this.map.fitLonLat(extentOf([line]));
+      },
       () => this.markStale(),
       (text) => this.errors.show('corridor', text),
     );
@@ -174,6 +178,12 @@ export class SurveyPanel {
 
   /** True while a saved survey's values are being put back into the form (not a change by the user). */
   private restoring = false;
+
+  /** A corridor's centre line drawn on the map. */
+  lineDrawn(line: LonLat[]): void {
+    this.errors.clear();
+    this.corridor.drawn(line);
+  }
 
   areasChanged(roi: PolygonRings | null, nfz: PolygonRings[]): void {
     this.roi = roi;
