@@ -193,6 +193,21 @@ pub fn current() -> CancelToken {
     CURRENT.with(|c| c.borrow().clone()).unwrap_or_default()
 }
 
+/// Runs `a` on this thread and `b` on another, side by side, both under
+/// the current thread's token. (`a` need not be `Send`: the survey's
+/// projection, a PROJ handle, is not.)
+pub fn join<A, B: Send>(a: impl FnOnce() -> A, b: impl FnOnce() -> B + Send) -> (A, B) {
+    let token = current();
+    std::thread::scope(|s| {
+        let other = s.spawn(|| token.scope(b));
+        let ra = a();
+        match other.join() {
+            Ok(rb) => (ra, rb),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
 /// Checks the current thread's token once every `every` calls of
 /// [`tick`](Pacer::tick): for loops whose iterations are too short to check
 /// each time.

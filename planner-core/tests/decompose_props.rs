@@ -7,7 +7,9 @@ use std::time::Instant;
 use geo::{Area, BoundingRect, Validation, Winding, unary_union};
 use geo_types::{Coord, LineString, MultiPolygon, Polygon};
 use planner_core::coverage::{self, CellLayouts, FreeSpace};
-use planner_core::decompose::{DecomposeError, decompose, decompose_merged, free_space};
+use planner_core::decompose::{
+    DecomposeError, PreparedFree, decompose, decompose_merged, free_space,
+};
 use proptest::prelude::*;
 
 fn poly(v: Vec<(f64, f64)>) -> Polygon<f64> {
@@ -450,6 +452,9 @@ fn check_survey(
     match decompose(&free, deg) {
         Ok(cells) => {
             assert_invariants(&free, &cells, deg, lines);
+            // Prepared once for many angles: the same invariants.
+            let prepared = PreparedFree::new(&free).unwrap().decompose(deg).unwrap();
+            assert_invariants(&free, &prepared, deg, lines);
             Ok(None)
         }
         Err(e) => {

@@ -39,7 +39,11 @@ impl SliceFrame {
     }
 
     pub(crate) fn to_local(self, p: Coord<f64>) -> Coord<f64> {
-        let d = p - self.origin;
+        self.rotate(p - self.origin)
+    }
+
+    /// The rotation alone, of a point already relative to the origin.
+    pub(crate) fn rotate(self, d: Coord<f64>) -> Coord<f64> {
         Coord {
             x: d.x * self.sweep.x + d.y * self.sweep.y,
             y: d.x * self.along.x + d.y * self.along.y,

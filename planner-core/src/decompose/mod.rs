@@ -18,7 +18,7 @@ mod sweep;
 mod test_support;
 mod touch;
 
-pub use boustrophedon::{MergedCell, decompose, decompose_merged};
+pub use boustrophedon::{MergedCell, PreparedFree, decompose, decompose_merged};
 pub use free_space::free_space;
 
 /// Why [`decompose`] could not produce cells.

@@ -75,20 +75,13 @@ pub(super) fn decompose_and_cover(
         SliceAngle::Auto => auto_candidates(free),
     };
     let token = crate::cancel::current();
+    let prepared = decompose::PreparedFree::new(free).map_err(decompose_error)?;
     // One decomposition per core at a time (each can hold tens of
     // thousands of cells), the token taken along to the worker threads.
     let decomposed = |a: f64| -> Result<Laid, PlanError> {
         token.scope(|| {
             crate::cancel::check()?;
-            let cells = decompose::decompose(free, a).map_err(|e| match e {
-                decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
-                    NO_FLY_POINTER,
-                    "the no-fly zones cover the whole region of interest: nothing is left to \
-                     survey",
-                )]),
-                decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
-                other => PlanError::Internal(other.to_string()),
-            })?;
+            let cells = prepared.decompose(a).map_err(decompose_error)?;
             let layouts: Vec<Option<coverage::CellLayouts>> = cells
                 .iter()
                 .enumerate()
@@ -181,6 +174,18 @@ pub(super) fn lay_pattern(
         crate::cancel::check()?;
     }
     Ok(())
+}
+
+/// A decomposition's fault as the survey reports it.
+fn decompose_error(e: decompose::DecomposeError) -> PlanError {
+    match e {
+        decompose::DecomposeError::EmptyFreeSpace => PlanError::Invalid(vec![Issue::new(
+            NO_FLY_POINTER,
+            "the no-fly zones cover the whole region of interest: nothing is left to survey",
+        )]),
+        decompose::DecomposeError::Cancelled(c) => PlanError::Cancelled(c),
+        other => PlanError::Internal(other.to_string()),
+    }
 }
 
 /// Candidate slice angles for `auto`: every 15°, and the bearings of the

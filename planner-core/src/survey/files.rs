@@ -2,6 +2,7 @@
 //! files per sortie, the fence per UAV, the cells), for the CLI's output
 //! directory and the service's downloads.
 
+use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 
 use super::result::SurveyPlan;
@@ -37,10 +38,10 @@ impl SurveyPlan {
         out
     }
 
-    /// Every file of the plan, rendered.
+    /// Every file of the plan, rendered (each alone, so side by side).
     pub fn files(&self) -> Vec<PlanFile> {
         self.file_names()
-            .iter()
+            .par_iter()
             .filter_map(|n| self.file(n))
             .collect()
     }
@@ -99,10 +100,12 @@ impl SurveyPlan {
                 done("application/geo+json", pretty(&route))
             }
             "kml" => {
+                // A set: a sortie may fly thousands of cells.
+                let flown: std::collections::HashSet<usize> = s.cells.iter().copied().collect();
                 let cell_rings: Vec<(String, Vec<[f64; 2]>)> = self
                     .cells
                     .iter()
-                    .filter(|c| s.cells.contains(&c.id))
+                    .filter(|c| flown.contains(&c.id))
                     .map(|c| (format!("cell {}", c.id), geojson_exterior(&c.polygon)))
                     .collect();
                 let title = if u.sorties.len() > 1 {

@@ -92,7 +92,13 @@ pub fn plan_survey_over(
     aircraft::order_lanes(&mut d, params);
     let (rally_points, rally_utm) =
         rally::check_rally_points(&params.rally_points, &area, setup.clearance, dem)?;
-    let outcome = flock_plan::share_cells(&setup, &d, params, &flight, over_dem.as_ref())?;
+    // The coverage figure needs only the lanes: measured on another core
+    // while the flock shares the cells.
+    let (outcome, (lane_count, coverage_ratio)) = crate::cancel::join(
+        || flock_plan::share_cells(&setup, &d, params, &flight, over_dem.as_ref()),
+        || cells::coverage(&d.plans, flight.geometry.footprint_side_m, &free),
+    );
+    let outcome = outcome?;
     let proj = &area.projection;
     let (uavs, mut flown) = mission::uav_plans(
         &setup,
@@ -102,8 +108,6 @@ pub fn plan_survey_over(
         &flight,
         proj,
     )?;
-    let (lane_count, coverage_ratio) =
-        cells::coverage(&d.plans, flight.geometry.footprint_side_m, &free);
     crate::cancel::check()?;
     let mut warnings = setup.warnings.clone();
     warnings.extend(over_dem.as_ref().and_then(|o| o.terrain.warning()));
