@@ -25,6 +25,8 @@ use crate::terrain::TerrainModel;
 const CHECK_STEP: f64 = 0.13;
 /// Lane ends are pulled back in steps of this share of the turn radius.
 const TRIM_STEP: f64 = 0.25;
+/// Corners of a transit's path a Dubins word may skip at once.
+const LOOKAHEAD: usize = 12;
 /// The shortest lead-in or overshoot by a no-fly zone, in turn radii.
 const MIN_RUN: f64 = 0.15;
 /// A lane shorter than this after trimming is left out, m.
@@ -151,10 +153,19 @@ impl<'a> PlaneFlight<'a> {
         if let Some(w) = self.dubins_clear(a, b) {
             return Ok(w);
         }
-        let path = self
-            .routes
-            .shortest_path(a.at, b.at)
-            .map_err(|_| self.fault(a.at, "the transit"))?;
+        // The search with corners a turn radius out first, then (a field
+        // too dense for that) with the bare corners.
+        self.chain(&self.routes, a, b)
+            .or_else(|| self.chain(self.obstacles, a, b))
+            .ok_or_else(|| self.fault(a.at, "the transit"))
+    }
+
+    /// Dubins words through the corners of `map`'s NFZ-avoiding path from
+    /// `a` to `b` (headed along the bisector of its legs), each from the
+    /// pose reached to the farthest of the next [`LOOKAHEAD`] corners it
+    /// reaches clear, else through a detour; `None` when stuck.
+    fn chain(&self, map: &ObstacleMap, a: Pose, b: Pose) -> Option<Vec<Piece>> {
+        let path = map.shortest_path(a.at, b.at).ok()?;
         let mut poses = vec![a];
         for i in 1..path.len().saturating_sub(1) {
             let (p, c, n) = (path[i - 1], path[i], path[i + 1]);
@@ -166,18 +177,16 @@ impl<'a> PlaneFlight<'a> {
         let mut out = Vec::new();
         let mut i = 0;
         while i + 1 < poses.len() {
-            crate::cancel::check()?;
-            let Some((j, w)) = (i + 1..poses.len())
+            crate::cancel::check().ok()?;
+            let far = (i + LOOKAHEAD).min(poses.len() - 1);
+            let (j, w) = (i + 1..=far)
                 .rev()
                 .find_map(|j| self.dubins_clear(poses[i], poses[j]).map(|w| (j, w)))
-                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))
-            else {
-                return Err(self.fault(poses[i].at, "the transit"));
-            };
+                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))?;
             out.extend(w);
             i = j;
         }
-        Ok(out)
+        Some(out)
     }
 
     /// Two clear Dubins words from `a` to `b` through a pose nearby (1 to 3
