@@ -214,7 +214,15 @@ fn clip_polyline(line: &[Coord<f64>], region: &Region) -> Vec<Vec<Coord<f64>>> {
                 .and_then(|p| p.last())
                 .is_some_and(|&end| dist(end, pa) < GRAZE_GAP_M);
             match pieces.last_mut() {
-                Some(piece) if continues || grazed => piece.push(pb),
+                Some(piece) if continues => piece.push(pb),
+                Some(piece) if grazed => {
+                    // Within one segment the piece's end is no vertex: the
+                    // lane goes straight on through the graze.
+                    if k > 0 {
+                        piece.pop();
+                    }
+                    piece.push(pb);
+                }
                 _ => pieces.push(vec![pa, pb]),
             }
         }
@@ -500,6 +508,27 @@ mod tests {
             let c = offset_curve(&line, o).unwrap_or_else(|| panic!("offset {o}"));
             assert!(c.0.len() >= 2000 / 2, "{o}: {} vertices", c.0.len());
         }
+    }
+
+    #[test]
+    fn a_lane_grazing_a_zone_by_millimetres_is_not_cut() {
+        let line = [coord! {x: 0.0, y: 0.0}, coord! {x: 100.0, y: 0.0}];
+        let free_with_tip = |tip_y: f64| {
+            let field = polygon![(x: -10.0, y: -10.0), (x: 110.0, y: -10.0), (x: 110.0, y: 10.0), (x: -10.0, y: 10.0)];
+            let zone = polygon![(x: 45.0, y: 5.0), (x: 50.0, y: tip_y), (x: 55.0, y: 5.0)];
+            let free = MultiPolygon(vec![field]).difference(&MultiPolygon(vec![zone]));
+            Region::from_multi_polygon(&free)
+        };
+        // The zone's tip 1 mm across the lane: a 2 mm gap, flown through.
+        let pieces = clip_polyline(&line, &free_with_tip(-0.001));
+        assert_eq!(pieces.len(), 1, "{pieces:?}");
+        assert_eq!(pieces[0].len(), 2, "no vertex at the graze: {pieces:?}");
+        // 1 m across: a gap of 5/6·2 m, two pieces that stop at the zone.
+        let pieces = clip_polyline(&line, &free_with_tip(-1.0));
+        assert_eq!(pieces.len(), 2, "{pieces:?}");
+        let gap = (pieces[0][1].x, pieces[1][0].x);
+        assert!((gap.0 - (50.0 - 5.0 / 6.0)).abs() < 1e-6, "{gap:?}");
+        assert!((gap.1 - (50.0 + 5.0 / 6.0)).abs() < 1e-6, "{gap:?}");
     }
 
     #[test]

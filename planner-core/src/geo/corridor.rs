@@ -190,7 +190,8 @@ pub fn prepare_corridor(
             "the line is shorter than a millimetre",
         )]));
     }
-    let corridor = corridor_polygon(&line, width_m);
+    // Exteriors counter-clockwise, holes clockwise, as SurveyArea promises.
+    let corridor = corridor_polygon(&line, width_m).orient(Direction::Default);
     check_area(&corridor, ptr, limits)?;
     let no_fly_wgs84: Vec<Polygon<f64>> = no_fly
         .iter()
@@ -277,6 +278,7 @@ mod tests {
         let len = (line.0[1].x - line.0[0].x).hypot(line.0[1].y - line.0[0].y);
         let a = area.roi.unsigned_area();
         assert!((a - 100.0 * len).abs() < 1.0, "{a} vs {}", 100.0 * len);
+        assert!(area.roi.0[0].signed_area() > 0.0, "counter-clockwise");
         let limits = Limits {
             max_roi_area_km2: 0.01,
             ..Limits::default()
