@@ -2,7 +2,7 @@
 //! with it), `corridor_width_m` checked, and the corridor's cells and lanes
 //! laid in place of an area's decomposition.
 
-use geo_types::{LineString, MultiPolygon};
+use geo_types::{Coord, LineString, MultiPolygon, Polygon};
 use serde_json::{Map, Value};
 
 use super::cells::Decomposition;
@@ -125,12 +125,14 @@ pub(super) fn prepare(req: &SurveyRequest, limits: &Limits) -> Result<Prepared, 
         )])
     })?;
     let (area, centre) = prepare_corridor(line, width, &req.no_fly, NO_FLY_POINTER, limits)?;
+    // A UAV given no start takes off at the ROI's first vertex: here a
+    // corner of the corridor's start, not wherever the buffer's ring begins.
     let roi = area
         .roi_wgs84
         .0
         .iter()
         .map(|p| ParsedPolygon {
-            polygon: p.clone(),
+            polygon: starting_near(p, line.line.0[0]),
             pointer: line.pointer.clone(),
         })
         .collect();
@@ -145,6 +147,19 @@ pub(super) fn prepare(req: &SurveyRequest, limits: &Limits) -> Result<Prepared, 
         centre: Some((centre, width)),
         as_area: Some(as_area),
     })
+}
+
+/// `p` with its exterior ring starting at its vertex nearest `at`.
+fn starting_near(p: &Polygon<f64>, at: Coord<f64>) -> Polygon<f64> {
+    let ring = &p.exterior().0;
+    let open = &ring[..ring.len().saturating_sub(1)];
+    let d = |c: &Coord<f64>| (c.x - at.x).hypot(c.y - at.y);
+    let Some(i) = (0..open.len()).min_by(|&a, &b| d(&open[a]).total_cmp(&d(&open[b]))) else {
+        return p.clone();
+    };
+    let mut rotated: Vec<Coord<f64>> = open[i..].iter().chain(&open[..i]).copied().collect();
+    rotated.push(rotated[0]);
+    Polygon::new(LineString::new(rotated), p.interiors().to_vec())
 }
 
 /// The corridor's cells and lanes: lanes along `centre` (UTM) across
@@ -254,5 +269,14 @@ mod tests {
         assert!(a > 80.0 * 1000.0 && a < 80.0 * 1200.0, "{a}");
         assert!(plan.stats.free_area_m2 < a - 80.0 * 190.0);
         assert!(plan.uavs.iter().all(|u| !u.sorties.is_empty()));
+        // No UAV given: one takes off at a corner of the corridor's start,
+        // 40 m (half the width) from the line's first point.
+        doc.as_object_mut().unwrap().remove("uavs");
+        let req = SurveyRequest::from_document(&doc).unwrap();
+        let plan = plan_survey(&req, &Limits::default()).unwrap();
+        let [lon, lat] = plan.uavs[0].start;
+        let m =
+            ((lon - 5.0) * 111_320.0 * 52f64.to_radians().cos()).hypot((lat - 52.0) * 111_250.0);
+        assert!((m - 40.0).abs() < 1.0, "{m} m from the line's start");
     }
 }
