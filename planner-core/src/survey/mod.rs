@@ -21,6 +21,7 @@ mod files;
 mod flock_plan;
 mod homes;
 mod mission;
+mod plane_escape;
 mod plane_flight;
 mod plane_heights;
 mod rally;

@@ -13,6 +13,8 @@ use super::result::UavStats;
 use super::terrain_flight::FlightRules;
 use crate::coverage::airframe::{PlaneTurns, lane_poses};
 use crate::coverage::arcs::{self, ARC_SLACK, Flown, Mark, Waypoint};
+use std::f64::consts::PI;
+
 use crate::coverage::dubins::{Piece, Pose, dubins_paths};
 use crate::coverage::{Lane, photo_count};
 use crate::export::{AltitudeFrame, GeoPoint, MissionItem};
@@ -101,7 +103,7 @@ impl<'a> PlaneFlight<'a> {
     /// Is every point of `piece` outside the keep-out area? Arcs are
     /// checked along their chords and along the polygon round them (the
     /// rounded path flown runs between the two).
-    fn clear(&self, piece: &Piece) -> bool {
+    pub(super) fn clear(&self, piece: &Piece) -> bool {
         match *piece {
             Piece::Line { from, to } => self.obstacles.is_clear(from, to),
             Piece::Arc {
@@ -139,7 +141,7 @@ impl<'a> PlaneFlight<'a> {
     }
 
     /// The first clear Dubins word from `a` to `b`.
-    fn dubins_clear(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
+    pub(super) fn dubins_clear(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
         dubins_paths(a, b, self.turns.radius_m)
             .into_iter()
             .find(|w| self.all_clear(w))
@@ -182,52 +184,12 @@ impl<'a> PlaneFlight<'a> {
             let (j, w) = (i + 1..=far)
                 .rev()
                 .find_map(|j| self.dubins_clear(poses[i], poses[j]).map(|w| (j, w)))
-                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))?;
+                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))
+                .or_else(|| self.escape(poses[i], poses[i + 1]).map(|w| (i + 1, w)))?;
             out.extend(w);
             i = j;
         }
         Some(out)
-    }
-
-    /// Two clear Dubins words from `a` to `b` through a pose nearby (1 to 3
-    /// turn radii from their midpoint, 8 directions and 8 headings), the
-    /// shortest such; for turns too tight for one word.
-    fn detour(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
-        let r = self.turns.radius_m;
-        let mid = (a.at + b.at) / 2.0;
-        let mut best: Option<(f64, Vec<Piece>)> = None;
-        for ring in 1..=3 {
-            for k in 0..8 {
-                let dir = k as f64 * std::f64::consts::FRAC_PI_4;
-                let at = mid
-                    + Coord {
-                        x: ring as f64 * r * dir.cos(),
-                        y: ring as f64 * r * dir.sin(),
-                    };
-                if self.obstacles.contains_point(at) {
-                    continue;
-                }
-                for h in 0..8 {
-                    let via = Pose::new(at, h as f64 * std::f64::consts::FRAC_PI_4);
-                    let Some(first) = self.dubins_clear(a, via) else {
-                        continue;
-                    };
-                    let Some(second) = self.dubins_clear(via, b) else {
-                        continue;
-                    };
-                    let mut w = first;
-                    w.extend(second);
-                    let len: f64 = w.iter().map(Piece::length).sum();
-                    if best.as_ref().is_none_or(|(l, _)| len < *l) {
-                        best = Some((len, w));
-                    }
-                }
-            }
-            if best.is_some() {
-                break;
-            }
-        }
-        best.map(|(_, w)| w)
     }
 
     /// The lane pulled back at either end until the run beyond it is
@@ -282,6 +244,12 @@ impl<'a> PlaneFlight<'a> {
 
     /// A half turn from `pose` to the left (`side` 1) or right (−1).
     fn half_turn(&self, pose: Pose, side: f64) -> Piece {
+        self.arc_from(pose, side, PI)
+    }
+
+    /// An arc of `sweep` radians from `pose` to the left (`side` 1) or
+    /// right (−1).
+    pub(super) fn arc_from(&self, pose: Pose, side: f64, sweep: f64) -> Piece {
         let r = self.turns.radius_m;
         let normal = pose.heading + side * std::f64::consts::FRAC_PI_2;
         Piece::Arc {
@@ -291,8 +259,8 @@ impl<'a> PlaneFlight<'a> {
                     y: r * normal.sin(),
                 },
             radius: r,
-            start: normal + std::f64::consts::PI,
-            sweep: side * std::f64::consts::PI,
+            start: normal + PI,
+            sweep: side * sweep,
         }
     }
 
