@@ -15,6 +15,10 @@ pub const ARC_SLACK: f64 = 1.1;
 const MAX_STEP: f64 = 0.2618;
 /// Most corners one arc is refined to.
 const MAX_CORNERS: usize = 2048;
+/// Arcs turning less than this (radians) get no corner: the lines on either
+/// side are written as one leg (a kink a hair off the planned arc; the
+/// rounded path is checked as written).
+const TINY_SWEEP: f64 = 1e-3;
 /// Slack in the turn rule, metres (rounding).
 pub const RULE_TOL_M: f64 = 1e-6;
 
@@ -145,6 +149,7 @@ fn emit(path: &[Flown], corners: &[usize]) -> (Vec<Waypoint>, Vec<Option<usize>>
             start,
             sweep,
         } = f.piece
+            && sweep.abs() >= TINY_SWEEP
         {
             let k = corners[i];
             let step = sweep / k as f64;
@@ -324,6 +329,26 @@ mod tests {
                 assert!((sampled - flown).abs() < flown * 2e-3, "{sampled} {flown}");
             }
         }
+    }
+
+    #[test]
+    fn a_tiny_jog_is_one_leg() {
+        // Two arcs of 0.0003 rad beside a lane end: no corner, one leg.
+        let r = 60.0;
+        let a = Pose::new(c(0., 0.), 0.0);
+        let b = Pose::new(c(100., 0.01), 0.0);
+        let word = dubins_paths(a, b, r * ARC_SLACK).remove(0);
+        assert!(word.iter().any(|p| matches!(p, Piece::Arc { .. })));
+        let mut path = vec![Flown {
+            piece: Piece::Line {
+                from: c(-50., 0.),
+                to: c(0., 0.),
+            },
+            lane: true,
+        }];
+        path.extend(lines(&word, false));
+        let wps = waypoints(&path, r).unwrap();
+        assert_eq!(wps.len(), 3, "{wps:?}");
     }
 
     #[test]
