@@ -145,6 +145,34 @@ fn fixed_wing_on_the_illinois_fields_with_nfzs() {
     assert!(fw_len > mr_len, "{fw_len} vs {mr_len}");
 }
 
+/// Battery sorties priced with the plane's turns, climb-out and final:
+/// every sortie as flown fits the battery, and each is checked like a
+/// whole mission.
+#[test]
+fn plane_sorties_fit_their_battery() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test_2_cell.json");
+    let nfz = illinois_nfz(dir.path());
+    let battery = 400.0;
+    let params = json!({"altitude_m": 100, "side_overlap": 0.6,
+                        "uavs": [{"id": "a", "start": [-90.1350, 41.4690], "max_flight_time_s": battery}],
+                        "aircraft": {"type": "fixed_wing"}});
+    let (out, plan) = plan_cli(dir.path(), &roi, &[&nfz], &params);
+    let sorties = plan["uavs"][0]["sorties"].as_array().unwrap();
+    assert!(sorties.len() >= 2, "{}", sorties.len());
+    for s in sorties {
+        let t = s["stats"]["flight_time_s"].as_f64().unwrap();
+        assert!(t <= battery, "{}: {t} s", s["file_stem"]);
+    }
+    assert_eq!(plan["warnings"], json!([]));
+    let summary = check_aircraft(&out, &roi, &[&nfz], "fixed_wing", 40.0, 10.0, 100.0);
+    assert_eq!(
+        summary["missions"].as_object().unwrap().len(),
+        sorties.len()
+    );
+    assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
+}
+
 #[test]
 fn vtol_on_the_dutch_field_with_its_nfzs() {
     let dir = tempfile::tempdir().unwrap();

@@ -146,9 +146,10 @@ impl SurveyParams {
     }
 
     /// The parameters as the aircraft flies them: its cruise speed for
-    /// `speed_m_s` and, for planes, no time charged per turn (their turns
-    /// are flown arcs, counted in the length). Without `aircraft`, the
-    /// same parameters.
+    /// `speed_m_s` and, for planes, the time a turn adds to the sharing's
+    /// estimates as `turn_penalty_s` (the plan's own figures are the
+    /// flown lengths, without a penalty). Without `aircraft`, the same
+    /// parameters.
     pub(super) fn as_flown(&self) -> SurveyParams {
         let mut out = self.clone();
         if let Some(a) = &self.aircraft {
@@ -156,10 +157,26 @@ impl SurveyParams {
                 out.speed_m_s = v;
             }
             if a.is_plane() {
-                out.turn_penalty_s = 0.0;
+                // What a turn adds to a plane's flight over the turn the
+                // sharing sees (a lane's end or a transit's bend): a
+                // straight run and the arc's excess over the corner. The
+                // figures of the plan are the flown lengths.
+                let r = a.turn_radius() * ARC_SLACK;
+                out.turn_penalty_s =
+                    (a.lead_in() + (std::f64::consts::FRAC_PI_2 - 1.0) * r) / out.speed_m_s;
             }
         }
         out
+    }
+
+    /// The height a flock's leg from or to home is charged for (the climb
+    /// or descent): for a plane also its climb-out and its final, at the
+    /// climb angle.
+    pub(super) fn home_leg_m(&self, altitude: f64) -> f64 {
+        self.plane().map_or(altitude, |a| {
+            let angle = a.max_climb_angle_deg().to_radians();
+            altitude / angle.sin() + altitude / angle.tan() + 2.0 * a.turn_radius() * ARC_SLACK
+        })
     }
 
     /// How a plane turns between lanes (arcs planned [`ARC_SLACK`] wider
@@ -171,6 +188,30 @@ impl SurveyParams {
             overshoot_m: a.lead_in(),
         })
     }
+}
+
+/// Sorties of planes that outlast their battery: the sharing prices a
+/// transit as the NFZ-avoiding polyline, without the turns at its ends
+/// that the flown one has, so a sortie cut close to the battery may run
+/// over (the figures are the flown ones).
+pub(super) fn battery_warnings(params: &SurveyParams, uavs: &[super::UavPlan]) -> Vec<String> {
+    if params.plane().is_none() {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    for u in uavs {
+        let Some(limit) = u.max_flight_time_s else {
+            continue;
+        };
+        for s in u.sorties.iter().filter(|s| s.stats.flight_time_s > limit) {
+            out.push(format!(
+                "{} flies {:.0} s with its turns, over its battery of {limit:.0} s: give it a \
+                 longer max_flight_time_s, or more UAVs",
+                s.file_stem, s.stats.flight_time_s
+            ));
+        }
+    }
+    out
 }
 
 /// A plane flies each cell's lanes in the order its turns are shortest in.

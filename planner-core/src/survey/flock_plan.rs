@@ -139,7 +139,7 @@ pub(super) fn share_cells(
         pointer: &pointer,
         policy: params.assignment,
         turn_penalty_s: params.turn_penalty_s,
-        altitude_m: flight.altitude,
+        altitude_m: params.home_leg_m(flight.altitude),
         terrain: over_dem.map(|o| (&o.terrain.model, flight.rules)),
         plane: params.plane_turns(),
         stops: &stops,

@@ -111,6 +111,7 @@ pub fn plan_survey_over(
     )?;
     crate::cancel::check()?;
     let mut warnings = setup.warnings.clone();
+    warnings.extend(aircraft::battery_warnings(params, &uavs));
     warnings.extend(over_dem.as_ref().and_then(|o| o.terrain.warning()));
     warnings.extend(cells::left_out_warnings(
         setup.enclosed_m2,
