@@ -47,8 +47,8 @@ pub(super) fn uav_plans(
                 let trigger = flight.geometry.trigger_distance_m;
                 let frame = params.altitude_frame;
                 let terrain = home_amsl.map(|(o, h)| (&o.terrain.model, &flight.rules, h));
-                let (mission, stats, path) = plane
-                    .sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
+                let (mission, stats, path) =
+                    plane.sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
                 all_paths.extend(path);
                 (mission, stats, None)
             } else {
