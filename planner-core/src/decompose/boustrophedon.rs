@@ -114,9 +114,10 @@ fn decompose_with(
 /// (the `auto` angle tries a dozen): united, oriented and with its touches
 /// explicit in an unrotated frame, so that each angle only rotates the rings
 /// and sweeps. A touch stays a shared vertex through any rotation, so the
-/// sweep sees the same rings as [`decompose`]'s own clean-up would give, up
-/// to the rounding of the rotation; should the sweep still find the rotated
-/// rings inconsistent, that angle falls back to [`decompose`].
+/// cells keep every property listed for [`decompose`] (they are its cells
+/// up to rounding, except that where rings touch on a slice line the two
+/// clean-ups may split there differently); should the sweep still find the
+/// rotated rings inconsistent, that angle falls back to [`decompose`].
 pub struct PreparedFree<'a> {
     free: &'a MultiPolygon<f64>,
     /// Centre of the bounding box: the rings are relative to it.
