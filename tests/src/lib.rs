@@ -74,6 +74,47 @@ pub fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
+/// Writes `v` as JSON to `dir/name`; returns the path.
+pub fn write_json(dir: &Path, name: &str, v: &serde_json::Value) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
+    p
+}
+
+/// What `terraplan survey` reads in a test: the area, its no-fly zones, an
+/// optional DEM and the params file.
+pub struct SurveyFiles<'a> {
+    pub roi: &'a Path,
+    pub no_fly: &'a [&'a Path],
+    pub dem: Option<&'a Path>,
+    pub params: &'a Path,
+}
+
+/// `terraplan survey` of `files` into `out`, which must succeed (`what`
+/// names the case in the failure message); returns its plan.json.
+pub fn survey_cli(files: &SurveyFiles, out: &Path, what: &str) -> serde_json::Value {
+    let mut args = vec!["survey", "--roi", files.roi.to_str().unwrap()];
+    for n in files.no_fly {
+        args.extend(["--no-fly", n.to_str().unwrap()]);
+    }
+    if let Some(dem) = files.dem {
+        args.extend(["--dem", dem.to_str().unwrap()]);
+    }
+    args.extend([
+        "--params",
+        files.params.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let o = terraplan(&args);
+    assert!(
+        o.status.success(),
+        "{what}: terraplan survey failed: {}",
+        text(&o.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap()
+}
+
 /// A real `terraplan serve` process on a free loopback port, stopped with
 /// SIGTERM (graceful shutdown) when dropped.
 pub struct Server {

@@ -11,15 +11,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, assert_invalid_at, check_missions, post_json, shared_data, terraplan, text, validator,
-    workspace,
+    Server, SurveyFiles, assert_invalid_at, check_missions, post_json, shared_data, survey_cli,
+    terraplan, text, validator, workspace, write_json,
 };
-
-fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
-    p
-}
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
     json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
@@ -28,7 +22,7 @@ fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
 /// Two NFZs inside the Illinois fields of Fields2Cover's two-cell test
 /// (one straddling the cells' shared edge region, one in the south-east).
 fn illinois_nfz(dir: &Path) -> PathBuf {
-    write(
+    write_json(
         dir,
         "nfz.geojson",
         &json!({"type": "FeatureCollection", "features": [
@@ -40,23 +34,16 @@ fn illinois_nfz(dir: &Path) -> PathBuf {
 
 /// Plans with the CLI into `dir/out`; returns plan.json.
 fn plan_cli(dir: &Path, roi: &Path, nfz: &[&Path], params: &Value) -> (PathBuf, Value) {
-    let params_path = write(dir, "params.json", params);
+    let params_path = write_json(dir, "params.json", params);
     let out = dir.join("out");
     let _ = std::fs::remove_dir_all(&out);
-    let mut args = vec!["survey", "--roi", roi.to_str().unwrap()];
-    for n in nfz {
-        args.extend(["--no-fly", n.to_str().unwrap()]);
-    }
-    args.extend([
-        "--params",
-        params_path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let o = terraplan(&args);
-    assert!(o.status.success(), "terraplan failed: {}", text(&o.stderr));
-    let plan: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    let files = SurveyFiles {
+        roi,
+        no_fly: nfz,
+        dem: None,
+        params: &params_path,
+    };
+    let plan = survey_cli(&files, &out, "plan_cli");
     (out, plan)
 }
 
@@ -213,12 +200,12 @@ fn close_lanes_are_flown_skipping() {
 #[test]
 fn planes_over_a_real_dem() {
     let dir = tempfile::tempdir().unwrap();
-    let roi = write(
+    let roi = write_json(
         dir.path(),
         "roi.geojson",
         &rect(5.2950, 45.2960, 5.3080, 45.3030),
     );
-    let nfz = write(
+    let nfz = write_json(
         dir.path(),
         "nfz.geojson",
         &rect(5.3000, 45.2985, 5.3015, 45.2995),
@@ -228,22 +215,15 @@ fn planes_over_a_real_dem() {
         let params = json!({"altitude_m": 100, "side_overlap": 0.6,
                             "uavs": [{"id": "d", "start": [5.2945, 45.2955]}],
                             "aircraft": {"type": kind, "turn_radius_m": 35}});
-        let params_path = write(dir.path(), "params.json", &params);
+        let params_path = write_json(dir.path(), "params.json", &params);
         let out = dir.path().join(kind);
-        let o = terraplan(&[
-            "survey",
-            "--roi",
-            roi.to_str().unwrap(),
-            "--no-fly",
-            nfz.to_str().unwrap(),
-            "--dem",
-            dem.to_str().unwrap(),
-            "--params",
-            params_path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{kind}: {}", text(&o.stderr));
+        let files = SurveyFiles {
+            roi: &roi,
+            no_fly: &[&nfz],
+            dem: Some(&dem),
+            params: &params_path,
+        };
+        survey_cli(&files, &out, kind);
         let summary = check_aircraft(&out, &roi, &[&nfz], kind, 35.0, climb, 100.0);
         assert!(summary["footprint_coverage"].as_f64().unwrap() >= 0.995);
         let m = &summary["missions"]["d.waypoints"];
@@ -340,7 +320,7 @@ fn service_plans_a_fixed_wing_and_names_the_faults() {
         assert_invalid_at(&r, &body.to_string(), pointer, says);
     }
     // The CLI refuses the same with exit status 2.
-    let bad = write(
+    let bad = write_json(
         dir.path(),
         "bad.json",
         &json!({"aircraft": {"type": "fixed_wing", "turn_radius_m": 2}}),

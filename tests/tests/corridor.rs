@@ -21,17 +21,11 @@ use std::process::Command;
 use serde_json::{Value, json};
 use terraplan_e2e::{
     Server, assert_invalid_at, check_missions, get, post_json, shared_data, terraplan, text,
-    validator, workspace,
+    validator, workspace, write_json,
 };
 
 /// Debian's Python, which has GDAL's bindings (python3-gdal).
 const GDAL_PYTHON: &str = "/usr/bin/python3";
-
-fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
-    p
-}
 
 fn read(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -93,8 +87,8 @@ fn plan_corridor(
     params: &Value,
     dem: Option<&Path>,
 ) -> (PathBuf, Value, Value) {
-    let line_path = write(dir, "line.geojson", line);
-    let params_path = write(dir, "params.json", params);
+    let line_path = write_json(dir, "line.geojson", line);
+    let params_path = write_json(dir, "params.json", params);
     let out = dir.join("out");
     let mut args = vec![
         "survey".to_string(),
@@ -136,7 +130,7 @@ fn cli_corridor_along_a_field_edge_across_two_zones() {
     let zones: Vec<PathBuf> = field_edge_zones()
         .iter()
         .enumerate()
-        .map(|(i, z)| write(dir.path(), &format!("nfz{i}.geojson"), z))
+        .map(|(i, z)| write_json(dir.path(), &format!("nfz{i}.geojson"), z))
         .collect();
     let params = json!({"corridor_width_m": 120, "altitude_m": 35,
         "uavs": [{"id": "a", "start": [6.0619, 51.5124]}, {"id": "b", "start": [6.0655, 51.5116]}]});
@@ -221,7 +215,7 @@ fn service_plans_the_same_corridor_and_names_its_faults() {
     let zone_paths: Vec<PathBuf> = zones
         .iter()
         .enumerate()
-        .map(|(i, z)| write(dir.path(), &format!("nfz{i}.geojson"), z))
+        .map(|(i, z)| write_json(dir.path(), &format!("nfz{i}.geojson"), z))
         .collect();
     let params = json!({"corridor_width_m": 90, "altitude_m": 40,
         "uavs": [{"id": "a", "start": [6.0619, 51.5124]}]});
@@ -327,15 +321,15 @@ fn service_plans_the_same_corridor_and_names_its_faults() {
 fn cli_refuses_bad_corridors_with_status_2() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path();
-    let line = write(p, "line.geojson", &field_edge_line());
-    let point = write(
+    let line = write_json(p, "line.geojson", &field_edge_line());
+    let point = write_json(
         p,
         "point.geojson",
         &json!({"type": "LineString", "coordinates": [[6.06, 51.51]]}),
     );
-    let roi = write(p, "roi.geojson", &rect(6.063, 51.512, 0.001, 0.001));
-    let with_width = write(p, "params.json", &json!({"corridor_width_m": 50}));
-    let without = write(p, "bare.json", &json!({}));
+    let roi = write_json(p, "roi.geojson", &rect(6.063, 51.512, 0.001, 0.001));
+    let with_width = write_json(p, "params.json", &json!({"corridor_width_m": 50}));
+    let without = write_json(p, "bare.json", &json!({}));
     let out = p.join("out");
     let run = |args: &[&Path]| {
         let mut a: Vec<&str> = vec!["survey"];

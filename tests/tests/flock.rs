@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{Value, json};
 use terraplan_e2e::{
     Reply, Server, assert_invalid_at, assert_problem, get, post_json, shared_data, terraplan, text,
-    validator, workspace,
+    validator, workspace, write_json,
 };
 
 /// The Dutch field of survey_cli.rs (fields2cover's test parcel).
@@ -31,12 +31,6 @@ const GDAL_PYTHON: &str = "/usr/bin/python3";
 const TURN_PENALTY_S: f64 = 2.0;
 /// `speed_m_s` when not given.
 const SPEED_M_S: f64 = 10.0;
-
-fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
-    p
-}
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
     json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
@@ -96,7 +90,7 @@ fn survey(
     params: &Value,
     out_name: &str,
 ) -> (PathBuf, Value) {
-    let params_path = write(dir, &format!("{out_name}-params.json"), params);
+    let params_path = write_json(dir, &format!("{out_name}-params.json"), params);
     let out = dir.join(out_name);
     let mut args: Vec<String> = vec!["survey".into(), "--roi".into(), roi.display().to_string()];
     for n in nfz {
@@ -410,7 +404,7 @@ fn assert_files(out: &Path, plan: &Value) {
 fn three_uavs_on_a_field_under_each_policy() {
     let dir = tempfile::tempdir().unwrap();
     let roi = shared_data(NL_FIELD);
-    let nfz = write(dir.path(), "nfz.geojson", &nl_no_fly());
+    let nfz = write_json(dir.path(), "nfz.geojson", &nl_no_fly());
     let uavs = json!([
         {"id": "west", "start": NL_STARTS[0]},
         {"id": "east", "start": NL_STARTS[1]},
@@ -492,7 +486,7 @@ fn more_uavs_than_cells_share_the_lanes() {
 
     // A 270 m × 220 m rectangle: one cell of 13 lanes at 40 m.
     let bbox = [5.0, 52.0, 5.004, 52.002];
-    let roi = write(d, "rect.json", &rect(bbox[0], bbox[1], bbox[2], bbox[3]));
+    let roi = write_json(d, "rect.json", &rect(bbox[0], bbox[1], bbox[2], bbox[3]));
     let base = json!({"altitude_m": 40, "slice_angle_deg": 0});
     let mut one = base.clone();
     one["uavs"] = starts(1, bbox);
@@ -542,7 +536,7 @@ fn more_uavs_than_cells_share_the_lanes() {
 
     // A strip one lane wide shared by 3 UAVs: the lane itself is cut.
     let strip = [5.0, 52.0, 5.006, 52.0002];
-    let roi = write(
+    let roi = write_json(
         d,
         "strip.json",
         &rect(strip[0], strip[1], strip[2], strip[3]),
@@ -908,7 +902,7 @@ fn flock_faults_name_the_uav_at_fault() {
 fn balanced_beats_competition_with_a_battery() {
     let dir = tempfile::tempdir().unwrap();
     let roi = shared_data(NL_FIELD);
-    let nfz = write(dir.path(), "nfz.geojson", &nl_no_fly_south());
+    let nfz = write_json(dir.path(), "nfz.geojson", &nl_no_fly_south());
     let ids = ["west", "east", "north"];
     let mut faults = Vec::new();
     // The reviewer's cases: several UAVs with one battery, and one UAV alone
@@ -945,7 +939,7 @@ fn balanced_beats_competition_with_a_battery() {
         }
         let c = num(&competition["stats"]["makespan_s"]);
         // A valid plan exists (competition's); balanced must find one too.
-        let params_path = write(dir.path(), "balanced-params.json", &params("balanced"));
+        let params_path = write_json(dir.path(), "balanced-params.json", &params("balanced"));
         let out = dir.path().join(format!("balanced-{uav_count}"));
         let o = terraplan(&[
             "survey",

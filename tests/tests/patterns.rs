@@ -9,14 +9,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, check_missions, get, post_json, shared_data, terraplan, text, validator,
+    Server, SurveyFiles, check_missions, get, post_json, shared_data, survey_cli, terraplan, text,
+    validator, write_json,
 };
-
-fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
-    p
-}
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
     json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
@@ -36,28 +31,22 @@ fn nfzs() -> Value {
 
 /// Plans with `params` through the CLI into `dir/name`; returns its plan.json.
 fn plan(dir: &Path, name: &str, params: &Value) -> (PathBuf, Value) {
-    let params_path = write(dir, &format!("{name}.params.json"), params);
-    let nfz = write(dir, "nfz.geojson", &nfzs());
+    let params_path = write_json(dir, &format!("{name}.params.json"), params);
+    let nfz = write_json(dir, "nfz.geojson", &nfzs());
     let out = dir.join(name);
-    let o = terraplan(&[
-        "survey",
-        "--roi",
-        roi().to_str().unwrap(),
-        "--no-fly",
-        nfz.to_str().unwrap(),
-        "--params",
-        params_path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{name}: {}", text(&o.stderr));
-    let plan = serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap());
-    (out, plan.unwrap())
+    let files = SurveyFiles {
+        roi: &roi(),
+        no_fly: &[&nfz],
+        dem: None,
+        params: &params_path,
+    };
+    let plan = survey_cli(&files, &out, name);
+    (out, plan)
 }
 
 /// check_patterns.py on an output directory; returns its summary.
 fn check_patterns(dir: &Path, out: &Path, params: &Value) -> Value {
-    let params_path = write(dir, "checked.params.json", params);
+    let params_path = write_json(dir, "checked.params.json", params);
     let nfz = dir.join("nfz.geojson");
     let v = validator(
         "check_patterns.py",
@@ -234,7 +223,7 @@ fn service_and_refusals() {
         (json!({"trigger": {"interval_s": 3}}), "/trigger/interval_s"),
         (json!({"pattern": "zigzag"}), "/pattern"),
     ] {
-        let p = write(d, "bad.json", &params);
+        let p = write_json(d, "bad.json", &params);
         let o = terraplan(&[
             "survey",
             "--roi",
@@ -297,7 +286,7 @@ fn service_and_refusals() {
         }
     }
     std::fs::write(out.join("plan.json"), survey.to_string()).unwrap();
-    write(d, "nfz.geojson", &nfzs());
+    write_json(d, "nfz.geojson", &nfzs());
     let mut checked = params;
     checked["altitude_m"] = json!(90);
     checked["side_overlap"] = json!(0.5);
@@ -323,8 +312,8 @@ fn crosshatch_hover_over_a_dem() {
     let b: Vec<f64> = serde_json::from_value(info["bounds_wgs84"].clone()).unwrap();
     let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
     let (hx, hy) = ((b[2] - b[0]) / 5.0, (b[3] - b[1]) / 5.0);
-    let roi = write(d, "roi.json", &rect(cx - hx, cy - hy, cx + hx, cy + hy));
-    let nfz = write(
+    let roi = write_json(d, "roi.json", &rect(cx - hx, cy - hy, cx + hx, cy + hy));
+    let nfz = write_json(
         d,
         "nfz.geojson",
         &rect(cx - hx / 4.0, cy - hy / 4.0, cx + hx / 4.0, cy + hy / 4.0),
@@ -333,22 +322,15 @@ fn crosshatch_hover_over_a_dem() {
                         "pattern": "crosshatch", "camera_pitch_deg": -75,
                         "trigger": {"mode": "hover", "hold_s": 1},
                         "uavs": [{"id": "t1", "start": [cx - hx, cy - hy]}]});
-    let params_path = write(d, "params.json", &params);
+    let params_path = write_json(d, "params.json", &params);
     let out = d.join("out");
-    let o = terraplan(&[
-        "survey",
-        "--roi",
-        roi.to_str().unwrap(),
-        "--no-fly",
-        nfz.to_str().unwrap(),
-        "--params",
-        params_path.to_str().unwrap(),
-        "--dem",
-        dem.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let files = SurveyFiles {
+        roi: &roi,
+        no_fly: &[&nfz],
+        dem: Some(&dem),
+        params: &params_path,
+    };
+    survey_cli(&files, &out, "hover crosshatch over a DEM");
     let check = std::process::Command::new("/usr/bin/python3")
         .arg(terraplan_e2e::workspace().join("tests/validators/check_terrain.py"))
         .arg(&dem)
@@ -363,7 +345,7 @@ fn crosshatch_hover_over_a_dem() {
         text(&check.stdout),
         text(&check.stderr)
     );
-    let params_checked = write(d, "checked.json", &params);
+    let params_checked = write_json(d, "checked.json", &params);
     let v = validator(
         "check_patterns.py",
         &[&out, &params_checked, &roi, nfz.as_path()],

@@ -3,16 +3,13 @@
 //! every `.plan` with its `.waypoints`, fence and rally files read by
 //! pymavlink, MAVSDK and MAVProxy (tests/validators/check_missions.py).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde_json::{Value, json};
-use terraplan_e2e::{check_missions, shared_data, terraplan, text, validator, workspace};
-
-fn write(dir: &Path, name: &str, v: &Value) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, serde_json::to_string(v).unwrap()).unwrap();
-    p
-}
+use terraplan_e2e::{
+    SurveyFiles, check_missions, shared_data, survey_cli, terraplan, text, validator, workspace,
+    write_json,
+};
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
     json!({"type": "Polygon", "coordinates": [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]})
@@ -20,22 +17,15 @@ fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
 
 /// Plan, then run the independent validator; returns (plan.json, validator summary).
 fn plan_and_validate(roi: &Path, nfz: &[&Path], params: &Value, dir: &Path) -> (Value, Value) {
-    let params_path = write(dir, "params.json", params);
+    let params_path = write_json(dir, "params.json", params);
     let out = dir.join("out");
-    let mut args = vec!["survey", "--roi", roi.to_str().unwrap()];
-    for n in nfz {
-        args.extend(["--no-fly", n.to_str().unwrap()]);
-    }
-    args.extend([
-        "--params",
-        params_path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let o = terraplan(&args);
-    assert!(o.status.success(), "terraplan failed: {}", text(&o.stderr));
-    let plan: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    let files = SurveyFiles {
+        roi,
+        no_fly: nfz,
+        dem: None,
+        params: &params_path,
+    };
+    let plan = survey_cli(&files, &out, "plan_and_validate");
     let mut vargs: Vec<&Path> = vec![&out, roi];
     vargs.extend(nfz.iter().copied());
     let v = validator("check_survey.py", &vargs);
@@ -127,7 +117,7 @@ fn fields2cover_fields_with_generated_nfzs() {
     // Two Illinois fields as one ROI; NFZs inside, across a border, overlapping
     // each other and one entirely outside.
     let roi = shared_data("polygons/fields2cover__test_2_cell.json");
-    let nfz = write(
+    let nfz = write_json(
         dir.path(),
         "nfz.geojson",
         &json!({"type": "FeatureCollection", "features": [
@@ -248,7 +238,7 @@ fn netherlands_field_default_params() {
 fn defaults_with_an_empty_nfz_file_and_an_nfz_on_the_first_vertex() {
     let dir = tempfile::tempdir().unwrap();
     let roi = shared_data("polygons/fields2cover__test.json");
-    let empty = write(
+    let empty = write_json(
         dir.path(),
         "empty.geojson",
         &json!({"type": "FeatureCollection", "features": []}),
@@ -264,7 +254,7 @@ fn defaults_with_an_empty_nfz_file_and_an_nfz_on_the_first_vertex() {
 
     // An NFZ over the first vertex (and 3 m round it): the UAV takes off
     // at the next vertex that is 5 m clear, and the plan says where.
-    let nfz = write(
+    let nfz = write_json(
         dir.path(),
         "corner.geojson",
         &rect(
@@ -418,8 +408,8 @@ fn bad_input_names_its_fault() {
         ),
     ];
     for (name, roi, nfz, params, expect) in cases {
-        let roi_p = write(d, "case-roi.json", &roi);
-        let params_p = write(d, "case-params.json", &params);
+        let roi_p = write_json(d, "case-roi.json", &roi);
+        let params_p = write_json(d, "case-params.json", &params);
         let mut args = vec![
             "survey".to_string(),
             "--roi".into(),
@@ -428,7 +418,7 @@ fn bad_input_names_its_fault() {
         if let Some(n) = nfz {
             args.extend([
                 "--no-fly".into(),
-                write(d, "case-nfz.json", &n).display().to_string(),
+                write_json(d, "case-nfz.json", &n).display().to_string(),
             ]);
         }
         args.extend([
@@ -481,12 +471,12 @@ fn survey_over_a_dem_file() {
     let b: Vec<f64> = serde_json::from_value(info["bounds_wgs84"].clone()).unwrap();
     let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
     let (hx, hy) = ((b[2] - b[0]) / 4.0, (b[3] - b[1]) / 4.0);
-    let roi = write(
+    let roi = write_json(
         dir.path(),
         "roi.json",
         &rect(cx - hx, cy - hy, cx + hx, cy + hy),
     );
-    let params = write(
+    let params = write_json(
         dir.path(),
         "params.json",
         &json!({"altitude_m": 35, "agl_tolerance_m": 4, "altitude_frame": "terrain",
@@ -494,18 +484,13 @@ fn survey_over_a_dem_file() {
                 "rally_points": [[cx + hx, cy + hy]]}),
     );
     let out = dir.path().join("out");
-    let o = terraplan(&[
-        "survey",
-        "--roi",
-        roi.to_str().unwrap(),
-        "--params",
-        params.to_str().unwrap(),
-        "--dem",
-        dem.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let files = SurveyFiles {
+        roi: &roi,
+        no_fly: &[],
+        dem: Some(&dem),
+        params: &params,
+    };
+    survey_cli(&files, &out, "survey over a DEM file");
     let check = std::process::Command::new("/usr/bin/python3")
         .arg(workspace().join("tests/validators/check_terrain.py"))
         .arg(&dem)
@@ -540,7 +525,7 @@ fn survey_over_a_dem_file() {
         "rally altitude {alt}, ground {ground}, home {home}, highest {highest}"
     );
 
-    let far = write(dir.path(), "far.json", &rect(10.0, 50.0, 10.001, 50.001));
+    let far = write_json(dir.path(), "far.json", &rect(10.0, 50.0, 10.001, 50.001));
     let o = terraplan(&[
         "survey",
         "--roi",
