@@ -81,10 +81,17 @@ pub fn write_json(dir: &Path, name: &str, v: &serde_json::Value) -> PathBuf {
     p
 }
 
+/// The area a survey covers: a region of interest (`--roi`) or a
+/// corridor's centre line (`--corridor`).
+pub enum SurveyArea<'a> {
+    Roi(&'a Path),
+    Corridor(&'a Path),
+}
+
 /// What `terraplan survey` reads in a test: the area, its no-fly zones, an
 /// optional DEM and the params file.
 pub struct SurveyFiles<'a> {
-    pub roi: &'a Path,
+    pub area: SurveyArea<'a>,
     pub no_fly: &'a [&'a Path],
     pub dem: Option<&'a Path>,
     pub params: &'a Path,
@@ -93,7 +100,11 @@ pub struct SurveyFiles<'a> {
 /// `terraplan survey` of `files` into `out`, which must succeed (`what`
 /// names the case in the failure message); returns its plan.json.
 pub fn survey_cli(files: &SurveyFiles, out: &Path, what: &str) -> serde_json::Value {
-    let mut args = vec!["survey", "--roi", files.roi.to_str().unwrap()];
+    let (flag, area) = match files.area {
+        SurveyArea::Roi(p) => ("--roi", p),
+        SurveyArea::Corridor(p) => ("--corridor", p),
+    };
+    let mut args = vec!["survey", flag, area.to_str().unwrap()];
     for n in files.no_fly {
         args.extend(["--no-fly", n.to_str().unwrap()]);
     }
@@ -113,6 +124,38 @@ pub fn survey_cli(files: &SurveyFiles, out: &Path, what: &str) -> serde_json::Va
         text(&o.stderr)
     );
     serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap()
+}
+
+/// Debian's Python, which has GDAL's bindings (python3-gdal; the venv has
+/// none).
+pub const GDAL_PYTHON: &str = "/usr/bin/python3";
+
+/// check_terrain.py (GDAL) on a survey's `plan_json` over `dem`, for UAV
+/// `uav` and its `files` (its `.waypoints`, then optionally its
+/// `.route.geojson`); asserts that it passes and returns its summary.
+pub fn check_terrain(
+    dem: &Path,
+    plan_json: &Path,
+    uav: &str,
+    files: &[&Path],
+) -> serde_json::Value {
+    let out = Command::new(GDAL_PYTHON)
+        .arg(workspace().join("tests/validators/check_terrain.py"))
+        .arg(dem)
+        .arg(plan_json)
+        .arg(uav)
+        .args(files)
+        .output()
+        .expect("run check_terrain.py");
+    assert!(
+        out.status.success(),
+        "check_terrain.py on {} over {}, UAV {uav}: {}{}",
+        plan_json.display(),
+        dem.display(),
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("check_terrain.py prints its summary")
 }
 
 /// A real `terraplan serve` process on a free loopback port, stopped with
@@ -1140,14 +1183,10 @@ pub fn egm96_undulations(points: &[[f64; 2]]) -> Vec<f64> {
         .map(|p| format!("{} {}\n", p[0], p[1]))
         .collect();
     let script = workspace().join("tests/validators/egm96_proj.py");
-    let values: Vec<f64> = run_tool(
-        "/usr/bin/python3",
-        &[script.to_str().unwrap()],
-        Some(&input),
-    )
-    .lines()
-    .map(|l| l.parse().expect("egm96_proj.py prints numbers"))
-    .collect();
+    let values: Vec<f64> = run_tool(GDAL_PYTHON, &[script.to_str().unwrap()], Some(&input))
+        .lines()
+        .map(|l| l.parse().expect("egm96_proj.py prints numbers"))
+        .collect();
     assert_eq!(values.len(), points.len());
     values
 }

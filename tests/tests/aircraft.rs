@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, SurveyFiles, assert_invalid_at, check_missions, post_json, shared_data, survey_cli,
-    terraplan, text, validator, workspace, write_json,
+    Server, SurveyArea, SurveyFiles, assert_invalid_at, check_missions, post_json, shared_data,
+    survey_cli, terraplan, text, validator, workspace, write_json,
 };
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
@@ -38,7 +38,7 @@ fn plan_cli(dir: &Path, roi: &Path, nfz: &[&Path], params: &Value) -> (PathBuf, 
     let out = dir.join("out");
     let _ = std::fs::remove_dir_all(&out);
     let files = SurveyFiles {
-        roi,
+        area: SurveyArea::Roi(roi),
         no_fly: nfz,
         dem: None,
         params: &params_path,
@@ -218,7 +218,7 @@ fn planes_over_a_real_dem() {
         let params_path = write_json(dir.path(), "params.json", &params);
         let out = dir.path().join(kind);
         let files = SurveyFiles {
-            roi: &roi,
+            area: SurveyArea::Roi(&roi),
             no_fly: &[&nfz],
             dem: Some(&dem),
             params: &params_path,

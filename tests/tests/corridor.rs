@@ -16,16 +16,12 @@
 //!   corridor across; flown over `dems/opengeos_data__elevation_dtm.tif`.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, assert_invalid_at, check_missions, get, post_json, shared_data, terraplan, text,
-    validator, workspace, write_json,
+    Server, SurveyArea, SurveyFiles, assert_invalid_at, check_missions, check_terrain, get,
+    post_json, shared_data, survey_cli, terraplan, text, validator, write_json,
 };
-
-/// Debian's Python, which has GDAL's bindings (python3-gdal).
-const GDAL_PYTHON: &str = "/usr/bin/python3";
 
 fn read(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -90,30 +86,17 @@ fn plan_corridor(
     let line_path = write_json(dir, "line.geojson", line);
     let params_path = write_json(dir, "params.json", params);
     let out = dir.join("out");
-    let mut args = vec![
-        "survey".to_string(),
-        "--corridor".into(),
-        line_path.display().to_string(),
-    ];
-    for z in zones {
-        args.extend(["--no-fly".into(), z.display().to_string()]);
-    }
-    if let Some(d) = dem {
-        args.extend(["--dem".into(), d.display().to_string()]);
-    }
-    args.extend([
-        "--params".into(),
-        params_path.display().to_string(),
-        "--out".into(),
-        out.display().to_string(),
-    ]);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let o = terraplan(&args);
-    assert!(o.status.success(), "terraplan: {}", text(&o.stderr));
-    let plan = read(&out.join("plan.json"));
+    let zones: Vec<&Path> = zones.iter().map(PathBuf::as_path).collect();
+    let files = SurveyFiles {
+        area: SurveyArea::Corridor(&line_path),
+        no_fly: &zones,
+        dem,
+        params: &params_path,
+    };
+    let plan = survey_cli(&files, &out, "corridor");
     let width = params["corridor_width_m"].to_string();
     let mut vargs: Vec<&Path> = vec![&out, &line_path, Path::new(&width)];
-    vargs.extend(zones.iter().map(PathBuf::as_path));
+    vargs.extend(zones);
     let v = validator("check_corridor.py", &vargs);
     assert!(
         v.status.success(),
@@ -183,22 +166,12 @@ fn cli_corridor_over_the_dtm_between_buildings() {
     assert!(summary["min_nfz_distance_m"].as_f64().unwrap() >= 3.0 - 0.01);
     let t = &plan["stats"]["terrain"];
     assert_eq!(t["dem_known_fraction"], 1.0, "{t}");
-    let checked = Command::new(GDAL_PYTHON)
-        .arg(workspace().join("tests/validators/check_terrain.py"))
-        .arg(&dtm)
-        .arg(out.join("plan.json"))
-        .arg("a")
-        .arg(out.join("a.waypoints"))
-        .arg(out.join("a.route.geojson"))
-        .output()
-        .unwrap();
-    assert!(
-        checked.status.success(),
-        "check_terrain.py: {}{}",
-        text(&checked.stdout),
-        text(&checked.stderr)
+    let terrain = check_terrain(
+        &dtm,
+        &out.join("plan.json"),
+        "a",
+        &[&out.join("a.waypoints"), &out.join("a.route.geojson")],
     );
-    let terrain: Value = serde_json::from_slice(&checked.stdout).unwrap();
     // Lanes 30 m above the (dilated) ground, within the 3 m tolerance.
     assert!(
         terrain["lane_min_agl"].as_f64().unwrap() >= 27.0 - 0.01,

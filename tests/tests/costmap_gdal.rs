@@ -13,10 +13,7 @@ use std::path::Path;
 use std::process::Command;
 
 use serde_json::Value;
-use terraplan_e2e::{shared_data, terraplan, text, workspace};
-
-/// Debian's Python, which has GDAL's bindings (python3-gdal) and numpy.
-const GDAL_PYTHON: &str = "/usr/bin/python3";
+use terraplan_e2e::{GDAL_PYTHON, shared_data, terraplan, text, workspace};
 
 /// Build the costmap of `dem` with its slope layer, validate it with GDAL
 /// and return the validator's figures.

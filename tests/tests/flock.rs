@@ -17,16 +17,14 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Reply, Server, assert_invalid_at, assert_problem, get, post_json, shared_data, terraplan, text,
-    validator, workspace, write_json,
+    Reply, Server, SurveyArea, SurveyFiles, assert_invalid_at, assert_problem, check_terrain, get,
+    post_json, shared_data, survey_cli, terraplan, text, validator, workspace, write_json,
 };
 
 /// The Dutch field of survey_cli.rs (fields2cover's test parcel).
 const NL_FIELD: &str = "polygons/fields2cover__test.json";
 /// The bare-earth DTM under the flock experiment area.
 const DTM: &str = "dems/opengeos_data__elevation_dtm.tif";
-/// Debian's Python, which has GDAL's bindings (python3-gdal).
-const GDAL_PYTHON: &str = "/usr/bin/python3";
 /// `turn_penalty_s` when not given.
 const TURN_PENALTY_S: f64 = 2.0;
 /// `speed_m_s` when not given.
@@ -92,27 +90,13 @@ fn survey(
 ) -> (PathBuf, Value) {
     let params_path = write_json(dir, &format!("{out_name}-params.json"), params);
     let out = dir.join(out_name);
-    let mut args: Vec<String> = vec!["survey".into(), "--roi".into(), roi.display().to_string()];
-    for n in nfz {
-        args.extend(["--no-fly".into(), n.display().to_string()]);
-    }
-    if let Some(d) = dem {
-        args.extend(["--dem".into(), d.display().to_string()]);
-    }
-    args.extend([
-        "--params".into(),
-        params_path.display().to_string(),
-        "--out".into(),
-        out.display().to_string(),
-    ]);
-    let argv: Vec<&str> = args.iter().map(String::as_str).collect();
-    let o = terraplan(&argv);
-    assert!(
-        o.status.success(),
-        "terraplan survey ({out_name}, params {params}) failed: {}",
-        text(&o.stderr)
-    );
-    let plan = read_json(&out.join("plan.json"));
+    let files = SurveyFiles {
+        area: SurveyArea::Roi(roi),
+        no_fly: nfz,
+        dem,
+        params: &params_path,
+    };
+    let plan = survey_cli(&files, &out, &format!("{out_name}, params {params}"));
     (out, plan)
 }
 
@@ -601,19 +585,11 @@ fn five_uavs_over_the_dtm() {
                 s["file_stem"]
             );
         }
-        let check = std::process::Command::new(GDAL_PYTHON)
-            .arg(workspace().join("tests/validators/check_terrain.py"))
-            .arg(&dem)
-            .arg(out.join("plan.json"))
-            .arg(id)
-            .arg(out.join(format!("{id}.waypoints")))
-            .output()
-            .unwrap();
-        assert!(
-            check.status.success(),
-            "check_terrain.py, UAV {id}: {}{}",
-            text(&check.stdout),
-            text(&check.stderr)
+        check_terrain(
+            &dem,
+            &out.join("plan.json"),
+            id,
+            &[&out.join(format!("{id}.waypoints"))],
         );
     }
 }

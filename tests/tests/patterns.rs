@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    Server, SurveyFiles, check_missions, get, post_json, shared_data, survey_cli, terraplan, text,
-    validator, write_json,
+    Server, SurveyArea, SurveyFiles, check_missions, check_terrain, get, post_json, shared_data,
+    survey_cli, terraplan, text, validator, write_json,
 };
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
@@ -35,7 +35,7 @@ fn plan(dir: &Path, name: &str, params: &Value) -> (PathBuf, Value) {
     let nfz = write_json(dir, "nfz.geojson", &nfzs());
     let out = dir.join(name);
     let files = SurveyFiles {
-        roi: &roi(),
+        area: SurveyArea::Roi(&roi()),
         no_fly: &[&nfz],
         dem: None,
         params: &params_path,
@@ -325,25 +325,17 @@ fn crosshatch_hover_over_a_dem() {
     let params_path = write_json(d, "params.json", &params);
     let out = d.join("out");
     let files = SurveyFiles {
-        roi: &roi,
+        area: SurveyArea::Roi(&roi),
         no_fly: &[&nfz],
         dem: Some(&dem),
         params: &params_path,
     };
     survey_cli(&files, &out, "hover crosshatch over a DEM");
-    let check = std::process::Command::new("/usr/bin/python3")
-        .arg(terraplan_e2e::workspace().join("tests/validators/check_terrain.py"))
-        .arg(&dem)
-        .arg(out.join("plan.json"))
-        .arg("t1")
-        .arg(out.join("t1.waypoints"))
-        .output()
-        .unwrap();
-    assert!(
-        check.status.success(),
-        "{}{}",
-        text(&check.stdout),
-        text(&check.stderr)
+    check_terrain(
+        &dem,
+        &out.join("plan.json"),
+        "t1",
+        &[&out.join("t1.waypoints")],
     );
     let params_checked = write_json(d, "checked.json", &params);
     let v = validator(

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use serde_json::{Value, json};
 use terraplan_e2e::{
-    SurveyFiles, check_missions, shared_data, survey_cli, terraplan, text, validator, workspace,
-    write_json,
+    SurveyArea, SurveyFiles, check_missions, check_terrain, shared_data, survey_cli, terraplan,
+    text, validator, workspace, write_json,
 };
 
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Value {
@@ -20,7 +20,7 @@ fn plan_and_validate(roi: &Path, nfz: &[&Path], params: &Value, dir: &Path) -> (
     let params_path = write_json(dir, "params.json", params);
     let out = dir.join("out");
     let files = SurveyFiles {
-        roi,
+        area: SurveyArea::Roi(roi),
         no_fly: nfz,
         dem: None,
         params: &params_path,
@@ -485,25 +485,17 @@ fn survey_over_a_dem_file() {
     );
     let out = dir.path().join("out");
     let files = SurveyFiles {
-        roi: &roi,
+        area: SurveyArea::Roi(&roi),
         no_fly: &[],
         dem: Some(&dem),
         params: &params,
     };
     survey_cli(&files, &out, "survey over a DEM file");
-    let check = std::process::Command::new("/usr/bin/python3")
-        .arg(workspace().join("tests/validators/check_terrain.py"))
-        .arg(&dem)
-        .arg(out.join("plan.json"))
-        .arg("t1")
-        .arg(out.join("t1.waypoints"))
-        .output()
-        .unwrap();
-    assert!(
-        check.status.success(),
-        "{}{}",
-        text(&check.stdout),
-        text(&check.stderr)
+    check_terrain(
+        &dem,
+        &out.join("plan.json"),
+        "t1",
+        &[&out.join("t1.waypoints")],
     );
     let wp = validator("load_waypoints.py", &[&out.join("t1.waypoints")]);
     assert!(wp.status.success(), "{}", text(&wp.stderr));

@@ -8,10 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::{Value, json};
-use terraplan_e2e::{Server, get, post, post_json, shared_data, text, validator, workspace};
-
-/// Debian's Python, which has GDAL's bindings (python3-gdal).
-const GDAL_PYTHON: &str = "/usr/bin/python3";
+use terraplan_e2e::{Server, check_terrain, get, post, post_json, shared_data, text, validator};
 
 fn upload(server: &Server, path: &Path, query: &str) -> Value {
     let bytes = std::fs::read(path).unwrap();
@@ -111,23 +108,12 @@ fn plan_and_check(server: &Server, dem_file: &Path, dem_id: &str, body: Value) -
     let route_path = dir.path().join("uav.route.geojson");
     std::fs::write(&route_path, &route.body).unwrap();
 
-    let out = Command::new(GDAL_PYTHON)
-        .arg(workspace().join("tests/validators/check_terrain.py"))
-        .arg(dem_file)
-        .arg(&survey_path)
-        .arg(survey["uavs"][0]["id"].as_str().unwrap())
-        .arg(&wp_path)
-        .arg(&route_path)
-        .output()
-        .expect("run check_terrain.py");
-    assert!(
-        out.status.success(),
-        "check_terrain.py on {}: {}{}",
-        dem_file.display(),
-        text(&out.stdout),
-        text(&out.stderr)
+    let summary = check_terrain(
+        dem_file,
+        &survey_path,
+        survey["uavs"][0]["id"].as_str().unwrap(),
+        &[&wp_path, &route_path],
     );
-    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
     (survey, summary)
 }
 
