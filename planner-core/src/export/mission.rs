@@ -162,29 +162,30 @@ impl Mission {
     pub fn mav_items(&self) -> Vec<MavItem> {
         let home = self.home;
         let f = self.frame.mav_frame();
+        // A command at a position, in the mission's frame.
+        let nav = |command: u16, params: [f64; 4], p: GeoPoint| MavItem {
+            command,
+            frame: f,
+            params,
+            lat: p.lat,
+            lon: p.lon,
+            alt: p.alt,
+        };
         self.items
             .iter()
             .map(|item| match *item {
-                MissionItem::Takeoff { alt } => MavItem {
-                    command: cmd::NAV_TAKEOFF,
-                    frame: f,
-                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
-                    lat: home.lat,
-                    lon: home.lon,
-                    alt,
-                },
+                MissionItem::Takeoff { alt } => nav(
+                    cmd::NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, KEEP_HEADING],
+                    GeoPoint { alt, ..home },
+                ),
                 // param1 1 = ground speed; param3 -1 = leave throttle unchanged.
                 MissionItem::ChangeSpeed { speed_m_s } => {
                     MavItem::action(cmd::DO_CHANGE_SPEED, [1.0, speed_m_s, -1.0, 0.0])
                 }
-                MissionItem::Waypoint(p) => MavItem {
-                    command: cmd::NAV_WAYPOINT,
-                    frame: f,
-                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
-                    lat: p.lat,
-                    lon: p.lon,
-                    alt: p.alt,
-                },
+                MissionItem::Waypoint(p) => {
+                    nav(cmd::NAV_WAYPOINT, [0.0, 0.0, 0.0, KEEP_HEADING], p)
+                }
                 // param3 1 = take a photo at once when a distance is set.
                 MissionItem::CameraTriggerDistance { distance_m } => MavItem::action(
                     cmd::DO_SET_CAM_TRIGG_DIST,
@@ -201,49 +202,26 @@ impl Mission {
                 },
                 // Param 1 is the (minimum) pitch of the climb for planes in
                 // both ArduPlane and PX4.
-                MissionItem::PlaneTakeoff { alt, pitch_deg } => MavItem {
-                    command: cmd::NAV_TAKEOFF,
-                    frame: f,
-                    params: [pitch_deg, 0.0, 0.0, KEEP_HEADING],
-                    lat: home.lat,
-                    lon: home.lon,
-                    alt,
-                },
+                MissionItem::PlaneTakeoff { alt, pitch_deg } => nav(
+                    cmd::NAV_TAKEOFF,
+                    [pitch_deg, 0.0, 0.0, KEEP_HEADING],
+                    GeoPoint { alt, ..home },
+                ),
                 // Param 2 0 = the autopilot's default transition heading.
-                MissionItem::VtolTakeoff { alt } => MavItem {
-                    command: cmd::NAV_VTOL_TAKEOFF,
-                    frame: f,
-                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
-                    lat: home.lat,
-                    lon: home.lon,
-                    alt,
-                },
+                MissionItem::VtolTakeoff { alt } => nav(
+                    cmd::NAV_VTOL_TAKEOFF,
+                    [0.0, 0.0, 0.0, KEEP_HEADING],
+                    GeoPoint { alt, ..home },
+                ),
                 MissionItem::LandStart => MavItem::action(cmd::DO_LAND_START, [0.0; 4]),
                 // Abort altitude and precision landing 0 = the defaults.
-                MissionItem::Land(p) => MavItem {
-                    command: cmd::NAV_LAND,
-                    frame: f,
-                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
-                    lat: p.lat,
-                    lon: p.lon,
-                    alt: p.alt,
-                },
-                MissionItem::VtolLand(p) => MavItem {
-                    command: cmd::NAV_VTOL_LAND,
-                    frame: f,
-                    params: [0.0, 0.0, 0.0, KEEP_HEADING],
-                    lat: p.lat,
-                    lon: p.lon,
-                    alt: p.alt,
-                },
-                MissionItem::HoldWaypoint { point, hold_s } => MavItem {
-                    command: cmd::NAV_WAYPOINT,
-                    frame: f,
-                    params: [hold_s, 0.0, 0.0, KEEP_HEADING],
-                    lat: point.lat,
-                    lon: point.lon,
-                    alt: point.alt,
-                },
+                MissionItem::Land(p) => nav(cmd::NAV_LAND, [0.0, 0.0, 0.0, KEEP_HEADING], p),
+                MissionItem::VtolLand(p) => {
+                    nav(cmd::NAV_VTOL_LAND, [0.0, 0.0, 0.0, KEEP_HEADING], p)
+                }
+                MissionItem::HoldWaypoint { point, hold_s } => {
+                    nav(cmd::NAV_WAYPOINT, [hold_s, 0.0, 0.0, KEEP_HEADING], point)
+                }
                 // Pointed with DO_GIMBAL_MANAGER_PITCHYAW, not the older
                 // DO_MOUNT_CONTROL: both autopilots run it as a mission item
                 // (ArduPilot from 4.3, whose gimbal page keeps
