@@ -40,6 +40,9 @@ from shapely.geometry import LineString, Point, Polygon, shape
 import shapely
 from shapely.ops import unary_union
 
+sys.path.insert(0, str(Path(__file__).parent))
+from clearance import read_zones  # noqa: E402
+
 ML = mavutil.mavlink
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
                   "image_width_px": 5472, "image_height_px": 3648}
@@ -49,16 +52,6 @@ REL_TOL = 0.01
 def fail(msg):
     print(f"check_patterns: FAIL: {msg}", file=sys.stderr)
     sys.exit(1)
-
-
-def areas(path):
-    doc = json.loads(Path(path).read_text())
-    feats = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
-    geoms = []
-    for f in feats:
-        g = shape(f["geometry"] if f.get("type") == "Feature" else f)
-        geoms.append(g if g.is_valid else g.buffer(0))
-    return unary_union(geoms)
 
 
 def items(path):
@@ -174,8 +167,8 @@ def close(got, want, what):
 def main():
     out = Path(sys.argv[1])
     params = json.loads(Path(sys.argv[2]).read_text())
-    roi_ll = areas(sys.argv[3])
-    nfz_ll = unary_union([areas(p) for p in sys.argv[4:]]) if len(sys.argv) > 4 else None
+    roi_ll = read_zones([sys.argv[3]])
+    nfz_ll = read_zones(sys.argv[4:])
     plan = json.loads((out / "plan.json").read_text())
     stats = plan["stats"]
     to_utm = Transformer.from_crs("EPSG:4326", f"EPSG:{plan['utm_epsg']}", always_xy=True)

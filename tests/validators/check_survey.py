@@ -17,12 +17,12 @@ from pathlib import Path
 
 from pymavlink import mavutil, mavwp
 from pyproj import Transformer
-from shapely.geometry import LineString, Point, shape
+from shapely.geometry import LineString, Point
 import shapely
 from shapely.ops import unary_union
 
 sys.path.insert(0, str(Path(__file__).parent))
-from clearance import check as clearance_check, inclusion_rings  # noqa: E402
+from clearance import check as clearance_check, inclusion_rings, read_zones  # noqa: E402
 
 CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
 CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
@@ -37,20 +37,10 @@ def fail(msg):
     sys.exit(1)
 
 
-def areas(path):
-    doc = json.loads(Path(path).read_text())
-    feats = doc["features"] if doc.get("type") == "FeatureCollection" else [doc]
-    geoms = []
-    for f in feats:
-        g = f["geometry"] if f.get("type") == "Feature" else f
-        geoms.append(shape(g).buffer(0) if not shape(g).is_valid else shape(g))
-    return unary_union(geoms)
-
-
 def main():
     out = Path(sys.argv[1])
-    roi_ll = areas(sys.argv[2])
-    nfz_ll = unary_union([areas(p) for p in sys.argv[3:]]) if len(sys.argv) > 3 else None
+    roi_ll = read_zones([sys.argv[2]])
+    nfz_ll = read_zones(sys.argv[3:])
     plan = json.loads((out / "plan.json").read_text())
     epsg = plan["utm_epsg"]
     fwd = Transformer.from_crs("EPSG:4326", f"EPSG:{epsg}", always_xy=True).transform
