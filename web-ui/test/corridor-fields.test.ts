@@ -4,39 +4,13 @@ import path from 'node:path';
 import { describe, expect, it } from 'vitest';
 import { corridorFromRequest, corridorMembers, lineLengthM, parseLine } from '../src/corridor-fields';
 import { ImportError } from '../src/geo-import';
-import { buildSurveyRequest, formFromRequest, type SurveyFormValues } from '../src/survey-form';
+import { buildSurveyRequest, formFromRequest } from '../src/survey-form';
+import { formValues } from './form-values';
 
 // The shared test data (../shared/data beside the repository); vitest runs in web-ui/.
 const FIELD = path.resolve(process.cwd(), '../../shared/data/polygons/fields2cover__test.json');
 
 const line: [number, number][] = [[5, 52], [5.01, 52], [5.014, 52.0025]];
-
-function values(over: Partial<SurveyFormValues> = {}): SurveyFormValues {
-  return {
-    name: '',
-    roi: null,
-    noFlyZones: [],
-    demId: null,
-    allowPartialDem: false,
-    camera: 'dji_phantom4_pro',
-    customCamera: { sensor_width_mm: 13.2, sensor_height_mm: 8.8, focal_length_mm: 8.8, image_width_px: 5472, image_height_px: 3648, orientation: 'landscape' },
-    heightMode: 'altitude',
-    altitudeM: 60,
-    gsdCmPx: 1.5,
-    frontOverlapPct: 80,
-    sideOverlapPct: 70,
-    sliceAngle: 'auto',
-    speedMS: 10,
-    nfzClearanceM: 5,
-    altitudeFrame: 'relative',
-    assignment: 'balanced',
-    batteryMin: NaN,
-    uavs: [],
-    rallyPoints: [],
-    extra: {},
-    ...over,
-  };
-}
 
 describe('corridor line import', () => {
   it('reads a LineString from GeoJSON geometries, features and collections, dropping heights and repeats', () => {
@@ -71,25 +45,25 @@ describe('corridor line import', () => {
 
 describe('corridor request members', () => {
   it('sends corridor and corridor_width_m instead of roi, and reads them back', () => {
-    const { body, errors } = buildSurveyRequest(values({ corridor: { line, widthM: 80 } }));
+    const { body, errors } = buildSurveyRequest(formValues({ corridor: { line, widthM: 80 } }));
     expect(errors).toEqual([]);
     expect(body!.roi).toBeUndefined();
     expect(body!.corridor).toEqual({ type: 'LineString', coordinates: line });
     expect(body!.corridor_width_m).toBe(80);
-    const back = formFromRequest(body!, null, { camera: 'dji_phantom4_pro', customCamera: values().customCamera });
+    const back = formFromRequest(body!, null, { camera: 'dji_phantom4_pro', customCamera: formValues().customCamera });
     expect(back.values.corridor).toEqual({ line, widthM: 80 });
     expect(back.values.extra).toEqual({});
   });
 
   it('a corridor replaces the area, and with a battery its UAV starts at the line start', () => {
-    const { body } = buildSurveyRequest(values({ roi: [[[5, 52], [5.1, 52], [5.1, 52.1], [5, 52]]], corridor: { line, widthM: 50 }, batteryMin: 20 }));
+    const { body } = buildSurveyRequest(formValues({ roi: [[[5, 52], [5.1, 52], [5.1, 52.1], [5, 52]]], corridor: { line, widthM: 50 }, batteryMin: 20 }));
     expect(body!.roi).toBeUndefined();
     expect(body!.uavs).toEqual([{ id: 'uav1', start: [5, 52], max_flight_time_s: 1200 }]);
   });
 
   it('names a missing or out-of-range width', () => {
     for (const widthM of [NaN, 0.5, 2500]) {
-      const { body, errors } = buildSurveyRequest(values({ corridor: { line, widthM } }));
+      const { body, errors } = buildSurveyRequest(formValues({ corridor: { line, widthM } }));
       expect(body).toBeNull();
       expect(errors).toEqual([{ field: 'corridor', text: 'Corridor width: give a number of metres from 1 to 2000.', control: 'corridor-width' }]);
     }

@@ -10,38 +10,14 @@ import {
   nextUavId,
   uavColour,
   UAV_COLOURS,
-  type CustomCamera,
   type SurveyFormValues,
 } from '../src/survey-form';
+import { formValues, P4 as p4 } from './form-values';
 
 const square: [number, number][][] = [[[5, 52], [5.006, 52], [5.006, 52.004], [5, 52.004], [5, 52]]];
-const p4: CustomCamera = { sensor_width_mm: 13.2, sensor_height_mm: 8.8, focal_length_mm: 8.8, image_width_px: 5472, image_height_px: 3648, orientation: 'landscape' };
 
 function values(over: Partial<SurveyFormValues> = {}): SurveyFormValues {
-  return {
-    name: '  field 7 ',
-    roi: square,
-    noFlyZones: [],
-    demId: null,
-    allowPartialDem: false,
-    camera: 'dji_phantom4_pro',
-    customCamera: p4,
-    heightMode: 'altitude',
-    altitudeM: 60,
-    gsdCmPx: 1.5,
-    frontOverlapPct: 80,
-    sideOverlapPct: 70,
-    sliceAngle: 'auto',
-    speedMS: 10,
-    nfzClearanceM: 5,
-    altitudeFrame: 'relative',
-    assignment: 'balanced',
-    batteryMin: NaN,
-    uavs: [],
-    rallyPoints: [],
-    extra: {},
-    ...over,
-  };
+  return formValues({ name: '  field 7 ', roi: square, ...over });
 }
 
 describe('buildSurveyRequest', () => {
