@@ -165,6 +165,11 @@ impl Capture {
         coverage::photo_count(length_m, self.spacing_m)
     }
 
+    /// Ground distance between photos along a lane, m.
+    pub(super) fn spacing_m(&self) -> f64 {
+        self.spacing_m
+    }
+
     /// Time the stops of `photos` hover photos add to the flight, s.
     pub(super) fn stop_time_s(&self, photos: usize) -> f64 {
         match self.mode {
@@ -317,9 +322,25 @@ fn length_2d(pts: &[Point3]) -> f64 {
         .sum()
 }
 
+/// The 3D length of `pts` up to the horizontal distance `s` along it.
+pub(super) fn distance_3d_to(pts: &[Point3], s: f64) -> f64 {
+    let mut left = s;
+    let mut out = 0.0;
+    for w in pts.windows(2) {
+        let flat = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
+        let full = dist3(&w[0], &w[1]);
+        if left <= flat {
+            return out + if flat > 0.0 { full * left / flat } else { 0.0 };
+        }
+        left -= flat;
+        out += full;
+    }
+    out
+}
+
 /// `count` points every `spacing` metres (horizontally) along `pts` from
 /// its start, heights interpolated, each with its distance along.
-fn photo_stations(pts: &[Point3], spacing: f64, count: usize) -> Vec<(f64, Point3)> {
+pub(super) fn photo_stations(pts: &[Point3], spacing: f64, count: usize) -> Vec<(f64, Point3)> {
     let mut out = Vec::with_capacity(count);
     let mut seg = 0;
     let mut seg_start = 0.0;

@@ -297,6 +297,7 @@ pub(super) fn cells_out(d: &Decomposition, proj: &UtmProjection) -> Result<Vec<C
                 lane_length_m: plan
                     .map_or(0.0, |p| p.lanes.iter().map(|l| dist(l.start, l.end)).sum()),
                 polygon: gj::polygon_geometry(&proj.polygon_to_wgs84(c)?),
+                photos: None,
             })
         })
         .collect()

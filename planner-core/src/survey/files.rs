@@ -20,7 +20,8 @@ impl SurveyPlan {
     /// Names of the plan's files: per sortie `<stem>.waypoints`,
     /// `<stem>.plan`, `<stem>.route.geojson` and `<stem>.kml` (the stem is
     /// the UAV id, or `<id>.sortie<k>` for a UAV flying several sorties);
-    /// per UAV `<id>.fence.waypoints`; then `cells.geojson`.
+    /// per UAV `<id>.fence.waypoints`; `<id>.photos.geojson` per UAV whose
+    /// photos were planned; the rally files; then `cells.geojson`.
     pub fn file_names(&self) -> Vec<String> {
         let mut out: Vec<String> = Vec::new();
         for u in &self.uavs {
@@ -33,6 +34,7 @@ impl SurveyPlan {
             }
             out.push(format!("{}.{FENCE_FILE_SUFFIX}", u.id));
         }
+        out.extend(self.photo_file_names());
         out.extend(self.rally_file_names());
         out.push(CELLS_FILE.to_string());
         out
@@ -62,6 +64,9 @@ impl SurveyPlan {
         }
         if let Some(rally) = self.rally_file(name) {
             return Some(rally);
+        }
+        if let Some(photos) = self.photos_file(name) {
+            return Some(photos);
         }
         // The fence is the UAV's; it is also served under each sortie's stem.
         let fence = format!(".{FENCE_FILE_SUFFIX}");
@@ -131,6 +136,9 @@ impl SurveyPlan {
             props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
             props.insert("lanes".into(), json!(c.lanes));
             props.insert("lane_length_m".into(), json!(c.lane_length_m));
+            if let Some(photos) = &c.photos {
+                photos.add_properties(&mut props);
+            }
             (c.polygon.clone(), props)
         }))
     }
@@ -196,6 +204,7 @@ mod tests {
                 "a-1.route.geojson",
                 "a-1.kml",
                 "a-1.fence.waypoints",
+                "a-1.photos.geojson",
                 "cells.geojson"
             ]
         );

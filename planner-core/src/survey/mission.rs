@@ -9,6 +9,7 @@ use super::capture::Capture;
 use super::cells::dist;
 use super::flock_plan::SortieTour;
 use super::homes::FlockSetup;
+use super::photos::{PhotoCamera, PhotoPlanner, SortiePhotos};
 use super::request::{Flight, PlanError, SurveyParams};
 use super::result::{SortiePlan, UavPlan, UavStats};
 use super::terrain_flight::{UavTerrain, fly_tour};
@@ -30,6 +31,12 @@ pub(super) fn uav_plans(
 ) -> Result<(Vec<UavPlan>, Vec<Coord<f64>>), PlanError> {
     let mut uav_plans = Vec::with_capacity(flock.specs.len());
     let mut all_paths: Vec<Coord<f64>> = Vec::new();
+    let photo_camera = PhotoCamera::new(
+        &params.camera(),
+        params
+            .camera_pitch_deg
+            .unwrap_or(crate::coverage::NADIR_PITCH_DEG),
+    );
     let plane = params
         .plane()
         .map(|a| super::plane_flight::PlaneFlight::new(a, flight.altitude, &flock.obstacles));
@@ -42,7 +49,14 @@ pub(super) fn uav_plans(
             let tour = &sortie.tour;
             let home_amsl = over_dem.map(|o| (o, o.homes_amsl[i]));
             let capture = Capture::new(params, &flight.geometry, speed);
-            let (mission, stats, uav_terrain) = if let Some(plane) = &plane {
+            let photo_planner = PhotoPlanner {
+                camera: photo_camera,
+                capture: &capture,
+                speed_m_s: speed,
+                turn_penalty_s: params.turn_penalty_s,
+                model: home_amsl.map(|(o, h)| (&o.terrain.model, h)),
+            };
+            let (mission, stats, uav_terrain, photos) = if let Some(plane) = &plane {
                 let home = flock.homes[i];
                 let trigger = flight.geometry.trigger_distance_m;
                 let frame = params.altitude_frame;
@@ -50,15 +64,22 @@ pub(super) fn uav_plans(
                 let (mission, stats, path) =
                     plane.sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
                 all_paths.extend(path);
-                (mission, stats, None)
+                (mission, stats, None, None)
             } else {
-                let (mission, length_3d, uav_terrain) = fly(
-                    tour, spec.start, home_amsl, speed, &capture, params, flight, proj,
+                let (mission, length_3d, uav_terrain, photos) = fly(
+                    tour,
+                    spec.start,
+                    home_amsl,
+                    speed,
+                    &photo_planner,
+                    params,
+                    flight,
+                    proj,
                 )?;
                 let path = tour.path();
                 let stats = tour_stats(tour, &path, length_3d, speed, params, &capture);
                 all_paths.extend(path);
-                (mission, stats, uav_terrain)
+                (mission, stats, uav_terrain, Some(photos))
             };
             sorties.push(SortiePlan {
                 file_stem: if several {
@@ -71,6 +92,7 @@ pub(super) fn uav_plans(
                 stats,
                 mission,
                 terrain: uav_terrain,
+                photos,
             });
         }
         let pieces: Vec<Piece> = sorties.iter().flat_map(|s| s.pieces.clone()).collect();
@@ -91,20 +113,21 @@ pub(super) fn uav_plans(
 }
 
 /// One tour flown from `start`: flat at the altitude, or over the DEM
-/// from a home at `home_amsl`. The mission, its 3D length and the flight
-/// over the terrain.
+/// from a home at `home_amsl`. The mission, its 3D length, the flight
+/// over the terrain and the photos.
 #[allow(clippy::too_many_arguments)]
 fn fly(
     tour: &Tour,
     start: [f64; 2],
     home_amsl: Option<(&OverDem, f64)>,
     speed: f64,
-    capture: &Capture,
+    photos: &PhotoPlanner,
     params: &SurveyParams,
     flight: &Flight,
     proj: &UtmProjection,
-) -> Result<(Mission, f64, Option<UavTerrain>), PlanError> {
+) -> Result<(Mission, f64, Option<UavTerrain>, SortiePhotos), PlanError> {
     let altitude = flight.altitude;
+    let capture = photos.capture;
     Ok(match home_amsl {
         None => {
             let home = GeoPoint {
@@ -115,7 +138,8 @@ fn fly(
             let mission = build_mission(tour, home, altitude, speed, capture, params, proj)?;
             // Flat survey: 3D adds the climb after take-off and the
             // descent home.
-            (mission, tour.length_m() + 2.0 * altitude, None)
+            let photos = photos.flat(tour, altitude);
+            (mission, tour.length_m() + 2.0 * altitude, None, photos)
         }
         Some((o, home_amsl)) => {
             let flown = fly_tour(
@@ -129,7 +153,15 @@ fn fly(
                 capture,
                 proj,
             )?;
-            (flown.mission, flown.length_3d_m, Some(flown.terrain))
+            let climb = flown.legs.iter().flat_map(|(_, p)| p.first()).next();
+            let climb = climb.map_or(0.0, |p| (p.z - home_amsl).abs());
+            let photos = photos.over_dem(tour, &flown.legs, climb);
+            (
+                flown.mission,
+                flown.length_3d_m,
+                Some(flown.terrain),
+                photos,
+            )
         }
     })
 }

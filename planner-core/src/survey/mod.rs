@@ -21,6 +21,9 @@ mod files;
 mod flock_plan;
 mod homes;
 mod mission;
+mod photo_overlap;
+mod photos;
+mod photos_file;
 mod plane_escape;
 mod plane_flight;
 mod plane_heights;
@@ -34,6 +37,8 @@ pub use aircraft::{Aircraft, AircraftType};
 pub use capture::{DEFAULT_HOLD_S, Trigger, TriggerMode};
 pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
 pub use files::PlanFile;
+pub use photo_overlap::CellPhotos;
+pub use photos::{Photo, PhotoCamera, PhotoLane, SortiePhotos};
 pub use rally::MAX_RALLY_DISTANCE_M;
 pub use request::{
     DEFAULT_ALTITUDE_M, DEFAULT_NFZ_CLEARANCE_M, DEM_POINTER, MAX_RALLY_POINTS, MAX_UAVS,
@@ -119,7 +124,8 @@ pub fn plan_survey_over(
         coverage_ratio,
         free_area,
     ));
-    let cells_out = cells::cells_out(&d, proj)?;
+    let mut cells_out = cells::cells_out(&d, proj)?;
+    photo_overlap::fill(&mut cells_out, &uavs);
     // The inclusion fence holds the rally points (a UAV flies there on
     // RTL) and keeps the NFZs' clearance too: a vehicle flying on its edge
     // would breach it with ordinary GPS error.

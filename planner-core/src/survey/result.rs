@@ -117,6 +117,9 @@ pub struct CellOut {
     pub lane_length_m: f64,
     /// GeoJSON Polygon, WGS84.
     pub polygon: Value,
+    /// The overlaps and GSD its photos achieve on the ground.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photos: Option<super::photo_overlap::CellPhotos>,
 }
 
 /// One flight of a UAV, from take-off at its start to landing there.
@@ -134,6 +137,9 @@ pub struct SortiePlan {
     /// The flight over the DEM, when there is one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub terrain: Option<UavTerrain>,
+    /// The photos taken (plans stored before photos were planned have none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photos: Option<super::photos::SortiePhotos>,
 }
 
 impl SortiePlan {
@@ -207,6 +213,7 @@ impl From<StoredUavPlan> for UavPlan {
                 stats: s.stats.clone(),
                 mission,
                 terrain: s.terrain,
+                photos: None,
             });
         }
         let speed_m_s = s

@@ -165,6 +165,8 @@ pub(super) struct TerrainFlight {
     pub mission: Mission,
     pub length_3d_m: f64,
     pub terrain: UavTerrain,
+    /// The flight's 3D legs in planning coordinates (for its photos).
+    pub legs: Vec<(LegKind, Vec<Point3>)>,
 }
 
 /// Flies `tour` over `model` under `rules`: the legs in 3D, the mission in
@@ -293,6 +295,7 @@ pub(super) fn fly_tour(
         },
         length_3d_m,
         terrain,
+        legs,
     })
 }
 

@@ -147,6 +147,10 @@ pub struct UavFiles {
     rally: Option<String>,
     /// KML of the route and the UAV's cells, for Google Earth.
     kml: String,
+    /// GeoJSON of the sortie's planned photos (footprints on the ground);
+    /// without `?sortie=` the UAV's photos of every sortie.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    photos: Option<String>,
 }
 
 /// One flight of a UAV, from take-off to landing at its start.
@@ -306,6 +310,7 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                             rally: (!plan.rally_points.is_empty())
                                 .then(|| format!("{base}/uavs/{}/rally.waypoints", u.id)),
                             kml: f("route.kml"),
+                            photos: s.photos.is_some().then(|| f("photos.geojson")),
                         },
                     }
                 })
@@ -608,7 +613,8 @@ pub struct SortieQuery {
 
 /// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
 /// (QGroundControl), `route.geojson`, `route.kml`, `fence.waypoints` or
-/// `rally.waypoints` (a survey with rally points).
+/// `rally.waypoints` (a survey with rally points), `photos.geojson` (the
+/// planned photos' footprints; every sortie's without `?sortie=`).
 /// A UAV whose battery needs several sorties has one mission per sortie,
 /// chosen with `?sortie=k`.
 #[utoipa::path(
@@ -618,7 +624,7 @@ pub struct SortieQuery {
     params(
         ("id" = String, Path, description = "Survey id"),
         ("uav" = String, Path, description = "UAV id"),
-        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints, rally.waypoints"),
+        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints, rally.waypoints, photos.geojson"),
         SortieQuery,
     ),
     responses(
@@ -662,10 +668,11 @@ pub async fn uav_file(
         "fence.waypoints" => ("fence.waypoints", "fence.waypoints"),
         "rally.waypoints" => ("rally.waypoints", "rally.waypoints"),
         "route.kml" => ("kml", "kml"),
+        "photos.geojson" => ("photos.geojson", "photos.geojson"),
         other => {
             return Err(ApiError::NotFound(format!(
                 "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, route.kml, \
-                 fence.waypoints, rally.waypoints"
+                 fence.waypoints, rally.waypoints, photos.geojson"
             )));
         }
     };
@@ -686,6 +693,10 @@ pub async fn uav_file(
             _ if file == "rally.waypoints" => {
                 format!("survey {id} has no rally points (rally_points), or no UAV {uav:?}")
             }
+            _ if file == "photos.geojson" => format!(
+                "survey {id} has no planned photos of UAV {uav:?} (or no such UAV or sortie): \
+                 surveys planned before photos were kept them in no plan"
+            ),
             Some(k) => format!(
                 "survey {id} has no sortie {k} of UAV {uav:?} (a UAV flying one sortie takes no \
                  sortie number)"
