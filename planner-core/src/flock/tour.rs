@@ -367,9 +367,10 @@ impl<'a> Search<'a> {
         if legs.exact {
             // Price the current tour exactly (without budget: it is needed
             // for the final transits anyway).
-            for k in 0..=n {
-                let _ = legs.path(self.exit_of(k as isize - 1), self.entry_of(k));
-            }
+            let tour: Vec<_> = (0..=n)
+                .map(|k| (self.exit_of(k as isize - 1), self.entry_of(k)))
+                .collect();
+            legs.price_all(&tour);
         }
         let mut queued = vec![true; self.jobs.len()];
         let mut queue: VecDeque<usize> = self.seq.iter().map(|&(job, _)| job).collect();
@@ -628,24 +629,36 @@ impl<'a> Search<'a> {
         let (first, last) = (self.way(i), self.way(i + len - 1));
         let (x, y) = (self.exit_of(q), self.entry_of((q + 1) as usize));
 
-        let as_is: Vec<(usize, u8)> = self.seq[i..i + len].to_vec();
-        let backwards: Vec<(usize, u8)> = as_is.iter().rev().map(|&(j, w)| (j, w ^ 1)).collect();
-        let mut options = vec![as_is, backwards];
-        if len == 1 {
-            let (job, w) = self.seq[i];
-            options.extend([vec![(job, w ^ 2)], vec![(job, w ^ 3)]]);
-        }
+        // The segment as is, backwards, or (a single cell) flown another
+        // way: its ends are priced before anything is copied.
+        let ((j0, w0), (j1, w1)) = (self.seq[i], self.seq[i + len - 1]);
+        let option_count = if len == 1 { 4 } else { 2 };
         let old = [(before, first.entry), (last.exit, after), (x, y)];
-        for segment in options {
-            let ((j0, w0), (j1, w1)) = (segment[0], segment[segment.len() - 1]);
-            let (entry, exit) = (
-                self.jobs[j0].ways[w0 as usize].entry,
-                self.jobs[j1].ways[w1 as usize].exit,
-            );
+        for option in 0..option_count {
+            let (entry, exit) = match option {
+                0 => (first.entry, last.exit),
+                1 => (
+                    self.jobs[j1].ways[(w1 ^ 1) as usize].entry,
+                    self.jobs[j0].ways[(w0 ^ 1) as usize].exit,
+                ),
+                _ => {
+                    let way = self.jobs[j0].ways[(w0 ^ option as u8) as usize];
+                    (way.entry, way.exit)
+                }
+            };
             let new = [(before, after), (x, entry), (exit, y)];
             if Self::gain(legs, &old, &new).is_none() {
                 continue;
             }
+            let segment: Vec<(usize, u8)> = match option {
+                0 => self.seq[i..i + len].to_vec(),
+                1 => self.seq[i..i + len]
+                    .iter()
+                    .rev()
+                    .map(|&(j, w)| (j, w ^ 1))
+                    .collect(),
+                _ => vec![(j0, w0 ^ option as u8)],
+            };
             self.seq.drain(i..i + len);
             // Insertion index after the removal.
             let at = if q < i_s {
