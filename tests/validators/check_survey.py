@@ -5,12 +5,15 @@ code): loads every UAV's .waypoints with pymavlink's MAVWPLoader, compares
 item counts and positions with plan.json, and checks in UTM metres that no
 flown point or segment enters a no-fly zone or, away from home, comes closer
 than the plan's nfz_clearance_m to one or to the inclusion fence, that survey lanes stay in the
-ROI, and that the lanes' footprints cover the free area.
+ROI (an oblique camera's lanes may overshoot it by the footprint's offset
+ahead of the camera, so that its first photo sees the ROI's edge), and
+that the lanes' footprints cover the free area.
 
 usage: check_survey.py OUT_DIR ROI.geojson [NFZ.geojson ...]
 Prints a JSON summary; exits 1 with a message on the first failed check.
 """
 import json
+import math
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -37,6 +40,21 @@ def fail(msg):
     sys.exit(1)
 
 
+def oblique_overshoot(plan):
+    """How far an oblique survey's lanes may run past the ROI: a camera
+    pitched forward first sees the ground H·tan(tilt − half the field of
+    view along track) ahead of it, so its lanes start (and end) that much
+    outside (0 for a nadir camera, or without planned photos)."""
+    for uav in plan["uavs"]:
+        for sortie in uav["sorties"]:
+            cam = (sortie.get("photos") or {}).get("camera")
+            if cam:
+                tilt = math.radians(90.0 + cam["pitch_deg"])
+                near = tilt - math.atan(cam["half_tan"][1])
+                return max(0.0, plan["stats"]["altitude_m"] * math.tan(near))
+    return 0.0
+
+
 def main():
     out = Path(sys.argv[1])
     roi_ll = read_zones([sys.argv[2]])
@@ -53,7 +71,7 @@ def main():
     nfz = project(nfz_ll) if nfz_ll is not None and not nfz_ll.is_empty else None
     free = roi.difference(nfz) if nfz is not None else roi
     nfz_core = nfz.buffer(-GEOM_TOL_M) if nfz is not None else None
-    roi_grown = roi.buffer(GEOM_TOL_M)
+    roi_grown = roi.buffer(GEOM_TOL_M + oblique_overshoot(plan))
 
     clearance = plan["stats"].get("nfz_clearance_m", 0.0)
     summary = {"uavs": {}, "nfz_clearance_m": clearance}

@@ -21,6 +21,7 @@ mod files;
 mod flock_plan;
 mod homes;
 mod mission;
+mod oblique_lanes;
 mod photo_overlap;
 mod photos;
 mod photos_file;
@@ -95,6 +96,11 @@ pub fn plan_survey_over(
         &setup.flyable,
         flight.geometry.line_spacing_m,
     )?;
+    oblique_lanes::lengthen_lanes(
+        &mut d,
+        oblique_lanes::near_offset_m(params, flight.altitude),
+        &setup.obstacles,
+    );
     aircraft::order_lanes(&mut d, params);
     let (rally_points, rally_utm) =
         rally::check_rally_points(&params.rally_points, &area, setup.clearance, dem)?;

@@ -338,21 +338,28 @@ impl PhotoPlanner<'_> {
             .sum();
         let count = self.capture.photos(length);
         let spacing = self.capture.spacing_m();
+        // To the lane's start, and the turn onto it, before the first photo.
+        clock.fly(self, std::iter::once(*first));
         clock.turn_to(self, dy.atan2(dx), dx.hypot(dy));
         let stop_s = self.capture.stop_time_s(1);
+        // Rounded to keep plan.json small: the photos move by well under a
+        // millimetre.
+        let fine = |v: f64| (v * 1e7).round() / 1e7;
         let mut lane = PhotoLane {
             cell,
             start: round3([first.x, first.y, first.z]),
-            heading_deg,
-            spacing_m: spacing,
+            heading_deg: fine(heading_deg),
+            spacing_m: fine(spacing),
             count,
             time_s: round(clock.t),
-            interval_s: spacing / self.speed_m_s + stop_s,
+            interval_s: fine(spacing / self.speed_m_s + stop_s),
             ..PhotoLane::default()
         };
         if let Some((model, fallback_z)) = self.model {
             let rays = self.camera.rays(heading_deg);
-            let step = model.step_m().clamp(0.5, 5.0);
+            // Half a DEM cell: a ray crossing a roof's corner is not
+            // stepped over.
+            let step = (model.cell_m() / 4.0).clamp(0.1, 5.0);
             for (k, (s, p)) in photo_stations(pts, spacing, count).into_iter().enumerate() {
                 let c = [p.x, p.y, p.z];
                 let mut g = [0.0; 15];

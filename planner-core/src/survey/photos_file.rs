@@ -2,8 +2,6 @@
 //! photo — its footprint Polygon on the ground, the camera's position,
 //! time since take-off, pitch, heading, cell and GSD as properties.
 
-use std::fmt::Write;
-
 use super::files::PlanFile;
 use super::photos::{Photo, SortiePhotos};
 use super::result::{SortiePlan, SurveyPlan};
@@ -55,75 +53,124 @@ impl SurveyPlan {
         let proj = UtmProjection::new((epsg % 100) as u8, epsg < 32700)?;
         let over_dem = sorties.iter().any(|(_, s)| s.terrain.is_some());
         let reference = if over_dem {
-            "the DEM's vertical datum (above mean sea level for an orthometric DEM)"
+            "heights in the DEM's vertical datum (above mean sea level for an orthometric DEM)"
         } else {
-            "above the take-off point (the footprints on level ground at its height)"
+            "heights above the take-off point; footprints on level ground at its height"
         };
-        let uav_json = serde_json::to_string(uav).unwrap_or_default();
-        let mut out = String::from("{\"type\": \"FeatureCollection\", \"features\": [");
+        let mut out: Vec<u8> = Vec::new();
+        out.extend_from_slice(b"{\"type\":\"FeatureCollection\",\"properties\":{\"uav\":");
+        json(&mut out, uav);
+        out.extend_from_slice(b",\"heights\":");
+        json(&mut out, reference);
+        out.extend_from_slice(b",\"utm_epsg\":");
+        json(&mut out, &epsg);
+        out.extend_from_slice(b"},\"features\":[");
         let mut first = true;
         for (k, sortie) in sorties {
             let Some(photos) = &sortie.photos else {
                 continue;
             };
             for (index, p) in photos.photos().enumerate() {
-                out.push_str(if first { "\n" } else { ",\n" });
+                out.extend_from_slice(if first { b"\n" } else { b",\n" });
                 first = false;
-                feature(&mut out, &proj, photos, &p, &uav_json, k + 1, index)?;
+                let place = Place {
+                    sortie: k + 1,
+                    index,
+                    over_dem,
+                };
+                feature(&mut out, &proj, photos, &p, place)?;
             }
         }
-        let _ = write!(
-            out,
-            "\n], \"properties\": {{\"uav\": {uav_json}, \"altitude_reference\": \"{reference}\", \
-             \"utm_epsg\": {epsg}}}}}\n"
-        );
-        Ok(out)
+        out.extend_from_slice(b"\n]}\n");
+        Ok(String::from_utf8(out).unwrap_or_default())
     }
 }
 
+/// Where a photo is in the file: its sortie (from 1), its index in the
+/// sortie, and whether heights of the ground are known.
+struct Place {
+    sortie: usize,
+    index: usize,
+    over_dem: bool,
+}
+
 /// One photo's Feature, written to `out`: its footprint's corners (near
-/// left, near right, far right, far left, closed) as the Polygon.
+/// left, near right, far right, far left, closed) as the Polygon; lon/lat to
+/// 1e-7° (about a centimetre).
 fn feature(
-    out: &mut String,
+    out: &mut Vec<u8>,
     proj: &UtmProjection,
     photos: &SortiePhotos,
     p: &Photo,
-    uav_json: &str,
-    sortie: usize,
-    index: usize,
+    place: Place,
 ) -> Result<(), GeoError> {
     let ll = |c: &[f64; 3]| proj.to_wgs84(geo_types::Coord { x: c[0], y: c[1] });
-    out.push_str(
-        "{\"type\": \"Feature\", \"geometry\": {\"type\": \"Polygon\", \"coordinates\": [[",
+    let lonlat = |out: &mut Vec<u8>, c: &[f64; 3]| -> Result<(), GeoError> {
+        let g = ll(c)?;
+        out.push(b'[');
+        num(out, g.x, 1e7);
+        out.push(b',');
+        num(out, g.y, 1e7);
+        Ok(())
+    };
+    out.extend_from_slice(
+        b"{\"type\":\"Feature\",\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[[",
     );
     for (n, i) in [0, 1, 2, 3, 0].into_iter().enumerate() {
-        let c = ll(&p.corners[i])?;
-        let sep = if n == 0 { "" } else { ", " };
-        let _ = write!(out, "{sep}[{:.8}, {:.8}]", c.x, c.y);
+        if n > 0 {
+            out.push(b',');
+        }
+        lonlat(out, &p.corners[i])?;
+        out.push(b']');
     }
-    let camera = ll(&p.camera)?;
-    let centre = ll(&p.centre)?;
-    let _ = write!(
-        out,
-        "]]}}, \"properties\": {{\"uav\": {uav_json}, \"sortie\": {sortie}, \"index\": {index}, \
-         \"cell\": {}, \"time_s\": {:.2}, \"camera_pitch_deg\": {}, \"heading_deg\": {:.3}, \
-         \"centre\": [{:.8}, {:.8}, {:.3}], \"ground_centre\": [{:.8}, {:.8}], \
-         \"ground_heights_m\": [{:.3}, {:.3}, {:.3}, {:.3}, {:.3}], \"gsd_cm_px\": {:.4}}}}}",
-        p.cell,
-        p.time_s,
-        photos.camera.pitch_deg,
-        p.heading_deg,
-        camera.x,
-        camera.y,
-        p.camera[2],
-        centre.x,
-        centre.y,
-        p.corners[0][2],
-        p.corners[1][2],
-        p.corners[2][2],
-        p.corners[3][2],
-        p.centre[2],
-        p.gsd_cm_px(&photos.camera),
-    );
+    out.extend_from_slice(b"]]},\"properties\":{\"sortie\":");
+    json(out, &place.sortie);
+    out.extend_from_slice(b",\"index\":");
+    json(out, &place.index);
+    out.extend_from_slice(b",\"lane\":");
+    json(out, &p.lane);
+    out.extend_from_slice(b",\"cell\":");
+    json(out, &p.cell);
+    out.extend_from_slice(b",\"time_s\":");
+    num(out, p.time_s, 1e2);
+    out.extend_from_slice(b",\"camera_pitch_deg\":");
+    num(out, photos.camera.pitch_deg, 1e6);
+    out.extend_from_slice(b",\"heading_deg\":");
+    num(out, p.heading_deg, 1e4);
+    out.extend_from_slice(b",\"centre\":");
+    lonlat(out, &p.camera)?;
+    out.push(b',');
+    num(out, p.camera[2], 1e3);
+    out.extend_from_slice(b"],\"ground_centre\":");
+    lonlat(out, &p.centre)?;
+    out.push(b']');
+    if place.over_dem {
+        out.extend_from_slice(b",\"ground_heights_m\":[");
+        for (n, c) in p
+            .corners
+            .iter()
+            .chain(std::iter::once(&p.centre))
+            .enumerate()
+        {
+            if n > 0 {
+                out.push(b',');
+            }
+            num(out, c[2], 1e3);
+        }
+        out.push(b']');
+    }
+    out.extend_from_slice(b",\"gsd_cm_px\":");
+    num(out, p.gsd_cm_px(&photos.camera), 1e4);
+    out.extend_from_slice(b"}}");
     Ok(())
+}
+
+/// `v` rounded to `1/scale`, in its shortest form.
+fn num(out: &mut Vec<u8>, v: f64, scale: f64) {
+    json(out, &((v * scale).round() / scale));
+}
+
+fn json<T: serde::Serialize + ?Sized>(out: &mut Vec<u8>, v: &T) {
+    // Writing to a Vec cannot fail; numbers and strings always serialize.
+    let _ = serde_json::to_writer(&mut *out, v);
 }

@@ -188,6 +188,12 @@ impl TerrainModel {
         self.step_m
     }
 
+    /// The DEM's cell size under the model, metres (the smaller side).
+    pub fn cell_m(&self) -> f64 {
+        let r = self.raw.resolution_m();
+        r[0].min(r[1])
+    }
+
     /// True when no DEM cell lies under the model's extent.
     pub fn is_empty(&self) -> bool {
         self.fallback_m == f64::NEG_INFINITY

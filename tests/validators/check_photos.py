@@ -1,0 +1,311 @@
+"""Independent check of a terraplan survey's planned photos (issue 20 item
+5), written against shapely, pyproj and numpy only (none of terraplan's
+code).
+
+For every UAV's `<uav>.photos.geojson` in OUT_DIR:
+
+- the count: one Feature per photo, as many as plan.json's `photos` for
+  the UAV (and in all, the survey's);
+- the camera: each lane's photos (grouped by sortie and `lane`) lie on one
+  line along their `heading_deg` (within 0.05°), `camera_pitch_deg` is
+  the requested one, times rise through each sortie and end before its
+  flight time;
+- the footprints: the corner rays and the centre ray of a pinhole camera
+  (PARAMS' `camera`, or the Phantom 4 Pro default) rotated by the tilt
+  about the across-track axis and turned to the heading (numpy), met with
+  the level ground at take-off height (no DEM) or taken from GROUND.json,
+  the ray–DEM intersections check_photos_dem.py computed with GDAL (rays
+  grazing a roof's edge for less than a quarter cell, at most 1 % of them,
+  as it explains); every
+  corner of the file's footprint must lie within 1 % of its ray's range
+  (plus 5 cm) of the independent one, and its GSD within 1 %;
+- coverage: the union of the independent footprints covers at least
+  MIN_COVERAGE (default 0.995) of the free area (ROI minus NFZs);
+- the cells' figures: from the independent footprints, per cell, the front
+  overlap of consecutive photos of a lane (the share of a footprint's
+  length, on the line through its centre along the lane, that the next
+  footprint covers), the side overlap (the share of its width, on the
+  line through its centre across the lanes, that the footprints of the
+  lanes beside it cover, on each side where one of their footprints
+  crosses that line; lanes of one set are those within 1° of each other's
+  direction, a lane's place across them the mean of its photos' centres)
+  and the GSD, as minimum and median; each must match the cell's figures
+  in plan.json within OVERLAP_TOL (0.01 on level ground, 0.02 over a DEM)
+  and 1 % for the GSD.
+
+usage: check_photos.py OUT_DIR PARAMS.json ROI.geojson [NFZ.geojson ...]
+                       [--ground GROUND.json] [--min-coverage X]
+Prints a JSON summary; exits 1 with a message on the first failed check.
+"""
+import argparse
+import json
+import math
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import shapely
+from pyproj import Transformer
+from shapely.geometry import LineString, Polygon
+
+sys.path.insert(0, str(Path(__file__).parent))
+from clearance import read_zones  # noqa: E402
+
+DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
+                  "image_width_px": 5472, "image_height_px": 3648}
+CORNER_TOL = 0.01
+CORNER_FLOOR_M = 0.05
+LONG = 1.0e5
+
+
+def fail(msg):
+    print(f"check_photos: FAIL: {msg}", file=sys.stderr)
+    sys.exit(1)
+
+
+def rays(cam, pitch, heading):
+    """Unit rays (east, north, up) through the corners (near left, near
+    right, far right, far left) and the centre."""
+    tilt = math.radians(90.0 + pitch)
+    hd = math.radians(heading)
+    rot_x = np.array([[1, 0, 0],
+                      [0, math.cos(tilt), -math.sin(tilt)],
+                      [0, math.sin(tilt), math.cos(tilt)]])
+    to_grid = np.array([[math.cos(hd), math.sin(hd), 0],
+                        [-math.sin(hd), math.cos(hd), 0],
+                        [0, 0, 1]])
+    w, hh, f = cam["sensor_width_mm"] / 2, cam["sensor_height_mm"] / 2, cam["focal_length_mm"]
+    if cam.get("orientation") == "portrait":
+        w, hh = hh, w
+    out = []
+    for sx, sy in [(-w, -hh), (w, -hh), (w, hh), (-w, hh), (0.0, 0.0)]:
+        d = to_grid @ (rot_x @ np.array([sx, sy, -f]))
+        out.append(d / np.linalg.norm(d))
+    return out
+
+
+def span(poly, origin, direction):
+    """Where the line through origin along the unit direction crosses
+    poly, as (first, last) distances along it; None if it misses."""
+    o, d = np.asarray(origin), np.asarray(direction)
+    line = LineString([tuple(o - LONG * d), tuple(o + LONG * d)])
+    cut = line.intersection(poly)
+    if cut.is_empty or cut.length <= 0:
+        return None
+    ts = [float(np.dot(np.asarray(c) - o, d)) for c in shapely.get_coordinates(cut)]
+    return min(ts), max(ts)
+
+
+def union_length(pieces):
+    total, end = 0.0, -math.inf
+    for s, e in sorted(pieces):
+        s = max(s, end)
+        if e > s:
+            total += e - s
+        end = max(end, e)
+    return total
+
+
+def min_median(v):
+    return (min(v), float(np.median(v))) if v else (None, None)
+
+
+def cell_figures(lanes):
+    """Front and side overlap and GSD samples of one cell's lanes, each a
+    list of dicts with 'poly', 'centre', 'dir', 'gsd'."""
+    front = []
+    for lane in lanes:
+        for a, b in zip(lane, lane[1:]):
+            own = span(a["poly"], a["centre"], a["dir"])
+            nxt = span(b["poly"], a["centre"], a["dir"])
+            if own is None:
+                continue
+            shared = 0.0 if nxt is None else max(0.0, min(own[1], nxt[1]) - max(own[0], nxt[0]))
+            front.append(shared / (own[1] - own[0]))
+    sets = []
+    for lane in lanes:
+        d = lane[0]["dir"]
+        for s in sets:
+            if abs(float(np.dot(s[0], d))) >= math.cos(math.radians(1.0)):
+                s[1].append(lane)
+                break
+        else:
+            sets.append((d, [lane]))
+    side = []
+    for d, members in sets:
+        across = np.array([-d[1], d[0]])
+        offsets = [np.mean([np.dot(p["centre"], across) for p in lane]) for lane in members]
+        for i, lane in enumerate(members):
+            for p in lane:
+                own = span(p["poly"], p["centre"], across)
+                if own is None:
+                    continue
+                width = own[1] - own[0]
+                for sign in (1.0, -1.0):
+                    covered, abeam = [], False
+                    for j, other in enumerate(members):
+                        gap = sign * (offsets[j] - offsets[i])
+                        if j == i or gap <= 0.05 * width or gap > 2.0 * width:
+                            continue
+                        for q in other:
+                            s = span(q["poly"], p["centre"], across)
+                            if s is None:
+                                continue
+                            abeam = True
+                            lo, hi = max(s[0], own[0]), min(s[1], own[1])
+                            if hi > lo:
+                                covered.append((lo, hi))
+                    if abeam:
+                        side.append(union_length(covered) / width)
+    gsd = [p["gsd"] for lane in lanes for p in lane]
+    return front, side, gsd
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("out")
+    ap.add_argument("params")
+    ap.add_argument("roi")
+    ap.add_argument("nfz", nargs="*")
+    ap.add_argument("--ground")
+    ap.add_argument("--min-coverage", type=float, default=0.995)
+    args = ap.parse_args()
+    out = Path(args.out)
+    params = json.loads(Path(args.params).read_text())
+    plan = json.loads((out / "plan.json").read_text())
+    cam = params.get("camera", DEFAULT_CAMERA)
+    pitch = params.get("camera_pitch_deg", -90.0)
+    to_utm = Transformer.from_crs("EPSG:4326", f"EPSG:{plan['utm_epsg']}", always_xy=True)
+    ground = json.loads(Path(args.ground).read_text()) if args.ground else None
+    overlap_tol = 0.02 if ground else 0.01
+    gsd_per_m = cam["sensor_width_mm"] / cam["focal_length_mm"] * 100 / cam["image_width_px"]
+    if cam.get("orientation") == "portrait":
+        gsd_per_m = cam["sensor_height_mm"] / cam["focal_length_mm"] * 100 / cam["image_height_px"]
+
+    def utm(lon, lat):
+        return np.array(to_utm.transform(lon, lat))
+
+    summary = {"photos": 0, "worst_corner_error": 0.0, "worst_gsd_error": 0.0}
+    by_cell = defaultdict(lambda: defaultdict(list))
+    polys = []
+    for uav in plan["uavs"]:
+        name = f"{uav['id']}.photos.geojson"
+        feats = json.loads((out / name).read_text())["features"]
+        if len(feats) != uav["stats"]["photos"]:
+            fail(f"{name}: {len(feats)} photos, plan.json says {uav['stats']['photos']}")
+        summary["photos"] += len(feats)
+        times = defaultdict(list)
+        for k, ft in enumerate(feats):
+            pr = ft["properties"]
+            if abs(pr["camera_pitch_deg"] - pitch) > 1e-9:
+                fail(f"{name} #{k}: pitch {pr['camera_pitch_deg']}, requested {pitch}")
+            lon, lat, z = pr["centre"]
+            c = np.array([*utm(lon, lat), z])
+            dirs = rays(cam, pitch, pr["heading_deg"])
+            if ground:
+                hits = [np.array([*utm(g[0], g[1]), g[2]]) for g in ground[name][k]]
+            else:
+                hits = [c + (c[2] / -d[2]) * d for d in dirs]
+            got = [utm(*p) for p in ft["geometry"]["coordinates"][0][:4]]
+            for h, g in zip(hits[:4], got):
+                rng = float(np.linalg.norm(h - c))
+                err = float(np.linalg.norm(h[:2] - g))
+                summary["worst_corner_error"] = max(summary["worst_corner_error"], err / rng)
+                if err > CORNER_TOL * rng + CORNER_FLOOR_M:
+                    fail(f"{name} #{k}: a corner {err:.3f} m from the independent one "
+                         f"(range {rng:.1f} m)")
+            gsd = float(np.linalg.norm(hits[4] - c)) * gsd_per_m
+            gerr = abs(gsd - pr["gsd_cm_px"]) / gsd
+            summary["worst_gsd_error"] = max(summary["worst_gsd_error"], gerr)
+            if gerr > 0.01:
+                fail(f"{name} #{k}: GSD {pr['gsd_cm_px']}, independent {gsd:.4f}")
+            poly = Polygon([tuple(h[:2]) for h in hits[:4]])
+            polys.append(poly)
+            hd = math.radians(pr["heading_deg"])
+            by_cell[pr["cell"]][(uav["id"], pr["sortie"], pr["lane"])].append({
+                "poly": poly, "centre": hits[4][:2], "camera": c,
+                "dir": np.array([math.sin(hd), math.cos(hd)]), "gsd": gsd})
+            times[pr["sortie"]].append(pr["time_s"])
+        for s, ts in times.items():
+            if any(b < a - 1e-6 for a, b in zip(ts, ts[1:])):
+                fail(f"{name}: the times of sortie {s} do not rise")
+            flown = uav["sorties"][s - 1]["stats"]["flight_time_s"]
+            if ts[-1] > flown + 1e-6:
+                fail(f"{name}: a photo at {ts[-1]} s of sortie {s}, flown in {flown} s")
+    if ground:
+        # Rays that graze a roof's edge for less than a quarter cell (see
+        # check_photos_dem.py): at most 1 % of them.
+        summary["grazes"] = ground["grazes"]
+        if ground["grazes"] > 0.01 * 5 * summary["photos"]:
+            fail(f"{ground['grazes']} of {5 * summary['photos']} rays pass a roof's edge")
+    if summary["photos"] != plan["stats"]["photos"]:
+        fail(f"{summary['photos']} photos in the files, {plan['stats']['photos']} in the plan")
+
+    # Each lane on one line along its heading.
+    for lanes in by_cell.values():
+        for key, lane in lanes.items():
+            if len(lane) < 2:
+                continue
+            a, b = lane[0]["camera"][:2], lane[-1]["camera"][:2]
+            bearing = math.degrees(math.atan2(b[0] - a[0], b[1] - a[1]))
+            want = math.degrees(math.atan2(lane[0]["dir"][0], lane[0]["dir"][1]))
+            off = (bearing - want + 180) % 360 - 180
+            if abs(off) > 0.05:
+                fail(f"lane {key}: photos along {bearing:.3f}°, heading {want:.3f}°")
+
+    project = lambda g: shapely.transform(  # noqa: E731
+        g, lambda x, y: to_utm.transform(x, y), interleaved=False)
+    free = project(read_zones([args.roi]))
+    nfz = read_zones(args.nfz) if args.nfz else None
+    if nfz is not None:
+        free = free.difference(project(nfz))
+    seen = shapely.union_all([p.buffer(0) for p in polys])
+    coverage = free.intersection(seen).area / free.area
+    summary["coverage"] = coverage
+    if coverage < args.min_coverage:
+        fail(f"the footprints cover {coverage:.5f} of the free area, less than {args.min_coverage}")
+
+    cells = plan["cells"]
+    if isinstance(cells, dict):
+        # The service's answer: a FeatureCollection, the figures as properties.
+        cells = [{"id": f["properties"]["id"],
+                  "photos": f["properties"] if "gsd_cm_px_min" in f["properties"] else None}
+                 for f in cells["features"]]
+    listed = cells
+    cells = {c["id"]: c for c in cells}
+    worst = 0.0
+    for cell, lanes in by_cell.items():
+        front, side, gsd = cell_figures(list(lanes.values()))
+        mine = cells[cell].get("photos")
+        if mine is None:
+            fail(f"cell {cell}: photos but no figures in plan.json")
+        if mine["photos"] != len(gsd):
+            fail(f"cell {cell}: {mine['photos']} photos in plan.json, {len(gsd)} in the files")
+        for what, samples in (("front_overlap", front), ("side_overlap", side)):
+            lo, med = min_median(samples)
+            for stat, v in (("min", lo), ("median", med)):
+                theirs = mine[f"{what}_{stat}"]
+                if (v is None) != (theirs is None):
+                    fail(f"cell {cell}: {what}_{stat} {theirs} in plan.json, independent {v}")
+                if v is not None:
+                    worst = max(worst, abs(v - theirs))
+                    if abs(v - theirs) > overlap_tol:
+                        fail(f"cell {cell}: {what}_{stat} {theirs} in plan.json, independent {v:.4f}")
+        lo, med = min_median(gsd)
+        for stat, v in (("min", lo), ("median", med)):
+            if abs(v - mine[f"gsd_cm_px_{stat}"]) > 0.01 * v:
+                fail(f"cell {cell}: gsd_cm_px_{stat} {mine[f'gsd_cm_px_{stat}']}, independent {v:.4f}")
+    summary["worst_overlap_error"] = worst
+    summary["cells"] = len(by_cell)
+    summary["min_front_overlap"] = min(
+        (c["photos"]["front_overlap_min"] for c in listed
+         if c.get("photos") and c["photos"]["front_overlap_min"] is not None), default=None)
+    summary["min_side_overlap"] = min(
+        (c["photos"]["side_overlap_min"] for c in listed
+         if c.get("photos") and c["photos"]["side_overlap_min"] is not None), default=None)
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
