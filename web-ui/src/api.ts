@@ -79,6 +79,8 @@ export interface UavFiles {
   /** Rally points (MAVLink rally file), when the survey has some. */
   rally?: string;
   kml: string;
+  /** The sortie's planned photos (footprints) as GeoJSON (absent from older surveys and planes). */
+  photos?: string;
 }
 export interface Sortie {
   number: number;

@@ -100,6 +100,14 @@ function costlierStyle(cost: number): Style {
 const corridorLineStyle = new Style({ stroke: new Stroke({ color: '#0050d0', width: 3, lineDash: [10, 6] }) });
 
 const cellStyle = new Style({ stroke: new Stroke({ color: 'rgba(40, 40, 40, 0.8)', width: 1, lineDash: [3, 3] }), fill: new Fill({ color: 'rgba(255, 255, 255, 0.12)' }) });
+/** A cell whose photos overlap less than requested. */
+const lowCellStyle = new Style({ stroke: new Stroke({ color: 'rgba(200, 20, 20, 0.95)', width: 2.5 }), fill: new Fill({ color: 'rgba(220, 40, 40, 0.18)' }) });
+
+/** A photo's footprint, in its UAV's colour. */
+function footprintStyle(colour: string): Style {
+  const [r, g, b] = asArray(colour);
+  return new Style({ stroke: new Stroke({ color: `rgba(${r}, ${g}, ${b}, 0.55)`, width: 1 }), fill: new Fill({ color: `rgba(${r}, ${g}, ${b}, 0.06)` }) });
+}
 
 function markerStyle(colour: string, label: string, shape: 'circle' | 'square' = 'circle'): Style {
   const fill = new Fill({ color: colour });
@@ -185,6 +193,7 @@ export class MapView {
   private mode: MapMode = 'browse';
   private readonly areas = new VectorSource<Feature<Geometry>>();
   private readonly cells = new VectorSource<Feature<Geometry>>();
+  private readonly photos = new VectorSource<Feature<Geometry>>();
   private readonly flights = new VectorSource<Feature<Geometry>>();
   private readonly ground = new VectorSource<Feature<Geometry>>();
   private readonly hillshade = new ImageLayer({ visible: false, zIndex: 1 });
@@ -202,7 +211,8 @@ export class MapView {
     private readonly events: MapEvents,
   ) {
     this.surveyLayers = [
-      new VectorLayer({ source: this.cells, style: cellStyle, zIndex: 3 }),
+      new VectorLayer({ source: this.cells, style: (f) => (f.get('low') ? lowCellStyle : cellStyle), zIndex: 3 }),
+      new VectorLayer({ source: this.photos, style: (f) => f.get('style') as Style, zIndex: 3 }),
       new VectorLayer({ source: this.areas, style: (f) => areaStyles[f.get('kind') as AreaKind], zIndex: 4 }),
       new VectorLayer({ source: this.flights, style: (f, res) => (f.get('kind') === 'route' ? routeStyle(f, res, this.emphasis(f)) : (f.get('style') as Style | Style[])), zIndex: 5 }),
     ];
@@ -496,9 +506,10 @@ export class MapView {
     });
   }
 
-  /** Shows a planned survey: cells, and each UAV's route in its colour. */
-  showSurvey(survey: Survey | null, colours: (i: number) => string): void {
+  /** Shows a planned survey: cells (those in `lowCells` flagged), and each UAV's route in its colour. */
+  showSurvey(survey: Survey | null, colours: (i: number) => string, lowCells: Set<number> = new Set()): void {
     this.cells.clear();
+    this.photos.clear();
     for (const f of this.flights.getFeatures().filter((f) => f.get('kind') === 'route')) this.flights.removeFeature(f);
     if (!survey) return;
     for (const cell of survey.cells.features) {
@@ -506,7 +517,8 @@ export class MapView {
       const geom = g.type === 'Polygon'
         ? new Polygon((g.coordinates as number[][][]).map((r) => r.map(toMap)))
         : new MultiPolygon((g.coordinates as number[][][][]).map((p) => p.map((r) => r.map(toMap))));
-      this.cells.addFeature(new Feature({ geometry: geom }));
+      const id = cell.properties?.id;
+      this.cells.addFeature(new Feature({ geometry: geom, low: typeof id === 'number' && lowCells.has(id) }));
     }
     survey.uavs.forEach((uav, i) => {
       uav.sorties.forEach((sortie, k) => {
@@ -514,6 +526,13 @@ export class MapView {
         this.flights.addFeature(new Feature({ geometry: line, kind: 'route', uav: uav.id, sortie: k, colour: colours(i), width: 2.5 }));
       });
     });
+  }
+
+  /** Shows photo footprints (lon/lat rings) in `colour`; none clears them. */
+  showFootprints(rings: LonLat[][], colour: string): void {
+    this.photos.clear();
+    const style = footprintStyle(colour);
+    this.photos.addFeatures(rings.map((r) => new Feature({ geometry: new Polygon([r.map(toMap)]), style })));
   }
 
   private highlighted: { uav: string; sortie: number | null } | null = null;

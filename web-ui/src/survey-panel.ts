@@ -2,7 +2,7 @@
 // take-off points, and the planned survey (totals, per-UAV table, altitude
 // profile, downloads).
 
-import { api, type CameraPreset, type LonLat, type Survey } from './api';
+import { api, request, type CameraPreset, type LonLat, type Survey } from './api';
 import { CorridorFields } from './corridor-fields';
 import { PATTERN_DEFAULTS, readPatternFields, showPatternFields } from './pattern-fields';
 import { AIRCRAFT_DEFAULTS, readAircraftFields, showAircraftFields } from './aircraft-fields';
@@ -12,6 +12,7 @@ import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, 
 import { ImportError, parsePolygons, ringCrossesItself, utmArea, type PolygonRings } from './geo-import';
 import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
+import { cellOverlaps, footprints, lowOverlapCells, requestedOverlaps, shortfallText, uavPhotosUrl } from './photos';
 import { renderProfileChart, sortieProfile } from './profile-chart';
 import type { DemSelection } from './state';
 import {
@@ -467,7 +468,10 @@ export class SurveyPanel {
   show(survey: Survey): void {
     this.survey = survey;
     byId('survey-stale').hidden = true;
-    this.map.showSurvey(survey, uavColour);
+    const requested = requestedOverlaps(survey.request);
+    const overlaps = cellOverlaps(survey, requested);
+    const low = lowOverlapCells(overlaps);
+    this.map.showSurvey(survey, uavColour, low);
     byId('survey-results').hidden = false;
     byId('results-heading').textContent = `Plan${survey.name ? `: ${survey.name}` : ''}`;
 
@@ -492,8 +496,13 @@ export class SurveyPanel {
     if (s.flyable_area_m2 != null) clearance.push(['Flyable area', formatArea(s.flyable_area_m2)]);
     if (s.nfz_clearance_m != null) clearance.push(['NFZ clearance', formatNumber(s.nfz_clearance_m, 1, 'm')]);
     totals.splice(2, 0, ...clearance);
+    // The overlaps the photos achieve on the ground (surveys planned before photos were have none).
+    if (overlaps.length) totals.push(['Cells below the requested overlap', `${low.size} of ${overlaps.length}`]);
     byId('survey-totals').replaceChildren(...totals.flatMap(([k, v]) => [h('dt', {}, k), h('dd', {}, v)]));
-    byId('survey-warnings').replaceChildren(...survey.warnings.map((w) => h('li', {}, w)));
+    const shortfalls = overlaps
+      .filter((c) => low.has(c.id))
+      .map((c) => `Cell ${c.id}: achieved overlap ${shortfallText(c, requested)} (outlined red on the map).`);
+    byId('survey-warnings').replaceChildren(...[...survey.warnings, ...shortfalls].map((w) => h('li', {}, w)));
 
     const rows = survey.uavs.map((u, i) =>
       h(
@@ -526,6 +535,7 @@ export class SurveyPanel {
           link(so.files.kml, 'KML', `${u.id} route KML${tag}`),
           link(so.files.fence, 'fence', `${u.id} fence mission${tag}`),
           ...(so.files.rally ? [link(so.files.rally, 'rally', `${u.id} rally points${tag}`)] : []),
+          ...(so.files.photos ? [link(so.files.photos, 'photos', `${u.id} photo footprints GeoJSON${tag}`)] : []),
         );
       }),
     );
@@ -569,8 +579,28 @@ export class SurveyPanel {
     const id = this.highlighted ? byId<HTMLSelectElement>('profile-uav').value : null;
     const multi = !byId('profile-sortie-field').hidden;
     this.map.highlightRoute(id, id && multi ? Number(byId<HTMLSelectElement>('profile-sortie').value) : null);
+    void this.showFootprints(id);
     for (const b of byId('uav-table').querySelectorAll<HTMLButtonElement>('tbody button.link')) {
       b.setAttribute('aria-pressed', String(b.textContent === id));
+    }
+  }
+
+  /** Draws the photo footprints of UAV `id` (none for null, or a survey without planned photos). */
+  private async showFootprints(id: string | null): Promise<void> {
+    const survey = this.survey;
+    const url = survey && id ? uavPhotosUrl(survey, id) : null;
+    if (!survey || !id || !url) {
+      this.map.showFootprints([], '#000');
+      return;
+    }
+    const index = survey.uavs.findIndex((u) => u.id === id);
+    try {
+      const doc = await request<unknown>('GET', url);
+      // Another UAV or survey chosen meanwhile: not these.
+      if (this.survey !== survey || byId<HTMLSelectElement>('profile-uav').value !== id || !this.highlighted) return;
+      this.map.showFootprints(footprints(doc).map((f) => f.ring), uavColour(index));
+    } catch {
+      this.map.showFootprints([], '#000');
     }
   }
 
