@@ -35,9 +35,16 @@ pub struct CellPhotos {
 impl CellPhotos {
     /// The figures as GeoJSON properties (of the cell's Feature).
     pub(super) fn add_properties(&self, props: &mut serde_json::Map<String, serde_json::Value>) {
-        if let Ok(serde_json::Value::Object(m)) = serde_json::to_value(self) {
-            props.extend(m);
-        }
+        let mut put = |k: &str, v: serde_json::Value| {
+            props.insert(k.to_string(), v);
+        };
+        put("photos", self.photos.into());
+        put("front_overlap_min", self.front_overlap_min.into());
+        put("front_overlap_median", self.front_overlap_median.into());
+        put("side_overlap_min", self.side_overlap_min.into());
+        put("side_overlap_median", self.side_overlap_median.into());
+        put("gsd_cm_px_min", self.gsd_cm_px_min.into());
+        put("gsd_cm_px_median", self.gsd_cm_px_median.into());
     }
 }
 
