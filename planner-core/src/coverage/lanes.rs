@@ -289,6 +289,26 @@ fn clean_ring(cell: &Polygon<f64>) -> Vec<Coord<f64>> {
     ring
 }
 
+/// A bearing in [0, 180), 180 − 10⁻⁹ and beyond counting as 0.
+fn normal_bearing(b: f64) -> f64 {
+    let b = b.rem_euclid(180.0);
+    if b >= 180.0 - 1e-9 { 0.0 } else { b }
+}
+
+/// Whether `cell` is at most one lane wide across the slice: then laid
+/// along the slice (a cell of the decomposition meets every slice line in
+/// one segment) it is flown as one lane, so [`CellLayouts::new`] finds it
+/// no turn whichever layout it keeps. Lets the `auto` angle count turns
+/// without laying out the thousands of one-lane cells among many NFZs.
+pub fn is_one_lane(cell: &Polygon<f64>, line_spacing_m: f64, slice_angle_deg: f64) -> bool {
+    let ring = clean_ring(cell);
+    if ring.len() < 3 || !slice_angle_deg.is_finite() {
+        return false;
+    }
+    let frame = Frame::new(normal_bearing(slice_angle_deg), &ring);
+    row_offsets(frame.v, line_spacing_m).is_some_and(|rows| rows.len() == 1)
+}
+
 /// Most candidate lane directions tried per cell. A cell with more distinct
 /// edge bearings (a curved or densely digitised outline) keeps those of its
 /// longest edges: each candidate costs a pass over the ring, so trying all
@@ -300,10 +320,7 @@ const MAX_BEARINGS: usize = 48;
 /// appearance. Beyond [`MAX_BEARINGS`], the bearings with the most edge
 /// length along or across them are kept (the slice direction always).
 fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
-    let normal = |b: f64| {
-        let b = b.rem_euclid(180.0);
-        if b >= 180.0 - 1e-9 { 0.0 } else { b }
-    };
+    let normal = normal_bearing;
     // (bearing, weight, first appearance)
     let mut all: Vec<(f64, f64, usize)> = Vec::with_capacity(2 * ring.len() + 1);
     if slice_angle_deg.is_finite() {
@@ -1131,5 +1148,47 @@ mod tests {
                 plan_cell_in(i, cell, &indexed, 27.0, 0.0)
             );
         }
+    }
+
+    /// Every one-lane cell of a decomposition among many small NFZs, at
+    /// several slice angles, is laid out with no turn (the shortcut the
+    /// `auto` angle takes is exact), and wider cells are not taken for one.
+    #[test]
+    fn one_lane_cells_need_no_turn() {
+        let square = poly(&[(0.0, 0.0), (600.0, 0.0), (600.0, 600.0), (0.0, 600.0)]);
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let zones: Vec<Polygon<f64>> = (0..60)
+            .map(|_| {
+                let (cx, cy, r) = (40.0 + 520.0 * next(), 40.0 + 520.0 * next(), 2.0 + 8.0 * next());
+                let ring: Vec<(f64, f64)> = (0..6)
+                    .map(|k| {
+                        let t = std::f64::consts::PI * k as f64 / 3.0;
+                        (cx + r * t.cos(), cy + r * t.sin())
+                    })
+                    .collect();
+                poly(&ring)
+            })
+            .collect();
+        let free = crate::decompose::free_space(&square, &zones);
+        let (mut one, mut wide) = (0, 0);
+        for angle in [0.0, 15.0, 90.0, 137.0] {
+            for spacing in [30.0, 80.0] {
+                let cells = crate::decompose::decompose(&free, angle).unwrap();
+                for (i, c) in cells.iter().enumerate() {
+                    let turns = CellLayouts::new(i, c, spacing, angle).map_or(0, |l| l.turns());
+                    if is_one_lane(c, spacing, angle) {
+                        one += 1;
+                        assert_eq!(turns, 0, "cell {i} at {angle}° and {spacing} m");
+                    } else {
+                        wide += 1;
+                    }
+                }
+            }
+        }
+        assert!(one > 100 && wide > 10, "{one} one-lane cells, {wide} wider");
     }
 }

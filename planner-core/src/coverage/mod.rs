@@ -21,7 +21,7 @@ pub use corridor::{
     corridor_polygon, lane_offsets, offset_curve,
 };
 pub use coverage_ratio::coverage_ratio;
-pub use lanes::{CellLayouts, plan_cell, plan_cell_candidates_in, plan_cell_in};
+pub use lanes::{CellLayouts, is_one_lane, plan_cell, plan_cell_candidates_in, plan_cell_in};
 pub use oblique::{
     FAR_EDGE_BELOW_HORIZON_DEG, MIN_PITCH_DEG, NADIR_PITCH_DEG, PitchTooShallow, footprint_corners,
     least_steep_pitch_deg, pitched_geometry,

@@ -55,8 +55,24 @@ pub(super) struct Decomposition {
 struct Laid {
     angle: f64,
     cells: Vec<Polygon<f64>>,
-    layouts: Vec<Option<coverage::CellLayouts>>,
+    layouts: Vec<Layouts>,
     turns: usize,
+}
+
+/// A cell's lane layouts, or not yet: a cell one lane wide needs no turn
+/// whatever its layout, and is only laid out if its angle contends.
+enum Layouts {
+    Laid(Option<coverage::CellLayouts>),
+    OneLane,
+}
+
+impl Layouts {
+    fn turns(&self) -> usize {
+        match self {
+            Layouts::Laid(l) => l.as_ref().map_or(0, coverage::CellLayouts::turns),
+            Layouts::OneLane => 0,
+        }
+    }
 }
 
 /// Decompose at the requested angle, or at every candidate angle for
@@ -82,14 +98,20 @@ pub(super) fn decompose_and_cover(
         token.scope(|| {
             crate::cancel::check()?;
             let cells = prepared.decompose(a).map_err(decompose_error)?;
-            let layouts: Vec<Option<coverage::CellLayouts>> = cells
+            let layouts: Vec<Layouts> = cells
                 .iter()
                 .enumerate()
-                .map(|(i, c)| coverage::CellLayouts::new(i, c, spacing, a))
+                .map(|(i, c)| {
+                    if coverage::is_one_lane(c, spacing, a) {
+                        Layouts::OneLane
+                    } else {
+                        Layouts::Laid(coverage::CellLayouts::new(i, c, spacing, a))
+                    }
+                })
                 .collect();
             // The cells stop early when cancelled, with layouts to throw away.
             crate::cancel::check()?;
-            let turns = layouts.iter().flatten().map(|l| l.turns()).sum();
+            let turns = layouts.iter().map(Layouts::turns).sum();
             Ok(Laid {
                 angle: a,
                 cells,
@@ -128,7 +150,14 @@ pub(super) fn decompose_and_cover(
         let plans: Vec<CellPlan> = layouts
             .par_iter()
             .zip(&cells)
-            .filter_map(|(l, c)| token.scope(|| l.as_ref()?.best_plan(c, &free_space)))
+            .enumerate()
+            .filter_map(|(i, (l, c))| {
+                token.scope(|| match l {
+                    Layouts::Laid(l) => l.as_ref()?.best_plan(c, &free_space),
+                    Layouts::OneLane => coverage::CellLayouts::new(i, c, spacing, a)?
+                        .best_plan(c, &free_space),
+                })
+            })
             .collect();
         crate::cancel::check()?;
         let length_m: f64 = plans.iter().map(CellPlan::length_m).sum();

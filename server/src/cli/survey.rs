@@ -115,13 +115,29 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
     let files = plan.files();
-    let mut doc = serde_json::to_value(&plan).map_err(|e| Failure::other(e.to_string()))?;
-    doc["files"] = json!(
-        files
+    // Written straight from the plan: going through a `serde_json::Value`
+    // copies tens of megabytes among thousands of NFZs.
+    #[derive(serde::Serialize)]
+    struct FileRef<'a> {
+        name: &'a str,
+        content_type: &'a str,
+    }
+    #[derive(serde::Serialize)]
+    struct PlanDocument<'a> {
+        #[serde(flatten)]
+        plan: &'a planner_core::survey::SurveyPlan,
+        files: Vec<FileRef<'a>>,
+    }
+    let doc = PlanDocument {
+        plan: &plan,
+        files: files
             .iter()
-            .map(|f| json!({"name": f.name, "content_type": f.content_type}))
-            .collect::<Vec<_>>()
-    );
+            .map(|f| FileRef {
+                name: &f.name,
+                content_type: f.content_type,
+            })
+            .collect(),
+    };
     let write = |name: &str, content: &str| {
         let path = args.out.join(name);
         std::fs::write(&path, content)
