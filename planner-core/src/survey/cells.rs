@@ -60,16 +60,17 @@ struct Laid {
 }
 
 /// A cell's lane layouts, or not yet: a cell one lane wide needs no turn
-/// whatever its layout, and is only laid out if its angle contends.
+/// whatever its layout, and is only laid out if its angle contends (boxed:
+/// most cells of thousands are one lane).
 enum Layouts {
-    Laid(Option<coverage::CellLayouts>),
+    Laid(Option<Box<coverage::CellLayouts>>),
     OneLane,
 }
 
 impl Layouts {
     fn turns(&self) -> usize {
         match self {
-            Layouts::Laid(l) => l.as_ref().map_or(0, coverage::CellLayouts::turns),
+            Layouts::Laid(l) => l.as_ref().map_or(0, |l| l.turns()),
             Layouts::OneLane => 0,
         }
     }
@@ -105,7 +106,7 @@ pub(super) fn decompose_and_cover(
                     if coverage::is_one_lane(c, spacing, a) {
                         Layouts::OneLane
                     } else {
-                        Layouts::Laid(coverage::CellLayouts::new(i, c, spacing, a))
+                        Layouts::Laid(coverage::CellLayouts::new(i, c, spacing, a).map(Box::new))
                     }
                 })
                 .collect();
@@ -154,8 +155,9 @@ pub(super) fn decompose_and_cover(
             .filter_map(|(i, (l, c))| {
                 token.scope(|| match l {
                     Layouts::Laid(l) => l.as_ref()?.best_plan(c, &free_space),
-                    Layouts::OneLane => coverage::CellLayouts::new(i, c, spacing, a)?
-                        .best_plan(c, &free_space),
+                    Layouts::OneLane => {
+                        coverage::CellLayouts::new(i, c, spacing, a)?.best_plan(c, &free_space)
+                    }
                 })
             })
             .collect();
