@@ -72,7 +72,7 @@ fn plan_and_check(dir: &Path, name: &str, params: &Value) -> (Value, Value) {
 }
 
 /// Every trigger mode and both patterns on a real field with NFZs, a flock
-/// in battery sorties among them: one footprint per photo the plan counts,
+/// in battery sorties among them, and a VTOL: one footprint per photo the plan counts,
 /// covering the free area, each where the camera's rays meet the ground,
 /// the cells' overlaps as recomputed from them — on level ground the
 /// requested 80 % front overlap exactly, and the side overlap at least
@@ -105,6 +105,14 @@ fn footprints_cover_the_field_in_every_trigger_mode_and_pattern() {
     assert!(
         time["min_front_overlap"].as_f64().unwrap() >= 0.75 - 1e-9,
         "{time}"
+    );
+    // Planes: the photos of the lanes they lay themselves (a VTOL in
+    // battery sorties).
+    plan_and_check(
+        d,
+        "vtol",
+        &json!({"altitude_m": 100, "side_overlap": 0.6, "aircraft": {"type": "vtol"},
+                "uavs": [{"id": "v", "start": [-90.1347, 41.4692], "max_flight_time_s": 600}]}),
     );
     let (hover_plan, _) = plan_and_check(
         d,
@@ -187,7 +195,7 @@ fn oblique_footprints_reach_behind_the_lane_start() {
 
 /// Over the Copernicus DSM west of Grenoble (hills of ~150 m; in WGS 84,
 /// so no datum shift between the planner's and GDAL's transformations)
-/// with an NFZ, nadir and oblique: every corner of every footprint where
+/// with an NFZ, nadir, oblique and by a fixed wing: every corner of every footprint where
 /// GDAL's ray casting puts it (within 1 % of the range plus 5 cm), the
 /// overlaps recomputed from those within 0.02, the GSD within 1 %, and the
 /// footprints cover the free area; the slopes make the achieved overlap
@@ -200,9 +208,20 @@ fn footprints_and_overlaps_over_a_real_dem() {
     let roi = write_json(d, "roi.geojson", &rect(5.2950, 45.2960, 5.3080, 45.3030));
     let nfz = write_json(d, "nfz.geojson", &rect(5.3000, 45.2985, 5.3015, 45.2995));
     let camera = write_json(d, "camera.json", &json!({}));
-    for (name, pitch) in [("nadir", -90.0), ("oblique", -60.0)] {
-        let params = json!({"altitude_m": 80, "camera_pitch_deg": pitch,
-                            "uavs": [{"id": "d", "start": [5.2945, 45.2955]}]});
+    let uav = json!([{"id": "d", "start": [5.2945, 45.2955]}]);
+    for (name, params) in [
+        ("nadir", json!({"altitude_m": 80, "uavs": uav})),
+        (
+            "oblique",
+            json!({"altitude_m": 80, "camera_pitch_deg": -60, "uavs": uav}),
+        ),
+        // A plane lays its own lanes: its photos are read off its mission.
+        (
+            "fixed_wing",
+            json!({"altitude_m": 100, "side_overlap": 0.6, "altitude_frame": "terrain", "uavs": uav,
+                   "aircraft": {"type": "fixed_wing", "turn_radius_m": 35}}),
+        ),
+    ] {
         let params_path = write_json(d, &format!("{name}.params.json"), &params);
         let out = d.join(name);
         let plan = survey_cli(

@@ -53,7 +53,12 @@ pub(super) fn uav_plans(
                 camera: photo_camera,
                 capture: &capture,
                 speed_m_s: speed,
-                turn_penalty_s: params.turn_penalty_s,
+                // A plane's turns are flown arcs, in its length.
+                turn_penalty_s: if plane.is_some() {
+                    0.0
+                } else {
+                    params.turn_penalty_s
+                },
                 model: home_amsl.map(|(o, h)| (&o.terrain.model, h)),
             };
             let (mission, stats, uav_terrain, photos) = if let Some(plane) = &plane {
@@ -64,7 +69,8 @@ pub(super) fn uav_plans(
                 let (mission, stats, path) =
                     plane.sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
                 all_paths.extend(path);
-                (mission, stats, None, None)
+                let photos = photo_planner.of_mission(&mission, tour, proj)?;
+                (mission, stats, None, Some(photos))
             } else {
                 let (mission, length_3d, uav_terrain, photos) = fly(
                     tour,

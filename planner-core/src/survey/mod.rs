@@ -25,6 +25,7 @@ mod oblique_lanes;
 mod photo_overlap;
 mod photos;
 mod photos_file;
+mod photos_mission;
 mod plane_escape;
 mod plane_flight;
 mod plane_heights;

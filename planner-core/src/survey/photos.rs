@@ -326,7 +326,13 @@ impl PhotoPlanner<'_> {
     }
 
     /// The photos of one lane flown through `pts`, then the lane flown.
-    fn lane(&self, out: &mut SortiePhotos, clock: &mut Clock, cell: usize, pts: &[Point3]) {
+    pub(super) fn lane(
+        &self,
+        out: &mut SortiePhotos,
+        clock: &mut Clock,
+        cell: usize,
+        pts: &[Point3],
+    ) {
         let (Some(first), Some(last)) = (pts.first(), pts.last()) else {
             return;
         };
@@ -381,14 +387,14 @@ impl PhotoPlanner<'_> {
 
 /// Time since take-off along a flight, with the heading last flown (turns
 /// counted as `flock::count_turns` counts them).
-struct Clock {
+pub(super) struct Clock {
     t: f64,
     last: Option<Point3>,
     heading: Option<f64>,
 }
 
 impl Clock {
-    fn new(t: f64) -> Clock {
+    pub(super) fn new(t: f64) -> Clock {
         Clock {
             t,
             last: None,
@@ -414,7 +420,7 @@ impl Clock {
         self.heading = Some(h);
     }
 
-    fn fly(&mut self, p: &PhotoPlanner, pts: impl Iterator<Item = Point3>) {
+    pub(super) fn fly(&mut self, p: &PhotoPlanner, pts: impl Iterator<Item = Point3>) {
         for q in pts {
             if let Some(a) = self.last {
                 let (dx, dy, dz) = (q.x - a.x, q.y - a.y, q.z - a.z);

@@ -51,7 +51,11 @@ impl SurveyPlan {
     ) -> Result<String, GeoError> {
         let epsg = self.utm_epsg;
         let proj = UtmProjection::new((epsg % 100) as u8, epsg < 32700)?;
-        let over_dem = sorties.iter().any(|(_, s)| s.terrain.is_some());
+        let over_dem = sorties.iter().any(|(_, s)| {
+            s.photos
+                .as_ref()
+                .is_some_and(|p| p.lanes.iter().any(|l| !l.ground.is_empty()))
+        });
         let reference = if over_dem {
             "heights in the DEM's vertical datum (above mean sea level for an orthometric DEM)"
         } else {
