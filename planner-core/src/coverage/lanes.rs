@@ -1158,12 +1158,18 @@ mod tests {
         let square = poly(&[(0.0, 0.0), (600.0, 0.0), (600.0, 600.0), (0.0, 600.0)]);
         let mut seed = 7u64;
         let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let zones: Vec<Polygon<f64>> = (0..60)
             .map(|_| {
-                let (cx, cy, r) = (40.0 + 520.0 * next(), 40.0 + 520.0 * next(), 2.0 + 8.0 * next());
+                let (cx, cy, r) = (
+                    40.0 + 520.0 * next(),
+                    40.0 + 520.0 * next(),
+                    2.0 + 8.0 * next(),
+                );
                 let ring: Vec<(f64, f64)> = (0..6)
                     .map(|k| {
                         let t = std::f64::consts::PI * k as f64 / 3.0;

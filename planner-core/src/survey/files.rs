@@ -51,16 +51,15 @@ impl SurveyPlan {
     /// One file of the plan by name (see [`SurveyPlan::file_names`]),
     /// rendered alone; `None` for an unknown name.
     pub fn file(&self, name: &str) -> Option<PlanFile> {
-        let text = "text/plain; charset=utf-8";
-        let done = |content_type: &'static str, content: String| {
+        let done = |content: String| {
             Some(PlanFile {
                 name: name.to_string(),
-                content_type,
+                content_type: content_type_of(name),
                 content,
             })
         };
         if name == CELLS_FILE {
-            return done("application/geo+json", pretty(&self.cells_geojson()));
+            return done(pretty(&self.cells_geojson()));
         }
         if let Some(rally) = self.rally_file(name) {
             return Some(rally);
@@ -75,7 +74,7 @@ impl SurveyPlan {
                 .chain(u.sorties.iter().map(|s| s.file_stem.as_str()))
                 .any(|stem| name.strip_prefix(stem) == Some(fence.as_str()))
         }) {
-            return done(text, export::write_fence(&self.fences));
+            return done(export::write_fence(&self.fences));
         }
         let (u, s, suffix) = self.uavs.iter().find_map(|u| {
             u.sorties.iter().find_map(|s| {
@@ -84,15 +83,12 @@ impl SurveyPlan {
             })
         })?;
         match suffix {
-            "waypoints" => done(text, export::write_waypoints(&s.mission)),
-            "plan" => done(
-                "application/json",
-                pretty(&export::write_plan(
-                    &s.mission,
-                    &self.fences,
-                    &self.rally_for(u),
-                )),
-            ),
+            "waypoints" => done(export::write_waypoints(&s.mission)),
+            "plan" => done(pretty(&export::write_plan(
+                &s.mission,
+                &self.fences,
+                &self.rally_for(u),
+            ))),
             "route.geojson" => {
                 let mut props = Map::new();
                 props.insert("uav".into(), json!(u.id));
@@ -102,7 +98,7 @@ impl SurveyPlan {
                 props.insert("flight_time_s".into(), json!(s.stats.flight_time_s));
                 let route =
                     json!({"type": "FeatureCollection", "features": [s.route_feature(props)]});
-                done("application/geo+json", pretty(&route))
+                done(pretty(&route))
             }
             "kml" => {
                 // A set: a sortie may fly thousands of cells.
@@ -118,10 +114,7 @@ impl SurveyPlan {
                 } else {
                     format!("terraplan survey, UAV {}", u.id)
                 };
-                done(
-                    "application/vnd.google-earth.kml+xml",
-                    export::write_kml(&title, &s.mission, &cell_rings),
-                )
+                done(export::write_kml(&title, &s.mission, &cell_rings))
             }
             _ => None,
         }
@@ -141,6 +134,20 @@ impl SurveyPlan {
             }
             (c.polygon.clone(), props)
         }))
+    }
+}
+
+/// The media type of a plan file, known from its name alone (so a listing
+/// of the files needs none of them rendered).
+pub fn content_type_of(name: &str) -> &'static str {
+    if name.ends_with(".geojson") {
+        "application/geo+json"
+    } else if name.ends_with(".plan") {
+        "application/json"
+    } else if name.ends_with(".kml") {
+        "application/vnd.google-earth.kml+xml"
+    } else {
+        "text/plain; charset=utf-8"
     }
 }
 
@@ -212,6 +219,13 @@ mod tests {
         assert_eq!(all.len(), names.len());
         for f in &all {
             assert_eq!(plan.file(&f.name).as_ref(), Some(f));
+            // A listing made from the names alone says the same.
+            assert_eq!(
+                super::content_type_of(&f.name),
+                f.content_type,
+                "{}",
+                f.name
+            );
         }
         assert!(plan.file("a-1.exe").is_none());
         assert!(plan.file("b.waypoints").is_none());

@@ -38,7 +38,7 @@ mod terrain_prep;
 pub use aircraft::{Aircraft, AircraftType};
 pub use capture::{DEFAULT_HOLD_S, Trigger, TriggerMode};
 pub use corridor::{CORRIDOR_POINTER, CORRIDOR_WIDTH_RANGE_M};
-pub use files::PlanFile;
+pub use files::{PlanFile, content_type_of};
 pub use photo_overlap::CellPhotos;
 pub use photos::{Photo, PhotoCamera, PhotoLane, SortiePhotos};
 pub use rally::MAX_RALLY_DISTANCE_M;

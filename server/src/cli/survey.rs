@@ -6,7 +6,8 @@ use std::path::PathBuf;
 use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::{Issue, Limits};
 use planner_core::survey::{
-    CORRIDOR_POINTER, DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, plan_survey_over,
+    CORRIDOR_POINTER, DEM_POINTER, NO_FLY_POINTER, PlanError, ROI_POINTER, content_type_of,
+    plan_survey_over,
 };
 use planner_core::terrain::DemLimits;
 use serde_json::{Value, json};
@@ -114,27 +115,28 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
 
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
-    let files = plan.files();
-    // Written straight from the plan: going through a `serde_json::Value`
-    // copies tens of megabytes among thousands of NFZs.
+    // plan.json is written straight from the plan (a `serde_json::Value`
+    // copies tens of megabytes among thousands of NFZs), on its own thread
+    // while the other files render: it lists them by name alone.
     #[derive(serde::Serialize)]
-    struct FileRef<'a> {
-        name: &'a str,
-        content_type: &'a str,
+    struct FileRef {
+        name: String,
+        content_type: &'static str,
     }
     #[derive(serde::Serialize)]
     struct PlanDocument<'a> {
         #[serde(flatten)]
         plan: &'a planner_core::survey::SurveyPlan,
-        files: Vec<FileRef<'a>>,
+        files: Vec<FileRef>,
     }
     let doc = PlanDocument {
         plan: &plan,
-        files: files
-            .iter()
-            .map(|f| FileRef {
-                name: &f.name,
-                content_type: f.content_type,
+        files: plan
+            .file_names()
+            .into_iter()
+            .map(|name| FileRef {
+                content_type: content_type_of(&name),
+                name,
             })
             .collect(),
     };
@@ -143,12 +145,22 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         std::fs::write(&path, content)
             .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
     };
-    for f in &files {
-        write(&f.name, &f.content)?;
-    }
-    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
-    text.push('\n');
-    write("plan.json", &text)?;
+    let (files, plan_json) = std::thread::scope(|scope| {
+        let plan_json = scope.spawn(|| -> Result<(), Failure> {
+            let mut text =
+                serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
+            text.push('\n');
+            write("plan.json", &text)
+        });
+        let files = plan.files();
+        let written = files.iter().try_for_each(|f| write(&f.name, &f.content));
+        let plan_json = plan_json
+            .join()
+            .unwrap_or_else(|_| Err(Failure::other("plan.json could not be written")));
+        (written, plan_json)
+    });
+    files?;
+    plan_json?;
     let s = &plan.stats;
     println!(
         "planned {} cells, {} lanes, {} UAV(s) ({} sorties, {}), {:.0} m, {} photos, makespan {:.0} \
