@@ -26,9 +26,12 @@ For every UAV's `<uav>.photos.geojson` in OUT_DIR:
   length, on the line through its centre along the lane, that the next
   footprint covers), the side overlap (the share of its width, on the
   line through its centre across the lanes, that the footprints of the
-  lanes beside it cover, on each side where one of their footprints
-  crosses that line; lanes of one set are those within 1° of each other's
-  direction, a lane's place across them the mean of its photos' centres)
+  nearest lanes beside it cover, on each side where one of their
+  footprints crosses that line: lanes farther across than 5 % of its width
+  and within twice it, nearest first, up to a quarter width beyond the
+  first with a photo abeam; lanes of one set are those within 1° of each
+  other's direction, a lane's place across them the mean of its photos'
+  centres; in a cell of more than 20 000 photos every k-th photo)
   and the GSD, as minimum and median; each must match the cell's figures
   in plan.json within OVERLAP_TOL (0.01 on level ground, 0.02 over a DEM)
   and 1 % for the GSD.
@@ -56,6 +59,7 @@ DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_lengt
                   "image_width_px": 5472, "image_height_px": 3648}
 CORNER_TOL = 0.01
 CORNER_FLOOR_M = 0.05
+MAX_SIDE_PHOTOS = 20000
 LONG = 1.0e5
 
 
@@ -124,39 +128,49 @@ def cell_figures(lanes):
             shared = 0.0 if nxt is None else max(0.0, min(own[1], nxt[1]) - max(own[0], nxt[0]))
             front.append(shared / (own[1] - own[0]))
     sets = []
-    for lane in lanes:
+    for k, lane in enumerate(lanes):
         d = lane[0]["dir"]
         for s in sets:
             if abs(float(np.dot(s[0], d))) >= math.cos(math.radians(1.0)):
-                s[1].append(lane)
+                s[1].append(k)
                 break
         else:
-            sets.append((d, [lane]))
+            sets.append((d, [k]))
+    # A cell of many photos: every stride-th photo (in file order) measured.
+    total = sum(len(lane) for lane in lanes)
+    stride = max(1, math.ceil(total / MAX_SIDE_PHOTOS))
+    first = np.cumsum([0] + [len(lane) for lane in lanes])
     side = []
     for d, members in sets:
         across = np.array([-d[1], d[0]])
-        offsets = [np.mean([np.dot(p["centre"], across) for p in lane]) for lane in members]
-        for i, lane in enumerate(members):
-            for p in lane:
+        offsets = {k: np.mean([np.dot(p["centre"], across) for p in lanes[k]]) for k in members}
+        for k in members:
+            for n, p in enumerate(lanes[k]):
+                if (first[k] + n) % stride:
+                    continue
                 own = span(p["poly"], p["centre"], across)
                 if own is None:
                     continue
                 width = own[1] - own[0]
                 for sign in (1.0, -1.0):
-                    covered, abeam = [], False
-                    for j, other in enumerate(members):
-                        gap = sign * (offsets[j] - offsets[i])
-                        if j == i or gap <= 0.05 * width or gap > 2.0 * width:
-                            continue
-                        for q in other:
-                            s = span(q["poly"], p["centre"], across)
-                            if s is None:
+                    # The lanes on this side nearest first; those with a
+                    # photo abeam up to a quarter width beyond the first.
+                    cands = sorted((sign * (offsets[j] - offsets[k]), j) for j in members
+                                   if j != k and 0.05 * width < sign * (offsets[j] - offsets[k]) <= 2.0 * width)
+                    covered, nearest = [], None
+                    for gap, j in cands:
+                        if nearest is not None and gap > nearest + 0.25 * width:
+                            break
+                        for q in lanes[j]:
+                            sp = span(q["poly"], p["centre"], across)
+                            if sp is None:
                                 continue
-                            abeam = True
-                            lo, hi = max(s[0], own[0]), min(s[1], own[1])
+                            if nearest is None:
+                                nearest = gap
+                            lo, hi = max(sp[0], own[0]), min(sp[1], own[1])
                             if hi > lo:
                                 covered.append((lo, hi))
-                    if abeam:
+                    if nearest is not None:
                         side.append(union_length(covered) / width)
     gsd = [p["gsd"] for lane in lanes for p in lane]
     return front, side, gsd

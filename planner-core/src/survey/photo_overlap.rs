@@ -14,6 +14,9 @@ use super::result::{CellOut, UavPlan};
 /// Lanes whose bearings differ by less than this belong to one set
 /// (a crosshatch's two sets are told apart by it), degrees.
 const SAME_DIRECTION_DEG: f64 = 1.0;
+/// At most this many photos of a cell are measured for side overlap (a
+/// regular subset beyond): a survey of a million photos stays quick.
+const MAX_SIDE_PHOTOS: usize = 20_000;
 
 /// The overlaps and GSD a cell's photos achieve on the ground. Overlaps
 /// are fractions; `None` where there is nothing to measure (a lane of one
@@ -155,93 +158,150 @@ struct Placed<'a> {
     along: Vec<(f64, usize)>,
     /// The longest along-track reach of a footprint from its centre.
     reach: f64,
+    /// The farthest a footprint reaches across from its centre.
+    half_width: f64,
 }
 
 /// Side overlap samples: for every photo and each side with a
 /// neighbouring lane's photo abeam (its footprint crossed by the line
 /// through this photo's centre, across the lanes), the share of this
-/// footprint's width on that line that the neighbours' footprints cover.
+/// footprint's width on that line that the nearest such lanes' footprints
+/// cover. In a cell of more than [`MAX_SIDE_PHOTOS`] photos only every
+/// k-th photo (in flight order, k the least that keeps within it) is
+/// measured.
 fn side_overlaps(lanes: &[LaneShots]) -> Vec<f64> {
-    let mut out = Vec::new();
-    let mut sets: Vec<([f64; 2], Vec<&LaneShots>)> = Vec::new();
+    let total: usize = lanes.iter().map(|l| l.shots.len()).sum();
+    let stride = total.div_ceil(MAX_SIDE_PHOTOS).max(1);
+    let mut first = Vec::with_capacity(lanes.len());
+    let mut count = 0;
     for l in lanes {
+        first.push(count);
+        count += l.shots.len();
+    }
+    let mut out = Vec::new();
+    let mut sets: Vec<([f64; 2], Vec<usize>)> = Vec::new();
+    for (k, l) in lanes.iter().enumerate() {
         // Directions modulo 180°: a lane flown back is of the same set.
         match sets.iter_mut().find(|(d, _)| {
             let cos = (d[0] * l.dir[0] + d[1] * l.dir[1]).abs();
             cos >= SAME_DIRECTION_DEG.to_radians().cos()
         }) {
-            Some((_, members)) => members.push(l),
-            None => sets.push((l.dir, vec![l])),
+            Some((_, members)) => members.push(k),
+            None => sets.push((l.dir, vec![k])),
         }
     }
     for (dir, members) in sets {
-        let across = [-dir[1], dir[0]];
         let placed: Vec<Placed> = members
             .iter()
-            .map(|l| {
-                let n = l.shots.len().max(1) as f64;
-                let offset = l.shots.iter().map(|s| dot(s.centre, across)).sum::<f64>() / n;
-                let mut along: Vec<(f64, usize)> = l
-                    .shots
-                    .iter()
-                    .enumerate()
-                    .map(|(i, s)| (dot(s.centre, dir), i))
-                    .collect();
-                along.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let reach = l
-                    .shots
-                    .iter()
-                    .flat_map(|s| {
-                        s.quad
-                            .iter()
-                            .map(move |q| dot(sub(*q, s.centre), dir).abs())
-                    })
-                    .fold(0.0, f64::max);
-                Placed {
-                    lane: l,
-                    offset,
-                    along,
-                    reach,
-                }
-            })
+            .map(|&k| Placed::new(&lanes[k], dir))
             .collect();
+        // The lanes by their place across: each photo looks only at the
+        // lanes within reach of its footprint's width.
+        let mut order: Vec<usize> = (0..placed.len()).collect();
+        order.sort_by(|&a, &b| placed[a].offset.total_cmp(&placed[b].offset));
+        let offsets: Vec<f64> = order.iter().map(|&k| placed[k].offset).collect();
         for (i, me) in placed.iter().enumerate() {
-            for shot in &me.lane.shots {
-                let Some((lo, hi)) = interval(&shot.quad, shot.centre, across) else {
-                    continue;
-                };
-                let width = hi - lo;
-                let a = dot(shot.centre, dir);
-                for sign in [1.0, -1.0] {
-                    let mut covered: Vec<(f64, f64)> = Vec::new();
-                    let mut abeam = false;
-                    for (j, other) in placed.iter().enumerate() {
-                        let gap = sign * (other.offset - me.offset);
-                        if j == i || gap <= 0.05 * width || gap > 2.0 * width {
-                            continue;
-                        }
-                        let from = other.along.partition_point(|p| p.0 < a - other.reach);
-                        for &(b, k) in &other.along[from..] {
-                            if b > a + other.reach {
-                                break;
-                            }
-                            let q = &other.lane.shots[k].quad;
-                            if let Some((s, e)) = interval(q, shot.centre, across) {
-                                abeam = true;
-                                if e.min(hi) > s.max(lo) {
-                                    covered.push((s.max(lo), e.min(hi)));
-                                }
-                            }
-                        }
-                    }
-                    if abeam {
-                        out.push(ratio(union_length(&mut covered), width));
-                    }
+            let reach = 4.0 * me.half_width;
+            let from = offsets.partition_point(|&o| o < me.offset - reach);
+            let to = offsets.partition_point(|&o| o <= me.offset + reach);
+            let near: Vec<&Placed> = order[from..to]
+                .iter()
+                .filter(|&&j| j != i)
+                .map(|&j| &placed[j])
+                .collect();
+            for (n, shot) in me.lane.shots.iter().enumerate() {
+                if (first[members[i]] + n) % stride == 0 {
+                    out.extend(shot_side_overlaps(shot, me.offset, &near, dir));
                 }
             }
         }
     }
     out
+}
+
+/// The side overlap samples of one photo (of a lane placed at `offset`)
+/// with the lanes `near` it, one per side with a photo abeam: of the lanes
+/// on that side (farther across than 5 % of its width, within twice it)
+/// nearest first, those with a photo abeam up to a quarter of its width
+/// beyond the first such.
+fn shot_side_overlaps(shot: &Shot, offset: f64, near: &[&Placed], dir: [f64; 2]) -> Vec<f64> {
+    let across = [-dir[1], dir[0]];
+    let Some((lo, hi)) = interval(&shot.quad, shot.centre, across) else {
+        return Vec::new();
+    };
+    let width = hi - lo;
+    let a = dot(shot.centre, dir);
+    let mut out = Vec::with_capacity(2);
+    for sign in [1.0, -1.0] {
+        let mut side: Vec<(f64, &Placed)> = near
+            .iter()
+            .map(|o| (sign * (o.offset - offset), *o))
+            .filter(|(gap, _)| *gap > 0.05 * width && *gap <= 2.0 * width)
+            .collect();
+        side.sort_by(|x, y| x.0.total_cmp(&y.0));
+        let mut covered: Vec<(f64, f64)> = Vec::new();
+        let mut nearest: Option<f64> = None;
+        for (gap, other) in side {
+            if nearest.is_some_and(|g| gap > g + 0.25 * width) {
+                break;
+            }
+            let from = other.along.partition_point(|p| p.0 < a - other.reach);
+            for &(b, k) in &other.along[from..] {
+                if b > a + other.reach {
+                    break;
+                }
+                let q = &other.lane.shots[k].quad;
+                if let Some((s, e)) = interval(q, shot.centre, across) {
+                    nearest.get_or_insert(gap);
+                    if e.min(hi) > s.max(lo) {
+                        covered.push((s.max(lo), e.min(hi)));
+                    }
+                }
+            }
+        }
+        if nearest.is_some() {
+            out.push(ratio(union_length(&mut covered), width));
+        }
+    }
+    out
+}
+
+impl<'a> Placed<'a> {
+    /// `lane` placed across and along the unit direction `dir`.
+    fn new(lane: &'a LaneShots, dir: [f64; 2]) -> Placed<'a> {
+        let across = [-dir[1], dir[0]];
+        let n = lane.shots.len().max(1) as f64;
+        let offset = lane
+            .shots
+            .iter()
+            .map(|s| dot(s.centre, across))
+            .sum::<f64>()
+            / n;
+        let mut along: Vec<(f64, usize)> = lane
+            .shots
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (dot(s.centre, dir), i))
+            .collect();
+        along.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let extent = |axis: [f64; 2]| {
+            lane.shots
+                .iter()
+                .flat_map(|s| {
+                    s.quad
+                        .iter()
+                        .map(move |q| dot(sub(*q, s.centre), axis).abs())
+                })
+                .fold(0.0, f64::max)
+        };
+        Placed {
+            lane,
+            offset,
+            along,
+            reach: extent(dir),
+            half_width: extent(across),
+        }
+    }
 }
 
 /// Where the line through `origin` along the unit `dir` crosses `quad`: its
