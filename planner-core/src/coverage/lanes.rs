@@ -1156,13 +1156,8 @@ mod tests {
     #[test]
     fn one_lane_cells_need_no_turn() {
         let square = poly(&[(0.0, 0.0), (600.0, 0.0), (600.0, 600.0), (0.0, 600.0)]);
-        let mut seed = 7u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::test_rng::Lcg(7);
+        let mut next = || rng.next();
         let zones: Vec<Polygon<f64>> = (0..60)
             .map(|_| {
                 let (cx, cy, r) = (
