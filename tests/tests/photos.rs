@@ -1,8 +1,9 @@
 //! Planned photos (issue 20 item 5): `photos.geojson` per UAV and each
 //! cell's achieved overlap and GSD, through `terraplan survey` and the
 //! service, checked by tests/validators/check_photos.py (shapely, pyproj,
-//! numpy: counts, footprints recast from the camera, coverage of the free
-//! area, overlaps recomputed) and, over a real DEM, check_photos_dem.py
+//! numpy, pymavlink: counts, cameras where the missions take the photos,
+//! footprints recast from the camera, coverage of the free area, overlaps
+//! recomputed) and, over a real DEM, check_photos_dem.py
 //! (GDAL reads the DEM, numpy casts the rays).
 
 use std::path::{Path, PathBuf};
@@ -64,6 +65,11 @@ fn plan_and_check(dir: &Path, name: &str, params: &Value) -> (Value, Value) {
     let plan = survey_cli(&files, &out, name);
     let summary = check_photos(&out, &params_path, &field(), &nfz, None);
     assert_eq!(summary["photos"], plan["stats"]["photos"], "{name}");
+    // Every photo where its sortie's .waypoints takes it.
+    assert_eq!(
+        summary["photos_matched_to_missions"], plan["stats"]["photos"],
+        "{name}"
+    );
     assert!(
         summary["coverage"].as_f64().unwrap() >= 0.995,
         "{name}: {summary}"
@@ -243,6 +249,10 @@ fn footprints_and_overlaps_over_a_real_dem() {
         assert!(rays.status.success(), "{}", text(&rays.stderr));
         let summary = check_photos(&out, &params_path, &roi, &nfz, Some(&ground));
         assert_eq!(summary["photos"], plan["stats"]["photos"]);
+        assert_eq!(
+            summary["photos_matched_to_missions"],
+            plan["stats"]["photos"]
+        );
         assert!(
             summary["worst_corner_error"].as_f64().unwrap() < 0.01,
             "{summary}"
@@ -276,13 +286,12 @@ fn service_serves_photos_geojson() {
     body["no_fly_zones"] = json!([nfzs()]);
     let r = post_json(&server.url("/api/v1/surveys"), &body);
     assert_eq!(r.status, 201, "{}", r.text());
-    let survey = r.json();
+    let mut survey = r.json();
     let out = d.join("service");
     std::fs::create_dir_all(&out).unwrap();
-    let uav = &survey["uavs"][0];
-    let sorties = uav["sorties"].as_array().unwrap();
+    let sorties = survey["uavs"][0]["sorties"].as_array_mut().unwrap();
     assert!(sorties.len() > 1, "{}", sorties.len());
-    for s in sorties {
+    for (k, s) in sorties.iter_mut().enumerate() {
         let f = get(&server.url(s["files"]["photos"].as_str().unwrap()));
         assert_eq!(f.status, 200);
         let doc: Value = serde_json::from_slice(&f.body).unwrap();
@@ -290,6 +299,12 @@ fn service_serves_photos_geojson() {
             doc["features"].as_array().unwrap().len() as u64,
             s["stats"]["photos"].as_u64().unwrap()
         );
+        // Each sortie's mission, saved under a stem the checker reads.
+        let wp = get(&server.url(s["files"]["waypoints"].as_str().unwrap()));
+        assert_eq!(wp.status, 200);
+        let stem = format!("a.s{}", k + 1);
+        std::fs::write(out.join(format!("{stem}.waypoints")), &wp.body).unwrap();
+        s["file_stem"] = json!(stem);
     }
     let id = survey["id"].as_str().unwrap();
     let all = get(&server.url(&format!("/api/v1/surveys/{id}/uavs/a/photos.geojson")));
@@ -307,6 +322,10 @@ fn service_serves_photos_geojson() {
     let nfz = write_json(d, "nfz.geojson", &nfzs());
     let summary = check_photos(&out, &params_path, &field(), &nfz, None);
     assert_eq!(summary["photos"], survey["stats"]["photos"]);
+    assert_eq!(
+        summary["photos_matched_to_missions"],
+        survey["stats"]["photos"]
+    );
     let missing = get(&server.url(&format!("/api/v1/surveys/{id}/uavs/zz/photos.geojson")));
     assert_eq!(missing.status, 404);
 }

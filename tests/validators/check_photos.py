@@ -6,6 +6,11 @@ For every UAV's `<uav>.photos.geojson` in OUT_DIR:
 
 - the count: one Feature per photo, as many as plan.json's `photos` for
   the UAV (and in all, the survey's);
+- the missions (where the `.waypoints` are there, read by pymavlink): the
+  cameras of each sortie's photos are, in order and within 5 cm, where its
+  mission takes them (every trigger distance, or interval × speed, from a
+  lane's start where triggering starts, floor(length / spacing) + 1 per
+  lane; at the waypoint before each IMAGE_START_CAPTURE);
 - the camera: each lane's photos (grouped by sortie and `lane`) lie on one
   line along their `heading_deg` (within 0.05°), `camera_pitch_deg` is
   the requested one, times rise through each sortie and end before its
@@ -49,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from pymavlink import mavutil, mavwp
 from pyproj import Transformer
 from shapely.geometry import LineString, Polygon
 
@@ -66,6 +72,63 @@ LONG = 1.0e5
 def fail(msg):
     print(f"check_photos: FAIL: {msg}", file=sys.stderr)
     sys.exit(1)
+
+
+ML = mavutil.mavlink
+POSITIONS = (ML.MAV_CMD_NAV_WAYPOINT, ML.MAV_CMD_NAV_LAND, ML.MAV_CMD_NAV_VTOL_LAND)
+STATION_TOL_M = 0.05
+
+
+def along(lane, s):
+    """The point `s` metres (horizontally) along the polyline `lane`."""
+    for a, b in zip(lane, lane[1:]):
+        seg = math.hypot(b[0] - a[0], b[1] - a[1])
+        if s <= seg or b is lane[-1]:
+            t = min(s / seg, 1.0) if seg > 0 else 0.0
+            return (a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+        s -= seg
+    return lane[-1]
+
+
+def mission_stations(path, fwd):
+    """Where a `.waypoints` mission (read by pymavlink) takes its photos:
+    every trigger distance (or interval × speed) from each lane's start,
+    floor(length / spacing) + 1 of them, the lane running from the
+    waypoint where triggering starts to the one where it stops; and at the
+    waypoint before each IMAGE_START_CAPTURE."""
+    loader = mavwp.MAVWPLoader()
+    loader.load(str(path))
+    out, lane, spacing, speed, last = [], None, None, None, None
+
+    def close_lane():
+        pts = [p for p in lane if p is not None]
+        length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
+        n = math.floor(length / spacing + 1e-9) + 1
+        out.extend(along(pts, k * spacing) for k in range(n))
+
+    for i in range(1, loader.count()):
+        w = loader.wp(i)
+        c = w.command
+        if c in POSITIONS:
+            last = fwd(w.y, w.x)
+            if lane is not None:
+                lane.append(last)
+        elif c == ML.MAV_CMD_DO_CHANGE_SPEED:
+            speed = w.param2
+        elif c == ML.MAV_CMD_DO_SET_CAM_TRIGG_INTERVAL:
+            spacing = w.param1 / 1000.0 * speed
+        elif c in (ML.MAV_CMD_DO_SET_CAM_TRIGG_DIST, ML.MAV_CMD_DO_TRIGGER_CONTROL):
+            on = w.param1 > 0 if c == ML.MAV_CMD_DO_SET_CAM_TRIGG_DIST else w.param1 == 1
+            if on:
+                lane = [last]
+                if c == ML.MAV_CMD_DO_SET_CAM_TRIGG_DIST:
+                    spacing = w.param1
+            elif lane is not None:
+                close_lane()
+                lane = None
+        elif c == ML.MAV_CMD_IMAGE_START_CAPTURE:
+            out.append(last)
+    return out
 
 
 def rays(cam, pitch, heading):
@@ -253,6 +316,26 @@ def main():
         summary["grazes"] = ground["grazes"]
         if ground["grazes"] > 0.01 * 5 * summary["photos"]:
             fail(f"{ground['grazes']} of {5 * summary['photos']} rays pass a roof's edge")
+    # The cameras where each sortie's mission takes its photos (when the
+    # missions are there: the CLI's output directory).
+    stations_checked = 0
+    for uav in plan["uavs"]:
+        feats = json.loads((out / f"{uav['id']}.photos.geojson").read_text())["features"]
+        for k, sortie in enumerate(uav["sorties"]):
+            # The service's answer names no file stems (its missions are URLs).
+            wp = out / f"{sortie.get('file_stem')}.waypoints"
+            if "file_stem" not in sortie or not wp.exists():
+                continue
+            want = mission_stations(wp, lambda lon, lat: tuple(utm(lon, lat)))
+            got = [utm(*f["properties"]["centre"][:2]) for f in feats
+                   if f["properties"]["sortie"] == k + 1]
+            if len(got) != len(want):
+                fail(f"{wp.name}: the mission takes {len(want)} photos, photos.geojson has {len(got)}")
+            for n, (g, w) in enumerate(zip(got, want)):
+                if math.hypot(g[0] - w[0], g[1] - w[1]) > STATION_TOL_M:
+                    fail(f"{wp.name}: photo {n} at {tuple(g)}, the mission takes it at {w}")
+            stations_checked += len(want)
+    summary["photos_matched_to_missions"] = stations_checked
     if summary["photos"] != plan["stats"]["photos"]:
         fail(f"{summary['photos']} photos in the files, {plan['stats']['photos']} in the plan")
 
