@@ -3,7 +3,8 @@
 //! lane is the stretch from the waypoint where the camera starts triggering
 //! by distance to the one where it stops.
 
-use geo_types::Coord;
+use geo::{Distance, Euclidean};
+use geo_types::{Coord, Line, Point};
 
 use super::photos::{Clock, PhotoPlanner, SortiePhotos};
 use crate::coverage::Lane;
@@ -105,7 +106,7 @@ fn cell_of(lanes: &[(usize, Lane)], next: &mut usize, pts: &[Point3]) -> usize {
         x: (a.x + b.x) / 2.0,
         y: (a.y + b.y) / 2.0,
     };
-    let on = |l: &Lane| distance_to_segment(mid, l.start, l.end) <= ON_LANE_M;
+    let on = |l: &Lane| Euclidean.distance(&Point(mid), &Line::new(l.start, l.end)) <= ON_LANE_M;
     let found = (*next..lanes.len())
         .chain(0..*next)
         .find(|&k| on(&lanes[k].1));
@@ -118,16 +119,4 @@ fn cell_of(lanes: &[(usize, Lane)], next: &mut usize, pts: &[Point3]) -> usize {
             .get(next.saturating_sub(1))
             .map_or(usize::MAX, |l| l.0),
     }
-}
-
-fn distance_to_segment(p: Coord<f64>, a: Coord<f64>, b: Coord<f64>) -> f64 {
-    let d = b - a;
-    let len2 = d.x * d.x + d.y * d.y;
-    let t = if len2 > 0.0 {
-        (((p - a).x * d.x + (p - a).y * d.y) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let c = a + d * t;
-    (p.x - c.x).hypot(p.y - c.y)
 }
