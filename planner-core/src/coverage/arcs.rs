@@ -19,6 +19,9 @@ const MAX_CORNERS: usize = 2048;
 /// side are written as one leg (a kink a hair off the planned arc; the
 /// rounded path is checked as written).
 const TINY_SWEEP: f64 = 1e-3;
+/// An arc turning less than this (radians) next to another arc may lose
+/// its corner (see [`waypoints`]).
+pub const SLIGHT_SWEEP: f64 = 0.05;
 /// Slack in the turn rule, metres (rounding).
 pub const RULE_TOL_M: f64 = 1e-6;
 
@@ -100,6 +103,24 @@ pub fn waypoints(path: &[Flown], radius: f64) -> Result<Vec<Waypoint>, TurnRuleE
             let Some(arc) = owner[i] else {
                 return Err(TurnRuleError { at: pts[i] });
             };
+            // A slight arc (a Dubins micro-jog) next to another leaves its
+            // corners too close to the other's: it is written with none
+            // instead, like a tiny arc (not by a lane, which is entered and
+            // left straight).
+            let near: Vec<usize> = [owner[i - 1], Some(arc), owner[i + 1]]
+                .into_iter()
+                .flatten()
+                .collect();
+            if let Some(&slight) = near.iter().find(|&&o| {
+                corners[o] > 0
+                    && sweep_of(&path[o]) < SLIGHT_SWEEP
+                    && near.iter().any(|&other| other != o)
+                    && !by_a_lane(path, o)
+            }) {
+                corners[slight] = 0;
+                refined = true;
+                continue;
+            }
             if corners[arc] >= MAX_CORNERS {
                 return Err(TurnRuleError { at: pts[i] });
             }
@@ -190,11 +211,45 @@ fn emit(path: &[Flown], corners: &[usize]) -> (Vec<Waypoint>, Vec<Option<usize>>
     (wps, owner)
 }
 
-/// Do two consecutive lines meet at an angle?
+/// How far an arc turns (0 for a line), radians.
+fn sweep_of(f: &Flown) -> f64 {
+    match f.piece {
+        Piece::Arc { sweep, .. } => sweep.abs(),
+        Piece::Line { .. } => 0.0,
+    }
+}
+
+/// Does a lane, or a line and then a lane, follow or precede `path[i]`?
+fn by_a_lane(path: &[Flown], i: usize) -> bool {
+    let lane_via_line = |steps: &mut dyn Iterator<Item = &Flown>| {
+        steps
+            .take(2)
+            .try_for_each(|f| {
+                if f.lane {
+                    Err(true)
+                } else if matches!(f.piece, Piece::Line { .. }) {
+                    Ok(())
+                } else {
+                    Err(false)
+                }
+            })
+            .err()
+            .unwrap_or(false)
+    };
+    lane_via_line(&mut path[i + 1..].iter()) || lane_via_line(&mut path[..i].iter().rev())
+}
+
+/// Do two consecutive lines meet at an angle? Lines joined at less than
+/// [`TINY_SWEEP`] (a Dubins word's rounding, or a straight of no length
+/// between a lattice straight and the next line) are written as one leg,
+/// like a tiny arc: a waypoint there would cut the leg next to an arc
+/// too short for the arc's corners.
 fn corner_between(a: &Piece, b: &Piece) -> bool {
     match (*a, *b) {
         (Piece::Line { from, to }, Piece::Line { to: next, .. }) => {
-            dist(from, to) > 1e-9 && dist(to, next) > 1e-9 && turn_angle(from, to, next) > 1e-9
+            dist(from, to) > 1e-9
+                && dist(to, next) > 1e-9
+                && turn_angle(from, to, next) >= TINY_SWEEP
         }
         _ => false,
     }

@@ -86,6 +86,49 @@ impl Piece {
         self.point(0.0)
     }
 
+    /// This piece and `next` (which starts where this one ends) as one
+    /// piece, if they are two arcs of one circle turning the same way or
+    /// two lines in one direction.
+    pub fn joined(&self, next: &Piece) -> Option<Piece> {
+        const TOL: f64 = 1e-7;
+        match (*self, *next) {
+            (
+                Piece::Arc {
+                    centre,
+                    radius,
+                    start,
+                    sweep,
+                },
+                Piece::Arc {
+                    centre: c2,
+                    radius: r2,
+                    start: s2,
+                    sweep: w2,
+                },
+            ) => {
+                let same_circle = (centre.x - c2.x).hypot(centre.y - c2.y) < TOL * radius.max(1.0)
+                    && (radius - r2).abs() < TOL * radius.max(1.0);
+                let continues = (start + sweep - s2 + std::f64::consts::PI)
+                    .rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                (same_circle && sweep * w2 > 0.0 && continues.abs() < TOL).then_some(Piece::Arc {
+                    centre,
+                    radius,
+                    start,
+                    sweep: sweep + w2,
+                })
+            }
+            (Piece::Line { from, to }, Piece::Line { from: f2, to: t2 }) => {
+                let (u, v) = (to - from, t2 - f2);
+                let cross = u.x * v.y - u.y * v.x;
+                let dot = u.x * v.x + u.y * v.y;
+                (dot > 0.0 && cross.abs() < TOL * dot && (to.x - f2.x).hypot(to.y - f2.y) < TOL)
+                    .then_some(Piece::Line { from, to: t2 })
+            }
+            _ => None,
+        }
+    }
+
     pub fn end(&self) -> Coord<f64> {
         self.point(1.0)
     }
@@ -169,34 +212,58 @@ fn word_params(w: usize, d: f64, alpha: f64, beta: f64) -> Option<[f64; 3]> {
     }
 }
 
-/// Every Dubins path from `a` to `b` with turns of `radius`, shortest
-/// first, each as its pieces (zero-length pieces left out).
-pub fn dubins_paths(a: Pose, b: Pose, radius: f64) -> Vec<Vec<Piece>> {
+/// The problem from `a` to `b` normalised by `radius`: distance, and both
+/// headings against the line between them.
+fn normalised(a: Pose, b: Pose, radius: f64) -> (f64, f64, f64) {
     let (dx, dy) = (b.at.x - a.at.x, b.at.y - a.at.y);
-    let d = dx.hypot(dy) / radius;
     let theta = mod2pi(dy.atan2(dx));
-    let alpha = mod2pi(a.heading - theta);
-    let beta = mod2pi(b.heading - theta);
-    let mut found: Vec<(f64, Vec<Piece>)> = (0..WORDS.len())
+    (
+        dx.hypot(dy) / radius,
+        mod2pi(a.heading - theta),
+        mod2pi(b.heading - theta),
+    )
+}
+
+/// The words that exist from `a` to `b`, as (normalised length, word,
+/// segment lengths), shortest first.
+fn words(a: Pose, b: Pose, radius: f64) -> Vec<(f64, usize, [f64; 3])> {
+    let (d, alpha, beta) = normalised(a, b, radius);
+    let mut found: Vec<(f64, usize, [f64; 3])> = (0..WORDS.len())
         .filter_map(|w| {
             let params = word_params(w, d, alpha, beta)?;
-            params.iter().all(|p| p.is_finite()).then(|| {
-                (
-                    params.iter().sum::<f64>(),
-                    pieces(a, &WORDS[w], params, radius),
-                )
-            })
+            params
+                .iter()
+                .all(|p| p.is_finite())
+                .then(|| (params.iter().sum::<f64>(), w, params))
         })
         .collect();
     found.sort_by(|x, y| x.0.total_cmp(&y.0));
-    found.into_iter().map(|(_, p)| p).collect()
+    found
 }
 
-/// Length of the shortest Dubins path from `a` to `b`.
+/// Every Dubins path from `a` to `b` with turns of `radius`, shortest
+/// first, each as its pieces (zero-length pieces left out).
+pub fn dubins_paths(a: Pose, b: Pose, radius: f64) -> Vec<Vec<Piece>> {
+    dubins_iter(a, b, radius).collect()
+}
+
+/// [`dubins_paths`], each word's pieces built only when it is reached
+/// (for callers that stop at the first word that suits them).
+pub fn dubins_iter(a: Pose, b: Pose, radius: f64) -> impl Iterator<Item = Vec<Piece>> {
+    words(a, b, radius)
+        .into_iter()
+        .map(move |(_, w, params)| pieces(a, &WORDS[w], params, radius))
+}
+
+/// Length of the shortest Dubins path from `a` to `b` (no pieces built).
 pub fn dubins_length(a: Pose, b: Pose, radius: f64) -> f64 {
-    dubins_paths(a, b, radius)
-        .first()
-        .map_or(f64::INFINITY, |p| p.iter().map(Piece::length).sum())
+    let (d, alpha, beta) = normalised(a, b, radius);
+    (0..WORDS.len())
+        .filter_map(|w| word_params(w, d, alpha, beta))
+        .map(|p| p.iter().sum::<f64>())
+        .filter(|l| l.is_finite())
+        .fold(f64::INFINITY, f64::min)
+        * radius
 }
 
 /// The pieces of one word from `pose`.

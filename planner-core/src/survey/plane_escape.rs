@@ -25,7 +25,7 @@ impl PlaneFlight<'_> {
                         x: ring as f64 * r * dir.cos(),
                         y: ring as f64 * r * dir.sin(),
                     };
-                if self.obstacles.contains_point(at) {
+                if self.blocked_at(at) {
                     continue;
                 }
                 for h in 0..8 {

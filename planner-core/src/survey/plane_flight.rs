@@ -7,15 +7,16 @@
 use geo_types::Coord;
 
 use super::aircraft::{Aircraft, AircraftType};
+use super::plane_clearance::ClearanceGrid;
 use super::plane_heights::{heights, split_lanes};
 use super::request::PlanError;
 use super::result::UavStats;
 use super::terrain_flight::FlightRules;
 use crate::coverage::airframe::{PlaneTurns, lane_poses};
-use crate::coverage::arcs::{self, ARC_SLACK, Flown, Mark, Waypoint};
+use crate::coverage::arcs::{self, ARC_SLACK, Flown, Mark, SLIGHT_SWEEP, Waypoint};
 use std::f64::consts::PI;
 
-use crate::coverage::dubins::{Piece, Pose, dubins_paths};
+use crate::coverage::dubins::{Piece, Pose, dubins_iter};
 use crate::coverage::{Lane, photo_count};
 use crate::export::{AltitudeFrame, GeoPoint, MissionItem};
 use crate::flock::{ObstacleMap, Tour};
@@ -27,12 +28,12 @@ use crate::terrain::TerrainModel;
 const CHECK_STEP: f64 = 0.13;
 /// Lane ends are pulled back in steps of this share of the turn radius.
 const TRIM_STEP: f64 = 0.25;
-/// Corners of a transit's path a Dubins word may skip at once.
-const LOOKAHEAD: usize = 12;
 /// The shortest lead-in or overshoot by a no-fly zone, in turn radii.
 const MIN_RUN: f64 = 0.15;
 /// A lane shorter than this after trimming is left out, m.
 const MIN_LANE_M: f64 = 1.0;
+/// How much wider than the keep-out area pieces are planned clear of, m.
+const PLAN_MARGIN_M: f64 = 1.0;
 
 /// How a plane flies: its turns and the keep-out area it stays out of.
 pub(super) struct PlaneFlight<'a> {
@@ -50,6 +51,12 @@ pub(super) struct PlaneFlight<'a> {
     /// The same obstacles with the transit search's corners a turn radius
     /// out, so that the arcs round them keep clear.
     pub routes: ObstacleMap,
+    /// The keep-out area [`PLAN_MARGIN_M`] wider: every piece is planned
+    /// clear of it, so that the waypoints written (which may leave out a
+    /// Dubins word's micro-jog) still keep the clearance.
+    planning: ObstacleMap,
+    /// How far each spot keeps from the wider area, for quick checks.
+    grid: Option<ClearanceGrid>,
 }
 
 /// One sortie as a plane flies it.
@@ -73,6 +80,7 @@ impl<'a> PlaneFlight<'a> {
             AircraftType::Vtol => radius * ARC_SLACK,
             _ => (altitude / climb_angle_deg.to_radians().tan()).max(radius * ARC_SLACK),
         };
+        let wider = crate::geo::keep_out_area(&obstacles.polygons(), PLAN_MARGIN_M);
         PlaneFlight {
             kind: aircraft.kind,
             radius,
@@ -86,10 +94,12 @@ impl<'a> PlaneFlight<'a> {
             altitude,
             obstacles,
             routes: obstacles.pushed(radius * ARC_SLACK),
+            planning: ObstacleMap::new(&wider, 0.0),
+            grid: ClearanceGrid::new(&wider),
         }
     }
 
-    fn fault(&self, at: Coord<f64>, what: &str) -> PlanError {
+    pub(super) fn fault(&self, at: Coord<f64>, what: &str) -> PlanError {
         PlanError::Invalid(vec![Issue::new(
             "/aircraft/turn_radius_m",
             &format!(
@@ -100,12 +110,29 @@ impl<'a> PlaneFlight<'a> {
         )])
     }
 
+    /// Is the segment `a`–`b` clear of the wider keep-out area pieces are
+    /// planned in? The raster answers far from it, the obstacle map near it.
+    pub(super) fn segment_clear(&self, a: Coord<f64>, b: Coord<f64>) -> bool {
+        self.surely_clear(a, b) || self.planning.is_clear(a, b)
+    }
+
+    /// Is the segment `a`–`b` far from the (wider) keep-out area by the
+    /// raster alone?
+    fn surely_clear(&self, a: Coord<f64>, b: Coord<f64>) -> bool {
+        self.grid.as_ref().is_some_and(|g| g.sure_clear(a, b))
+    }
+
+    /// Is the point `p` inside the wider keep-out area?
+    pub(super) fn blocked_at(&self, p: Coord<f64>) -> bool {
+        self.planning.contains_point(p)
+    }
+
     /// Is every point of `piece` outside the keep-out area? Arcs are
     /// checked along their chords and along the polygon round them (the
     /// rounded path flown runs between the two).
     pub(super) fn clear(&self, piece: &Piece) -> bool {
         match *piece {
-            Piece::Line { from, to } => self.obstacles.is_clear(from, to),
+            Piece::Line { from, to } => self.segment_clear(from, to),
             Piece::Arc {
                 centre,
                 radius,
@@ -131,65 +158,33 @@ impl<'a> PlaneFlight<'a> {
                 around.push(piece.end());
                 [inner, around]
                     .iter()
-                    .all(|p| p.windows(2).all(|w| self.obstacles.is_clear(w[0], w[1])))
+                    .all(|p| p.windows(2).all(|w| self.segment_clear(w[0], w[1])))
             }
         }
     }
 
-    fn all_clear(&self, pieces: &[Piece]) -> bool {
+    pub(super) fn all_clear(&self, pieces: &[Piece]) -> bool {
         pieces.iter().all(|p| self.clear(p))
     }
 
-    /// The first clear Dubins word from `a` to `b`.
+    /// The first clear Dubins word from `a` to `b`, one without a
+    /// micro-jog (an arc under [`SLIGHT_SWEEP`]) if there is one: a jog
+    /// next to another arc leaves too short a leg for the turn rule.
     pub(super) fn dubins_clear(&self, a: Pose, b: Pose) -> Option<Vec<Piece>> {
-        dubins_paths(a, b, self.turns.radius_m)
-            .into_iter()
-            .find(|w| self.all_clear(w))
-    }
-
-    /// From pose `a` to pose `b` keeping out of the keep-out area: one
-    /// Dubins word if one is clear, else Dubins words through the corners
-    /// of the NFZ-avoiding path (headed along the bisector of its legs),
-    /// skipping every corner it can.
-    fn connect(&self, a: Pose, b: Pose) -> Result<Vec<Piece>, PlanError> {
-        if let Some(w) = self.dubins_clear(a, b) {
-            return Ok(w);
+        let mut jog = None;
+        for word in dubins_iter(a, b, self.turns.radius_m) {
+            let jogs = word
+                .iter()
+                .any(|p| matches!(p, Piece::Arc { sweep, .. } if sweep.abs() < SLIGHT_SWEEP));
+            if jogs {
+                if jog.is_none() && self.all_clear(&word) {
+                    jog = Some(word);
+                }
+            } else if self.all_clear(&word) {
+                return Some(word);
+            }
         }
-        // The search with corners a turn radius out first, then (a field
-        // too dense for that) with the bare corners.
-        self.chain(&self.routes, a, b)
-            .or_else(|| self.chain(self.obstacles, a, b))
-            .ok_or_else(|| self.fault(a.at, "the transit"))
-    }
-
-    /// Dubins words through the corners of `map`'s NFZ-avoiding path from
-    /// `a` to `b` (headed along the bisector of its legs), each from the
-    /// pose reached to the farthest of the next [`LOOKAHEAD`] corners it
-    /// reaches clear, else through a detour; `None` when stuck.
-    fn chain(&self, map: &ObstacleMap, a: Pose, b: Pose) -> Option<Vec<Piece>> {
-        let path = map.shortest_path(a.at, b.at).ok()?;
-        let mut poses = vec![a];
-        for i in 1..path.len().saturating_sub(1) {
-            let (p, c, n) = (path[i - 1], path[i], path[i + 1]);
-            let (u, v) = (unit(c - p), unit(n - c));
-            let d = u + v;
-            poses.push(Pose::new(c, d.y.atan2(d.x)));
-        }
-        poses.push(b);
-        let mut out = Vec::new();
-        let mut i = 0;
-        while i + 1 < poses.len() {
-            crate::cancel::check().ok()?;
-            let far = (i + LOOKAHEAD).min(poses.len() - 1);
-            let (j, w) = (i + 1..=far)
-                .rev()
-                .find_map(|j| self.dubins_clear(poses[i], poses[j]).map(|w| (j, w)))
-                .or_else(|| self.detour(poses[i], poses[i + 1]).map(|w| (i + 1, w)))
-                .or_else(|| self.escape(poses[i], poses[i + 1]).map(|w| (i + 1, w)))?;
-            out.extend(w);
-            i = j;
-        }
-        Some(out)
+        jog
     }
 
     /// The lane pulled back at either end until the run beyond it is
@@ -204,7 +199,7 @@ impl<'a> PlaneFlight<'a> {
         // half turn to either side.
         let room = |pose: Pose, run: f64| {
             let beyond = pose.ahead(run);
-            self.obstacles.is_clear(pose.at, beyond.at)
+            self.segment_clear(pose.at, beyond.at)
                 && [1.0, -1.0]
                     .iter()
                     .any(|&side| self.clear(&self.half_turn(beyond, side)))
@@ -407,8 +402,7 @@ impl<'a> PlaneFlight<'a> {
         (0..24).find_map(|k| {
             let turn = (k as f64 / 2.0).ceil() * if k % 2 == 0 { 1.0 } else { -1.0 };
             let pose = Pose::new(home, base + turn * std::f64::consts::PI / 12.0).ahead(length);
-            (self.obstacles.is_clear(pose.at, home) && !self.obstacles.contains_point(pose.at))
-                .then_some(pose)
+            (self.obstacles.is_clear(pose.at, home) && !self.blocked_at(pose.at)).then_some(pose)
         })
     }
 
@@ -433,7 +427,10 @@ impl<'a> PlaneFlight<'a> {
         // clearance (the final was checked on its own).
         let n = rounded.len();
         for (i, w) in rounded.windows(2).enumerate() {
-            if i > 0 && i + 2 < n && !self.obstacles.is_clear(w[0], w[1]) {
+            if i > 0
+                && i + 2 < n
+                && !(self.surely_clear(w[0], w[1]) || self.obstacles.is_clear(w[0], w[1]))
+            {
                 return Err(self.fault(w[0], "the rounded path"));
             }
         }
@@ -619,13 +616,21 @@ struct Flight {
 }
 
 impl Flight {
+    /// Appends `pieces`, each joined to the one before where they are one
+    /// arc or one line (a lattice path's arcs of one circle): fewer
+    /// waypoints, and no corner pair at a join too close for the turn rule.
     fn push(&mut self, pieces: Vec<Piece>, lane: bool) {
-        self.path.extend(
-            pieces
-                .into_iter()
-                .filter(|p| p.length() > 1e-9)
-                .map(|piece| Flown { piece, lane }),
-        );
+        for piece in pieces.into_iter().filter(|p| p.length() > 1e-9) {
+            if let Some(last) = self.path.last_mut()
+                && last.lane == lane
+                && !lane
+                && let Some(joined) = last.piece.joined(&piece)
+            {
+                last.piece = joined;
+                continue;
+            }
+            self.path.push(Flown { piece, lane });
+        }
     }
 
     fn push_transit(&mut self, pieces: Vec<Piece>) {
@@ -647,11 +652,6 @@ impl Flight {
             true,
         );
     }
-}
-
-fn unit(c: Coord<f64>) -> Coord<f64> {
-    let l = c.x.hypot(c.y);
-    if l > 0.0 { c / l } else { c }
 }
 
 fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {

@@ -297,15 +297,20 @@ impl ObstacleMap {
     /// pushed `clearance_m` out from their corners instead: paths bend
     /// farther from the corners, as a turning plane needs.
     pub fn pushed(&self, clearance_m: f64) -> ObstacleMap {
+        let mut map = ObstacleMap::new(&self.polygons(), clearance_m);
+        map.exits = self.exits.clone();
+        map
+    }
+
+    /// The obstacles kept, as polygons.
+    pub fn polygons(&self) -> MultiPolygon<f64> {
         let ring = |r: &Vec<Coord<f64>>| LineString(r.clone());
         let polygons = self
             .obstacles
             .iter()
             .map(|o| geo_types::Polygon::new(ring(&o.exterior), o.holes.iter().map(ring).collect()))
             .collect();
-        let mut map = ObstacleMap::new(&MultiPolygon(polygons), clearance_m);
-        map.exits = self.exits.clone();
-        map
+        MultiPolygon(polygons)
     }
 
     /// The clearance used for the graph nodes, in metres.
