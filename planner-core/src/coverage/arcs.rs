@@ -11,8 +11,8 @@ use super::dubins::Piece;
 /// Planned arcs are this much wider than the turn radius: the circumscribed
 /// polygon's corners then keep some slack where two arcs meet.
 pub const ARC_SLACK: f64 = 1.1;
-/// Widest turn at one waypoint of an arc, radians (15°).
-const MAX_STEP: f64 = 0.2618;
+/// Widest turn at one waypoint of an arc, radians (30°).
+const MAX_STEP: f64 = std::f64::consts::FRAC_PI_6;
 /// Most corners one arc is refined to.
 const MAX_CORNERS: usize = 2048;
 /// Arcs turning less than this (radians) get no corner: the lines on either

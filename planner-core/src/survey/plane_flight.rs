@@ -24,7 +24,8 @@ use crate::geo::{Issue, UtmProjection};
 use crate::terrain::TerrainModel;
 
 /// Arc samples for clearance checks, radians (the polygon corners are
-/// never wider than 15°).
+/// never wider than 30°; the rounded path flown keeps within a few cm
+/// of the arc, well inside [`PLAN_MARGIN_M`]).
 const CHECK_STEP: f64 = 0.13;
 /// Lane ends are pulled back in steps of this share of the turn radius.
 const TRIM_STEP: f64 = 0.25;
