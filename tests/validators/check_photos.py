@@ -59,6 +59,7 @@ from pyproj import Transformer
 from shapely.geometry import LineString, Polygon
 
 sys.path.insert(0, str(Path(__file__).parent))
+from camera_rays import rays  # noqa: E402
 from clearance import read_zones  # noqa: E402
 
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
@@ -128,27 +129,6 @@ def mission_stations(path, fwd):
                 lane = None
         elif c == ML.MAV_CMD_IMAGE_START_CAPTURE:
             out.append(last)
-    return out
-
-
-def rays(cam, pitch, heading):
-    """Unit rays (east, north, up) through the corners (near left, near
-    right, far right, far left) and the centre."""
-    tilt = math.radians(90.0 + pitch)
-    hd = math.radians(heading)
-    rot_x = np.array([[1, 0, 0],
-                      [0, math.cos(tilt), -math.sin(tilt)],
-                      [0, math.sin(tilt), math.cos(tilt)]])
-    to_grid = np.array([[math.cos(hd), math.sin(hd), 0],
-                        [-math.sin(hd), math.cos(hd), 0],
-                        [0, 0, 1]])
-    w, hh, f = cam["sensor_width_mm"] / 2, cam["sensor_height_mm"] / 2, cam["focal_length_mm"]
-    if cam.get("orientation") == "portrait":
-        w, hh = hh, w
-    out = []
-    for sx, sy in [(-w, -hh), (w, -hh), (w, hh), (-w, hh), (0.0, 0.0)]:
-        d = to_grid @ (rot_x @ np.array([sx, sy, -f]))
-        out.append(d / np.linalg.norm(d))
     return out
 
 

@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 from osgeo import gdal, osr
 
+sys.path.insert(0, str(Path(__file__).parent))
+from camera_rays import rays  # noqa: E402
+
 gdal.UseExceptions()
 
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
@@ -80,9 +83,6 @@ def main():
              + arr[r0 + 1, c0] * (1 - fc) * fr + arr[r0 + 1, c0 + 1] * fc * fr)
         return None if math.isnan(v) else v
 
-    w, hh, f = camera["sensor_width_mm"] / 2, camera["sensor_height_mm"] / 2, camera["focal_length_mm"]
-    if camera.get("orientation") == "portrait":
-        w, hh = hh, w
     out = {}
     grazes = 0
     for path in sys.argv[4:]:
@@ -151,21 +151,10 @@ def main():
             lon, lat, z = pr["centre"]
             cx, cy, _ = to_utm.TransformPoint(lon, lat)
             c = np.array([cx, cy, z])
-            tilt = math.radians(90.0 + pr["camera_pitch_deg"])
-            hd = math.radians(pr["heading_deg"])
-            rot_x = np.array([[1, 0, 0],
-                              [0, math.cos(tilt), -math.sin(tilt)],
-                              [0, math.sin(tilt), math.cos(tilt)]])
-            # Track frame (across, along, up) to grid (east, north, up).
-            to_grid = np.array([[math.cos(hd), math.sin(hd), 0],
-                                [-math.sin(hd), math.cos(hd), 0],
-                                [0, 0, 1]])
             ring = ft["geometry"]["coordinates"][0][:4] + [pr["ground_centre"]]
             heights = pr["ground_heights_m"]
             pts = []
-            for k, (sx, sy) in enumerate([(-w, -hh), (w, -hh), (w, hh), (-w, hh), (0.0, 0.0)]):
-                d = to_grid @ (rot_x @ np.array([sx, sy, -f]))
-                d = d / np.linalg.norm(d)
+            for k, d in enumerate(rays(camera, pr["camera_pitch_deg"], pr["heading_deg"])):
                 t = first_hit(c, d, 0.0)
                 if t is None:
                     print(f"{path}: a ray of photo {pr['index']} meets no DEM height", file=sys.stderr)
