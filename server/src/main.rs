@@ -1,12 +1,6 @@
 //! The `terraplan` binary: `serve` (the HTTP service) and the CLI
 //! subcommands that run the same planner on files.
 
-/// mimalloc: planning allocates millions of small vectors (cells, rings,
-/// legs, paths); with glibc's malloc a survey among 5 000 no-fly zones spent
-/// a sixth of its time allocating and peaked 35 % higher.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 mod api;
 mod app;
 mod auth;
