@@ -1285,6 +1285,21 @@ pub fn check_missions(out: &Path) -> serde_json::Value {
     serde_json::from_slice(&v.stdout).expect("check_missions.py summary")
 }
 
+/// A fixed pseudo-random sequence (a 64-bit linear congruential generator)
+/// for test inputs that are the same every run.
+pub struct Lcg(pub u64);
+
+impl Lcg {
+    /// The next number, uniform in [0, 1).
+    pub fn next_unit(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::io::{Read, Write};

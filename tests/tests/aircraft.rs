@@ -261,13 +261,8 @@ fn planes_on_a_field_dense_with_nfzs() {
                  ll(300., 300.), ll(-300., 300.), ll(-300., -300.)]]}),
     );
     // A fixed linear congruential sequence: the same zones every run.
-    let mut seed: u64 = 20;
-    let mut next = || {
-        seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = terraplan_e2e::Lcg(20);
+    let mut next = || rng.next_unit();
     let features: Vec<Value> = (0..110)
         .map(|_| {
             let (cx, cy, r) = (

@@ -33,13 +33,8 @@ fn slow_survey() -> Value {
         .collect();
     ring.push(ring[0]);
     // Hexagons of 3 m radius at pseudo-random places inside the field.
-    let mut seed = 0x5eed_u64;
-    let mut next = || {
-        seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = terraplan_e2e::Lcg(0x5eed);
+    let mut next = || rng.next_unit();
     let zones: Vec<Value> = (0..3000)
         .map(|_| {
             let (a, r) = (std::f64::consts::TAU * next(), 1900.0 * next().sqrt());

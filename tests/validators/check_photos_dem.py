@@ -35,6 +35,7 @@ from osgeo import gdal, osr
 
 sys.path.insert(0, str(Path(__file__).parent))
 from camera_rays import rays  # noqa: E402
+from dem_heights import heights as dem_heights  # noqa: E402
 
 gdal.UseExceptions()
 
@@ -58,11 +59,7 @@ def main():
     dem_path, camera_path, out_path = sys.argv[1:4]
     camera = json.loads(Path(camera_path).read_text()) or DEFAULT_CAMERA
     ds = gdal.Open(dem_path)
-    band = ds.GetRasterBand(1)
-    arr = band.ReadAsArray().astype(np.float64)
-    nodata = band.GetNoDataValue()
-    if nodata is not None:
-        arr[arr == nodata] = np.nan
+    arr = dem_heights(ds)
     gt = ds.GetGeoTransform()
     det = gt[1] * gt[5] - gt[2] * gt[4]
     dem_srs = srs_of(wkt=ds.GetProjection())

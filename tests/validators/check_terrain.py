@@ -29,6 +29,7 @@ import numpy as np
 from osgeo import gdal, osr
 
 import egm96_proj  # beside this script
+from dem_heights import heights  # beside this script
 
 gdal.UseExceptions()
 
@@ -42,11 +43,7 @@ dem_path, survey_path, uav_id, wp_path = sys.argv[1:5]
 route_path = sys.argv[5] if len(sys.argv) > 5 else None
 survey = json.load(open(survey_path))
 ds = gdal.Open(dem_path)
-band = ds.GetRasterBand(1)
-arr = band.ReadAsArray().astype(np.float64)
-nodata = band.GetNoDataValue()
-if nodata is not None:
-    arr[arr == nodata] = np.nan
+arr = heights(ds)
 gt = ds.GetGeoTransform()
 srs = osr.SpatialReference()
 srs.ImportFromWkt(ds.GetProjection())
