@@ -2,9 +2,9 @@
 //! version 2) with the no-fly zones as exclusion fences, the survey area as
 //! an inclusion fence, and rally points.
 
-use serde_json::{Value, json};
+use serde::ser::{Serialize, SerializeMap, Serializer};
 
-use super::mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, cmd};
+use super::mission::{AltitudeFrame, FencePolygon, GeoPoint, MavItem, Mission, cmd};
 
 /// QGC's `firmwareType` for ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
 const FIRMWARE_ARDUPILOT: u8 = 3;
@@ -18,14 +18,13 @@ const VEHICLE_MULTIROTOR: u8 = 2;
 /// the key.
 const FENCE_ACTION: u8 = 0;
 
-/// A mission parameter as QGC stores it: NaN (e.g. `KEEP_HEADING`) as null.
-fn param(v: f64) -> Value {
-    if v.is_nan() { Value::Null } else { v.into() }
-}
-
 /// The mission, fences and rally points (altitude above home) as a
-/// QGroundControl plan document.
-pub fn write_plan(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]) -> Value {
+/// QGroundControl plan document, indented, with a final newline.
+///
+/// Serialised straight from the mission (no `serde_json::Value` in
+/// between): a plan among thousands of no-fly zones is tens of MB. Keys are
+/// written in byte order, as a JSON object map would sort them.
+pub fn write_plan(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]) -> String {
     // QGC's AltMode: 1 relative, 2 absolute (AMSL), 4 terrain frame.
     let altitude_mode = match mission.frame {
         AltitudeFrame::Relative => 1,
@@ -33,65 +32,170 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]
         AltitudeFrame::Terrain => 4,
     };
     let home = mission.home;
-    let items: Vec<Value> = mission
-        .mav_items()
-        .iter()
-        .enumerate()
-        .map(|(i, m)| {
-            let [p1, p2, p3, p4] = m.params;
-            let params = [p1, p2, p3, p4, m.lat, m.lon, m.alt].map(param);
-            let mut out = json!({
-                "autoContinue": true,
-                "command": m.command,
-                "doJumpId": i + 1,
-                "frame": m.frame,
-                "params": params,
-                "type": "SimpleItem",
-            });
-            // QGC's own altitude fields on positional items, so its editor
-            // shows the same altitude mode as the frame.
-            if m.command == cmd::NAV_TAKEOFF || m.command == cmd::NAV_WAYPOINT {
-                out["Altitude"] = m.alt.into();
-                out["AltitudeMode"] = altitude_mode.into();
-                out["AMSLAltAboveTerrain"] = Value::Null;
-            }
-            out
-        })
-        .collect();
-    let polygons: Vec<Value> = fences
-        .iter()
-        .map(|p| {
-            json!({
-                "fenceAction": FENCE_ACTION,
-                "inclusion": p.inclusion,
-                "polygon": p.vertices.iter().map(|v| [v[1], v[0]]).collect::<Vec<_>>(),
-                "version": 1,
-            })
-        })
-        .collect();
-    let rally_points: Vec<[f64; 3]> = rally.iter().map(|p| [p.lat, p.lon, p.alt]).collect();
-    json!({
-        "fileType": "Plan",
-        "version": 1,
-        "groundStation": "terraplan",
-        "geoFence": { "circles": [], "polygons": polygons, "version": 2 },
-        "rallyPoints": { "points": rally_points, "version": 2 },
-        "mission": {
-            "cruiseSpeed": mission.cruise_speed_m_s,
-            "hoverSpeed": mission.cruise_speed_m_s,
-            "firmwareType": FIRMWARE_ARDUPILOT,
-            "vehicleType": VEHICLE_MULTIROTOR,
-            "globalPlanAltitudeMode": altitude_mode,
-            "items": items,
-            "plannedHomePosition": [home.lat, home.lon, home.alt],
-            "version": 2,
+    let items = mission.mav_items();
+    let document = PlanDocument {
+        file_type: "Plan",
+        geo_fence: GeoFence {
+            circles: [],
+            polygons: FencePolygons(fences),
+            version: 2,
         },
-    })
+        ground_station: "terraplan",
+        mission: PlanMission {
+            cruise_speed: mission.cruise_speed_m_s,
+            firmware_type: FIRMWARE_ARDUPILOT,
+            global_plan_altitude_mode: altitude_mode,
+            hover_speed: mission.cruise_speed_m_s,
+            items: PlanItems {
+                items: &items,
+                altitude_mode,
+            },
+            planned_home_position: [home.lat, home.lon, home.alt],
+            vehicle_type: VEHICLE_MULTIROTOR,
+            version: 2,
+        },
+        rally_points: RallyPoints {
+            points: rally.iter().map(|p| [p.lat, p.lon, p.alt]).collect(),
+            version: 2,
+        },
+        version: 1,
+    };
+    let mut text = serde_json::to_string_pretty(&document).unwrap_or_default();
+    text.push('\n');
+    text
+}
+
+// Fields in byte order of their JSON keys (see `write_plan`).
+#[derive(serde::Serialize)]
+struct PlanDocument<'a> {
+    #[serde(rename = "fileType")]
+    file_type: &'static str,
+    #[serde(rename = "geoFence")]
+    geo_fence: GeoFence<'a>,
+    #[serde(rename = "groundStation")]
+    ground_station: &'static str,
+    mission: PlanMission<'a>,
+    #[serde(rename = "rallyPoints")]
+    rally_points: RallyPoints,
+    version: u8,
+}
+
+#[derive(serde::Serialize)]
+struct GeoFence<'a> {
+    circles: [u8; 0],
+    polygons: FencePolygons<'a>,
+    version: u8,
+}
+
+#[derive(serde::Serialize)]
+struct RallyPoints {
+    points: Vec<[f64; 3]>,
+    version: u8,
+}
+
+#[derive(serde::Serialize)]
+struct PlanMission<'a> {
+    #[serde(rename = "cruiseSpeed")]
+    cruise_speed: f64,
+    #[serde(rename = "firmwareType")]
+    firmware_type: u8,
+    #[serde(rename = "globalPlanAltitudeMode")]
+    global_plan_altitude_mode: u8,
+    #[serde(rename = "hoverSpeed")]
+    hover_speed: f64,
+    items: PlanItems<'a>,
+    #[serde(rename = "plannedHomePosition")]
+    planned_home_position: [f64; 3],
+    #[serde(rename = "vehicleType")]
+    vehicle_type: u8,
+    version: u8,
+}
+
+/// The fence polygons, vertices as QGC writes them: [lat, lon].
+struct FencePolygons<'a>(&'a [FencePolygon]);
+
+impl Serialize for FencePolygons<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.iter().map(|p| FenceEntry(p)))
+    }
+}
+
+struct FenceEntry<'a>(&'a FencePolygon);
+
+impl Serialize for FenceEntry<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut map = s.serialize_map(Some(4))?;
+        map.serialize_entry("fenceAction", &FENCE_ACTION)?;
+        map.serialize_entry("inclusion", &self.0.inclusion)?;
+        map.serialize_entry("polygon", &LatLonRing(&self.0.vertices))?;
+        map.serialize_entry("version", &1)?;
+        map.end()
+    }
+}
+
+struct LatLonRing<'a>(&'a [[f64; 2]]);
+
+impl Serialize for LatLonRing<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.iter().map(|v| [v[1], v[0]]))
+    }
+}
+
+/// The mission items as QGC's `SimpleItem`s.
+struct PlanItems<'a> {
+    items: &'a [MavItem],
+    altitude_mode: u8,
+}
+
+impl Serialize for PlanItems<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.items.iter().enumerate().map(|(i, item)| PlanItem {
+            jump_id: i + 1,
+            item,
+            altitude_mode: self.altitude_mode,
+        }))
+    }
+}
+
+struct PlanItem<'a> {
+    jump_id: usize,
+    item: &'a MavItem,
+    altitude_mode: u8,
+}
+
+impl Serialize for PlanItem<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let m = self.item;
+        // QGC's own altitude fields on positional items, so its editor
+        // shows the same altitude mode as the frame.
+        let positional = m.command == cmd::NAV_TAKEOFF || m.command == cmd::NAV_WAYPOINT;
+        let mut map = s.serialize_map(Some(if positional { 9 } else { 6 }))?;
+        if positional {
+            map.serialize_entry("AMSLAltAboveTerrain", &())?;
+            map.serialize_entry("Altitude", &m.alt)?;
+            map.serialize_entry("AltitudeMode", &self.altitude_mode)?;
+        }
+        map.serialize_entry("autoContinue", &true)?;
+        map.serialize_entry("command", &m.command)?;
+        map.serialize_entry("doJumpId", &self.jump_id)?;
+        map.serialize_entry("frame", &m.frame)?;
+        // A parameter QGC stores as null when NaN (e.g. `KEEP_HEADING`):
+        // serde_json writes a non-finite number as null.
+        let [p1, p2, p3, p4] = m.params;
+        map.serialize_entry("params", &[p1, p2, p3, p4, m.lat, m.lon, m.alt])?;
+        map.serialize_entry("type", "SimpleItem")?;
+        map.end()
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_json::{Value, json};
+
+    fn plan_value(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]) -> Value {
+        serde_json::from_str(&write_plan(mission, fences, rally)).expect("the plan is JSON")
+    }
     use crate::export::mission::MissionItem;
     use crate::export::write_waypoints;
 
@@ -120,7 +224,7 @@ mod tests {
             inclusion: false,
             vertices: vec![[8.5, 47.4], [8.6, 47.4], [8.6, 47.5]],
         }];
-        let plan = write_plan(&m, &fences, &[]);
+        let plan = plan_value(&m, &fences, &[]);
         assert_eq!(plan["fileType"], "Plan");
         assert_eq!(plan["version"], 1);
         assert_eq!(plan["mission"]["version"], 2);
@@ -159,7 +263,7 @@ mod tests {
             .insert(1, MissionItem::ChangeSpeed { speed_m_s: 7.0 });
         m.items
             .insert(2, MissionItem::CameraTriggerDistance { distance_m: 12.5 });
-        let plan = write_plan(&m, &[], &[]);
+        let plan = plan_value(&m, &[], &[]);
         let text = write_waypoints(&m);
         let rows: Vec<Vec<f64>> = text
             .lines()
@@ -191,7 +295,7 @@ mod tests {
             lat: 2.002,
             alt: 40.0,
         });
-        let plan = write_plan(
+        let plan = plan_value(
             &m,
             &[],
             &[GeoPoint {

@@ -3,10 +3,11 @@
 //! directory and the service's downloads.
 
 use rayon::prelude::*;
+use serde::ser::{Serialize, SerializeMap, Serializer};
 use serde_json::{Map, Value, json};
 
-use super::result::SurveyPlan;
-use crate::export::{self, geojson as gj};
+use super::result::{CellOut, SurveyPlan};
+use crate::export;
 
 /// A file produced from a plan.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,7 +60,9 @@ impl SurveyPlan {
             })
         };
         if name == CELLS_FILE {
-            return done(pretty(&self.cells_geojson()));
+            let mut text = serde_json::to_string_pretty(&CellsDocument(self)).unwrap_or_default();
+            text.push('\n');
+            return done(text);
         }
         if let Some(rally) = self.rally_file(name) {
             return Some(rally);
@@ -84,11 +87,11 @@ impl SurveyPlan {
         })?;
         match suffix {
             "waypoints" => done(export::write_waypoints(&s.mission)),
-            "plan" => done(pretty(&export::write_plan(
+            "plan" => done(export::write_plan(
                 &s.mission,
                 &self.fences,
                 &self.rally_for(u),
-            ))),
+            )),
             "route.geojson" => {
                 let mut props = Map::new();
                 props.insert("uav".into(), json!(u.id));
@@ -122,18 +125,51 @@ impl SurveyPlan {
 
     /// The cells as a GeoJSON FeatureCollection (WGS84).
     pub fn cells_geojson(&self) -> Value {
-        gj::feature_collection(self.cells.iter().map(|c| {
-            let mut props = Map::new();
-            props.insert("id".into(), json!(c.id));
-            props.insert("area_m2".into(), json!(c.area_m2));
-            props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
-            props.insert("lanes".into(), json!(c.lanes));
-            props.insert("lane_length_m".into(), json!(c.lane_length_m));
-            if let Some(photos) = &c.photos {
-                photos.add_properties(&mut props);
-            }
-            (c.polygon.clone(), props)
-        }))
+        serde_json::to_value(CellsDocument(self)).unwrap_or_default()
+    }
+}
+
+/// The cells' FeatureCollection, serialised from the plan's cells without
+/// copying their polygons (the file is tens of MB among thousands of
+/// no-fly zones). Keys in byte order, as a JSON object map sorts them.
+struct CellsDocument<'a>(&'a SurveyPlan);
+
+impl Serialize for CellsDocument<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut map = s.serialize_map(Some(2))?;
+        map.serialize_entry("features", &CellFeatures(&self.0.cells))?;
+        map.serialize_entry("type", "FeatureCollection")?;
+        map.end()
+    }
+}
+
+struct CellFeatures<'a>(&'a [CellOut]);
+
+impl Serialize for CellFeatures<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.iter().map(CellFeature))
+    }
+}
+
+struct CellFeature<'a>(&'a CellOut);
+
+impl Serialize for CellFeature<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let c = self.0;
+        let mut props = Map::new();
+        props.insert("id".into(), json!(c.id));
+        props.insert("area_m2".into(), json!(c.area_m2));
+        props.insert("lane_bearing_deg".into(), json!(c.lane_bearing_deg));
+        props.insert("lanes".into(), json!(c.lanes));
+        props.insert("lane_length_m".into(), json!(c.lane_length_m));
+        if let Some(photos) = &c.photos {
+            photos.add_properties(&mut props);
+        }
+        let mut map = s.serialize_map(Some(3))?;
+        map.serialize_entry("geometry", &c.polygon)?;
+        map.serialize_entry("properties", &props)?;
+        map.serialize_entry("type", "Feature")?;
+        map.end()
     }
 }
 
