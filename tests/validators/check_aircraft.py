@@ -22,7 +22,11 @@ for the inclusion fence) it checks:
   least the lead-in long is reported);
 - photo footprints (a photo every trigger distance along each lane, from its
   start; footprint from the pinhole camera at the altitude) cover at least
-  --min-coverage of the ROI less the NFZs.
+  --min-coverage of the ROI less the NFZs;
+- with a plan.json in OUT_DIR: its coverage_ratio is that of the lanes flown
+  (each lane's strip footprint_side_m wide with flat ends, united, within
+  the ROI less the NFZs) within COVERAGE_TOL, and its lane_count the lanes
+  flown: not the lanes planned before the plane pulled some back.
 
 usage: check_aircraft.py OUT_DIR ROI.geojson [NFZ.geojson ...] --type fixed_wing|vtol
        --radius R --climb DEG --clearance C --lead-in L --altitude A
@@ -49,6 +53,9 @@ RULE_TOL_M = 1e-3
 # off, which turns a short leg a little.
 QUANT_M = 1.2e-3
 CLEAR_TOL_M = 0.01
+# plan.json's coverage ratio against the flown lanes' strips (the files'
+# 1e-8° positions move a strip by a millimetre or so).
+COVERAGE_TOL = 1e-3
 ANGLE_TOL = 1e-6
 NAV_WAYPOINT, NAV_LAND, NAV_TAKEOFF, NAV_RTL = 16, 21, 22, 20
 VTOL_TAKEOFF, VTOL_LAND, LAND_START, CAM_DIST = 84, 85, 189, 206
@@ -216,6 +223,7 @@ def check_mission(wp_path, args, roi, free, nfz, to_utm):
 
     # Lanes: one straight leg each, entered and left straight, in free space.
     footprints = []
+    segments = []
     runs = []
     tpts = [p for p, _, _ in track]
     for on, off, trigger in lanes:
@@ -236,6 +244,7 @@ def check_mission(wp_path, args, roi, free, nfz, to_utm):
             if bent > 1e-3:
                 fail(f"{stem}: lane from item {on} is not entered and left straight ({what})")
             runs.append(run)
+        segments.append(lane)
         ux, uy = (b[0] - a[0]) / lane.length, (b[1] - a[1]) / lane.length
         angle = math.degrees(math.atan2(uy, ux))
         n = int(lane.length / trigger + 1e-9) + 1
@@ -247,6 +256,7 @@ def check_mission(wp_path, args, roi, free, nfz, to_utm):
         "waypoints": len(pts),
         "lanes": lanes,
         "footprints": footprints,
+        "segments": segments,
         "worst_rule_excess_m": worst_rule,
         "min_nfz_distance_m": min_nfz if math.isfinite(min_nfz) else None,
         "min_fence_distance_m": min_fence if math.isfinite(min_fence) else None,
@@ -255,6 +265,20 @@ def check_mission(wp_path, args, roi, free, nfz, to_utm):
         "full_runs": sum(r >= args.lead_in - 1e-3 for r in runs),
         "runs": len(runs),
     }
+
+
+def check_plan_coverage(stats, segments, free, summary):
+    """plan.json's coverage ratio and lane count against the lanes flown."""
+    half = stats["footprint_side_m"] / 2
+    strips = unary_union([s.buffer(half, cap_style="flat") for s in segments])
+    swept = strips.intersection(free).area / free.area
+    summary["swath_coverage"] = swept
+    summary["plan_coverage_ratio"] = stats["coverage_ratio"]
+    if abs(swept - stats["coverage_ratio"]) > COVERAGE_TOL:
+        fail(f"plan.json's coverage_ratio {stats['coverage_ratio']:.5f} is not that of the lanes "
+             f"flown ({swept:.5f})")
+    if stats["lane_count"] != len(segments):
+        fail(f"plan.json's lane_count {stats['lane_count']} is not the {len(segments)} lanes flown")
 
 
 def main():
@@ -298,15 +322,20 @@ def main():
         fail(f"no missions in {out}")
     summary = {"missions": {}, "lanes": 0}
     footprints = []
+    segments = []
     for wp in missions:
         r = check_mission(wp, args, roi, free, nfz, to_utm)
         footprints.extend(r.pop("footprints"))
+        segments.extend(r.pop("segments"))
         summary["lanes"] += len(r.pop("lanes"))
         summary["missions"][wp.name] = r
     covered = unary_union(footprints).intersection(free).area / free.area
     summary["footprint_coverage"] = covered
     if covered < args.min_coverage:
         fail(f"photo footprints cover {covered:.4%} of the free area, under {args.min_coverage:.2%}")
+    plan_path = out / "plan.json"
+    if plan_path.exists():
+        check_plan_coverage(json.loads(plan_path.read_text())["stats"], segments, free, summary)
     print(json.dumps(summary))
 
 

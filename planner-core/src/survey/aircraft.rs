@@ -4,10 +4,13 @@
 
 use serde::{Deserialize, Serialize};
 
+use geo_types::MultiPolygon;
+
 use super::cells::Decomposition;
 use super::request::SurveyParams;
 use crate::coverage::airframe::PlaneTurns;
 use crate::coverage::arcs::ARC_SLACK;
+use crate::coverage::{CellPlan, Lane};
 use crate::geo::Issue;
 use crate::num::readable;
 
@@ -214,19 +217,157 @@ pub(super) fn battery_warnings(params: &SurveyParams, uavs: &[super::UavPlan]) -
     out
 }
 
-/// A plane flies each cell's lanes in the order its turns are shortest in.
+/// A plane's lane count and coverage ratio (see [`crate::coverage::coverage_ratio`]):
+/// of the lanes it flies with the camera on, which lanes facing no-fly
+/// zones are pulled back from (or dropped) to leave room for its turns.
+pub(super) fn flown_coverage(
+    lanes: &[Lane],
+    footprint_side_m: f64,
+    free: &MultiPolygon<f64>,
+) -> (usize, f64) {
+    (
+        lanes.len(),
+        crate::coverage::coverage_ratio(lanes, footprint_side_m, free),
+    )
+}
+
+/// Why a plane's footprints miss part of the free area, when they miss
+/// more than 0.5 % and its lanes were pulled back: what of the `planned`
+/// lanes it flies (`flown`) and what helps.
+pub(super) fn pulled_back_warning(
+    params: &SurveyParams,
+    planned: &[CellPlan],
+    flown: &[Lane],
+    coverage_ratio: f64,
+) -> Option<String> {
+    let a = params.plane()?;
+    let length = |l: &Lane| (l.end.x - l.start.x).hypot(l.end.y - l.start.y);
+    let planned_m: f64 = planned.iter().flat_map(|p| &p.lanes).map(length).sum();
+    let flown_m: f64 = flown.iter().map(length).sum();
+    (coverage_ratio < 0.995 && flown_m < planned_m - 1.0).then(|| {
+        format!(
+            "the plane flies {:.2} of the {:.2} km of lanes planned: lane ends facing no-fly zones \
+             are pulled back (or short lanes left out) until it can turn before them at \
+             turn_radius_m = {} m with lead_in_m = {} m, so footprints cover {:.2} % of the free \
+             area; lower turn_radius_m or lead_in_m, or fly higher for wider footprints",
+            flown_m / 1000.0,
+            planned_m / 1000.0,
+            a.turn_radius(),
+            a.lead_in(),
+            coverage_ratio * 100.0
+        )
+    })
+}
+
+/// A plane flies each cell's lanes in the order its turns are shortest in:
+/// a grid's lanes as one set; a crosshatch's first set, then each part of
+/// its second set (see [`sets`]) on its own. A corridor's lanes keep their
+/// order (a bent lane's legs follow one another).
 pub(super) fn order_lanes(d: &mut Decomposition, params: &SurveyParams) {
-    if let Some(turns) = params.plane_turns() {
-        for plan in &mut d.plans {
-            *plan = turns.order(plan);
+    let Some(turns) = params.plane_turns() else {
+        return;
+    };
+    if d.along_line {
+        return;
+    }
+    for plan in &mut d.plans {
+        let mut lanes = Vec::with_capacity(plan.lanes.len());
+        for run in sets(&plan.lanes) {
+            let part = CellPlan {
+                lanes: plan.lanes[run].to_vec(),
+                links: Vec::new(),
+                ..plan.clone()
+            };
+            lanes.extend(turns.order(&part).lanes);
+        }
+        plan.links = vec![Vec::new(); lanes.len().saturating_sub(1)];
+        plan.lanes = lanes;
+    }
+}
+
+/// Lanes whose directions differ by less than this are of one set, radians.
+const SAME_SET_RAD: f64 = 0.01;
+
+/// The runs of `lanes` that are laid as one set: the lanes up to the first
+/// in another direction (a cell's own lanes, a grid's all), then each part
+/// of a crosshatch's second set, told apart by the step across from lane
+/// to lane (even within a part, changing where the next part starts).
+fn sets(lanes: &[Lane]) -> Vec<std::ops::Range<usize>> {
+    let heading = |l: &Lane| (l.end.y - l.start.y).atan2(l.end.x - l.start.x);
+    let parallel = |a: &Lane, b: &Lane| {
+        let d = (heading(a) - heading(b)).rem_euclid(std::f64::consts::PI);
+        d.min(std::f64::consts::PI - d) < SAME_SET_RAD
+    };
+    // The step across the lanes from `a` to `b`, along the normal of `a`'s
+    // line (the same for both ways along it).
+    let step = |a: &Lane, b: &Lane| {
+        let h = heading(a).rem_euclid(std::f64::consts::PI);
+        let (nx, ny) = (-h.sin(), h.cos());
+        let mid = |l: &Lane| ((l.start.x + l.end.x) / 2.0, (l.start.y + l.end.y) / 2.0);
+        let ((ax, ay), (bx, by)) = (mid(a), mid(b));
+        (bx - ax) * nx + (by - ay) * ny
+    };
+    let mut out = Vec::new();
+    let mut start = 0;
+    for k in 1..lanes.len() {
+        let new = if !parallel(&lanes[k - 1], &lanes[k]) {
+            true
+        } else if parallel(&lanes[0], &lanes[k]) || k - start < 2 {
+            false
+        } else {
+            let s0 = step(&lanes[k - 2], &lanes[k - 1]);
+            let s1 = step(&lanes[k - 2], &lanes[k]) - s0;
+            (s1 - s0).abs() > 0.01 * s0.abs() + 0.01
+        };
+        if new {
+            out.push(start..k);
+            start = k;
         }
     }
+    if !lanes.is_empty() {
+        out.push(start..lanes.len());
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use serde_json::json;
+
+    #[test]
+    fn a_crosshatch_is_ordered_set_by_set_and_part_by_part() {
+        let lane = |x0: f64, y0: f64, x1: f64, y1: f64| Lane {
+            start: geo_types::coord! {x: x0, y: y0},
+            end: geo_types::coord! {x: x1, y: y1},
+        };
+        // First set: 4 lanes north-south, 20 m apart, back and forth.
+        let mut lanes: Vec<Lane> = (0..4)
+            .map(|i| {
+                let x = 20.0 * f64::from(i);
+                if i % 2 == 0 {
+                    lane(x, 0.0, x, 300.0)
+                } else {
+                    lane(x, 300.0, x, 0.0)
+                }
+            })
+            .collect();
+        // Second set in two parts: 3 lanes east-west at y = 0, 20, 40, then
+        // 3 at y = 200, 220, 240.
+        for base in [0.0, 200.0] {
+            for i in 0..3 {
+                let y = base + 20.0 * f64::from(i);
+                lanes.push(if i % 2 == 0 {
+                    lane(0.0, y, 60.0, y)
+                } else {
+                    lane(60.0, y, 0.0, y)
+                });
+            }
+        }
+        assert_eq!(sets(&lanes), vec![0..4, 4..7, 7..10]);
+        assert_eq!(sets(&lanes[..4]), vec![0..4]);
+        assert!(sets(&[]).is_empty());
+    }
 
     #[test]
     fn defaults_per_type_and_checks() {

@@ -19,8 +19,12 @@ use crate::flock::{Piece, Tour, count_turns};
 use crate::geo::{GeoError, SurveyArea, UtmProjection};
 use crate::terrain::Point3;
 
+/// The UAVs' plans, every point flown and a plane's lanes flown.
+type FlownPlans = (Vec<UavPlan>, Vec<Coord<f64>>, Vec<crate::coverage::Lane>);
+
 /// Every UAV's plan from the tours of its sorties (`flights`, one list
-/// per UAV), and every point flown (for the fence).
+/// per UAV), every point flown (for the fence) and, for a plane, the lanes
+/// it flies with the camera on (pulled back from the no-fly zones).
 pub(super) fn uav_plans(
     flock: &FlockSetup,
     flights: Vec<Vec<SortieTour>>,
@@ -28,9 +32,10 @@ pub(super) fn uav_plans(
     params: &SurveyParams,
     flight: &Flight,
     proj: &UtmProjection,
-) -> Result<(Vec<UavPlan>, Vec<Coord<f64>>), PlanError> {
+) -> Result<FlownPlans, PlanError> {
     let mut uav_plans = Vec::with_capacity(flock.specs.len());
     let mut all_paths: Vec<Coord<f64>> = Vec::new();
+    let mut plane_lanes = Vec::new();
     let photo_camera = PhotoCamera::new(
         &params.camera(),
         params
@@ -66,11 +71,12 @@ pub(super) fn uav_plans(
                 let trigger = flight.geometry.trigger_distance_m;
                 let frame = params.altitude_frame;
                 let terrain = home_amsl.map(|(o, h)| (&o.terrain.model, &flight.rules, h));
-                let (mission, stats, path) =
+                let (mission, flown) =
                     plane.sortie(tour, home, spec.start, speed, trigger, frame, terrain, proj)?;
-                all_paths.extend(path);
+                all_paths.extend(flown.points);
+                plane_lanes.extend(flown.lanes);
                 let photos = photo_planner.of_mission(&mission, tour, proj)?;
-                (mission, stats, None, Some(photos))
+                (mission, flown.stats, None, Some(photos))
             } else {
                 let (mission, length_3d, uav_terrain, photos) = fly(
                     tour,
@@ -115,7 +121,7 @@ pub(super) fn uav_plans(
             sorties,
         });
     }
-    Ok((uav_plans, all_paths))
+    Ok((uav_plans, all_paths, plane_lanes))
 }
 
 /// One tour flown from `start`: flat at the altitude, or over the DEM

@@ -108,14 +108,17 @@ pub fn plan_survey_over(
     let (rally_points, rally_utm) =
         rally::check_rally_points(&params.rally_points, &area, setup.clearance, dem)?;
     // The coverage figure needs only the lanes: measured on another core
-    // while the flock shares the cells.
-    let (outcome, (lane_count, coverage_ratio)) = crate::cancel::join(
+    // while the flock shares the cells (a plane's once it has flown them).
+    let (outcome, planned_coverage) = crate::cancel::join(
         || flock_plan::share_cells(&setup, &d, params, &flight, over_dem.as_ref()),
-        || cells::coverage(&d.plans, flight.geometry.footprint_side_m, &free),
+        || {
+            (params.plane().is_none())
+                .then(|| cells::coverage(&d.plans, flight.geometry.footprint_side_m, &free))
+        },
     );
     let outcome = outcome?;
     let proj = &area.projection;
-    let (uavs, mut flown) = mission::uav_plans(
+    let (uavs, mut flown, plane_lanes) = mission::uav_plans(
         &setup,
         outcome.sorties,
         over_dem.as_ref(),
@@ -124,8 +127,17 @@ pub fn plan_survey_over(
         proj,
     )?;
     crate::cancel::check()?;
+    let (lane_count, coverage_ratio) = planned_coverage.unwrap_or_else(|| {
+        aircraft::flown_coverage(&plane_lanes, flight.geometry.footprint_side_m, &free)
+    });
     let mut warnings = setup.warnings.clone();
     warnings.extend(aircraft::battery_warnings(params, &uavs));
+    warnings.extend(aircraft::pulled_back_warning(
+        params,
+        &d.plans,
+        &plane_lanes,
+        coverage_ratio,
+    ));
     warnings.extend(over_dem.as_ref().and_then(|o| o.terrain.warning()));
     warnings.extend(cells::left_out_warnings(
         setup.enclosed_m2,

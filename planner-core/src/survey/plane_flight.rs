@@ -66,6 +66,9 @@ pub(super) struct PlaneSortie {
     pub stats: UavStats,
     /// Every point of the rounded path (for the fence).
     pub points: Vec<Coord<f64>>,
+    /// The lanes flown with the camera on, as pulled back (for the
+    /// coverage figure).
+    pub lanes: Vec<Lane>,
 }
 
 impl<'a> PlaneFlight<'a> {
@@ -466,14 +469,14 @@ impl<'a> PlaneFlight<'a> {
         let stats = UavStats {
             length_m,
             length_3d_m,
-            survey_length_m: f.lanes.iter().sum(),
+            survey_length_m: f.lanes.iter().map(|l| dist(l.start, l.end)).sum(),
             transit_length_m: f.transit_m,
             turns,
             flight_time_s: length_3d_m / speed_m_s,
             photos: f
                 .lanes
                 .iter()
-                .map(|&l| photo_count(l, trigger_distance_m))
+                .map(|l| photo_count(dist(l.start, l.end), trigger_distance_m))
                 .sum(),
             cells: cells.len(),
             sorties: 1,
@@ -484,6 +487,7 @@ impl<'a> PlaneFlight<'a> {
             items,
             stats,
             points,
+            lanes: f.lanes,
         })
     }
 
@@ -612,7 +616,7 @@ struct Entered {
 #[derive(Default)]
 struct Flight {
     path: Vec<Flown>,
-    lanes: Vec<f64>,
+    lanes: Vec<Lane>,
     transit_m: f64,
 }
 
@@ -644,7 +648,7 @@ impl Flight {
     }
 
     fn push_lane(&mut self, lane: &Lane) {
-        self.lanes.push(dist(lane.start, lane.end));
+        self.lanes.push(*lane);
         self.push(
             vec![Piece::Line {
                 from: lane.start,
@@ -661,8 +665,8 @@ fn dist(a: Coord<f64>, b: Coord<f64>) -> f64 {
 
 impl PlaneFlight<'_> {
     /// The mission of one sortie flown from UAV home `home` (planning
-    /// coordinates; `start` the same in lon/lat), its statistics and the
-    /// points flown (for the fence); over `terrain` (the model, the height
+    /// coordinates; `start` the same in lon/lat), and the sortie flown
+    /// (its items moved into the mission); over `terrain` (the model, the height
     /// rules and the DEM height at home) when given.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn sortie(
@@ -675,7 +679,7 @@ impl PlaneFlight<'_> {
         frame: AltitudeFrame,
         terrain: Option<(&TerrainModel, &FlightRules, f64)>,
         proj: &UtmProjection,
-    ) -> Result<(crate::export::Mission, UavStats, Vec<Coord<f64>>), PlanError> {
+    ) -> Result<(crate::export::Mission, PlaneSortie), PlanError> {
         let over = terrain.map(|(model, rules, home_amsl)| Over {
             model,
             rules,
@@ -690,7 +694,7 @@ impl PlaneFlight<'_> {
                 alt,
             })
         };
-        let flown = self.fly(
+        let mut flown = self.fly(
             tour,
             home,
             speed_m_s,
@@ -706,9 +710,9 @@ impl PlaneFlight<'_> {
             },
             frame,
             cruise_speed_m_s: speed_m_s,
-            items: flown.items,
+            items: std::mem::take(&mut flown.items),
             over_terrain: over.is_some(),
         };
-        Ok((mission, flown.stats, flown.points))
+        Ok((mission, flown))
     }
 }
