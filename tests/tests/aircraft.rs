@@ -177,6 +177,93 @@ fn plane_coverage_is_that_of_the_lanes_flown() {
     assert!(mplan["stats"]["coverage_ratio"].as_f64().unwrap() > 0.995);
 }
 
+/// Planes fly a crosshatch: both lane sets, each with the plane's
+/// lead-ins, overshoots and Dubins turns (set by set, part by part of the
+/// second). Every mission passes check_aircraft.py; check_patterns.py
+/// finds each set alone covering >= 99.5 % of the free area and the sets
+/// 90° ± 1° apart; a VTOL flock in battery sorties too; the service plans
+/// the same as the CLI.
+#[test]
+fn planes_fly_a_crosshatch() {
+    let dir = tempfile::tempdir().unwrap();
+    let roi = shared_data("polygons/fields2cover__test_2_cell.json");
+    let nfz = illinois_nfz(dir.path());
+    let cases = [
+        (
+            "fixed_wing",
+            40.0,
+            10.0,
+            json!({"altitude_m": 100, "side_overlap": 0.6, "pattern": "crosshatch",
+                   "aircraft": {"type": "fixed_wing"}}),
+        ),
+        (
+            "vtol",
+            60.0,
+            8.0,
+            json!({"altitude_m": 100, "side_overlap": 0.6, "pattern": "crosshatch",
+                   "uavs": [{"id": "a", "start": [-90.1350, 41.4690], "max_flight_time_s": 900},
+                            {"id": "b", "start": [-90.1300, 41.4640], "max_flight_time_s": 900}],
+                   "aircraft": {"type": "vtol"}}),
+        ),
+    ];
+    for (kind, radius, climb, params) in &cases {
+        let (kind, radius, climb) = (*kind, *radius, *climb);
+        let (out, plan) = plan_cli(dir.path(), &roi, &[&nfz], params);
+        let summary = check_aircraft(&out, &roi, &[&nfz], kind, radius, climb, 100.0);
+        assert!(
+            summary["footprint_coverage"].as_f64().unwrap() >= 0.995,
+            "{kind}: {summary}"
+        );
+        let params_path = write_json(dir.path(), "checked.params.json", params);
+        let v = validator(
+            "check_patterns.py",
+            &[&out, &params_path, &roi, nfz.as_path()],
+        );
+        assert!(
+            v.status.success(),
+            "{kind}: check_patterns: {}{}",
+            text(&v.stdout),
+            text(&v.stderr)
+        );
+        let p: Value = serde_json::from_slice(&v.stdout).unwrap();
+        for set in ["set1", "set2"] {
+            assert!(
+                p[format!("{set}_lanes")].as_u64().unwrap() >= 5,
+                "{kind}: {p}"
+            );
+            assert!(p[format!("{set}_coverage")].as_f64().unwrap() >= 0.995);
+        }
+        assert!(p["worst_right_angle_error_deg"].as_f64().unwrap() <= 1.0);
+        assert_eq!(p["photos"], plan["stats"]["photos"], "{kind}");
+        check_missions(&out);
+        if kind == "vtol" {
+            assert!(
+                plan["stats"]["sorties"].as_u64().unwrap() >= 3,
+                "{}",
+                plan["stats"]
+            );
+        }
+    }
+    // The service plans the fixed wing's crosshatch as the CLI does.
+    let data = tempfile::tempdir().unwrap();
+    let server = Server::start(data.path(), &[]);
+    let mut body = cases[0].3.clone();
+    body["roi"] = serde_json::from_str(&std::fs::read_to_string(&roi).unwrap()).unwrap();
+    body["no_fly_zones"] = serde_json::from_str::<Value>(&std::fs::read_to_string(&nfz).unwrap())
+        .unwrap()["features"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["geometry"].clone())
+        .collect();
+    let r = post_json(&server.url("/api/v1/surveys"), &body);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let (_, cli) = plan_cli(dir.path(), &roi, &[&nfz], &cases[0].3);
+    for k in ["lane_count", "photos", "length_m", "coverage_ratio"] {
+        assert_eq!(r.json()["stats"][k], cli["stats"][k], "{k}");
+    }
+}
+
 /// Battery sorties priced with the plane's turns, climb-out and final:
 /// every sortie as flown fits the battery, and each is checked like a
 /// whole mission.

@@ -247,7 +247,7 @@ pub(super) fn pulled_back_warning(
     (coverage_ratio < 0.995 && flown_m < planned_m - 1.0).then(|| {
         format!(
             "the plane flies {:.2} of the {:.2} km of lanes planned: lane ends facing no-fly zones \
-             are pulled back (or short lanes left out) until it can turn before them at \
+             are pulled back (or lanes it cannot reach left out) so that it can turn at \
              turn_radius_m = {} m with lead_in_m = {} m, so footprints cover {:.2} % of the free \
              area; lower turn_radius_m or lead_in_m, or fly higher for wider footprints",
             flown_m / 1000.0,

@@ -342,41 +342,72 @@ impl<'a> PlaneFlight<'a> {
         let mut at = climb_out;
         // The overshoot after the lane last flown, if any.
         let mut from_lane: Option<f64> = None;
+        // A lane no way reaches (either way round) is left out, and the
+        // coverage figure of the lanes flown shows it; the first such
+        // fault is the plan's when no lane is reached at all.
+        let mut fault = None;
         for cell in &lanes {
-            for (k, entered) in cell.iter().enumerate() {
-                let (start, end) = lane_poses(&entered.lane);
-                if k == 0 {
-                    let way = if let Some(over) = from_lane {
-                        self.around(at, over, start, entered.lead)?
-                    } else {
-                        let lead = start.ahead(-entered.lead);
-                        let mut w = self.connect(at, lead)?;
-                        w.push(Piece::Line {
-                            from: lead.at,
-                            to: start.at,
-                        });
-                        w
-                    };
-                    f.push_transit(way);
+            let mut prev: Option<Entered> = None;
+            for entered in cell {
+                let mut reached = None;
+                for way_round in [*entered, entered.reversed()] {
+                    match self.way_to(at, from_lane, prev.as_ref(), &way_round) {
+                        Ok(way) => {
+                            reached = Some((way_round, way));
+                            break;
+                        }
+                        Err(e @ PlanError::Invalid(_)) => {
+                            fault.get_or_insert(e);
+                        }
+                        Err(e) => return Err(e),
+                    }
+                }
+                let Some((entered, way)) = reached else {
+                    continue;
+                };
+                if prev.is_some() {
+                    f.push_turn(way);
                 } else {
-                    f.push_turn(self.lane_turn(&cell[k - 1], entered)?);
+                    f.push_transit(way);
                 }
                 f.push_lane(&entered.lane);
-                at = end;
+                at = lane_poses(&entered.lane).1;
                 from_lane = Some(entered.over);
+                prev = Some(entered);
             }
         }
-        let landing = self.landing(home, at)?;
-        let way = if let Some(over) = from_lane {
-            let out = at.ahead(over);
-            let mut w = vec![Piece::Line {
-                from: at.at,
-                to: out.at,
-            }];
-            w.extend(self.connect(out, landing)?);
-            w
-        } else {
-            self.connect(at, landing)?
+        if let Some(e) = fault.filter(|_| f.lanes.is_empty()) {
+            return Err(e);
+        }
+        // Home by the first landing direction a transit reaches.
+        let (out, mut way) = match from_lane {
+            Some(over) => {
+                let out = at.ahead(over);
+                let line = Piece::Line {
+                    from: at.at,
+                    to: out.at,
+                };
+                (out, vec![line])
+            }
+            None => (at, Vec::new()),
+        };
+        let mut landing = None;
+        let mut fault = None;
+        for approach in self.landings(home, at)? {
+            match self.connect(out, approach) {
+                Ok(w) => {
+                    way.extend(w);
+                    landing = Some(approach);
+                    break;
+                }
+                Err(e @ PlanError::Invalid(_)) => {
+                    fault.get_or_insert(e);
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        let Some(landing) = landing else {
+            return Err(fault.unwrap_or_else(|| self.fault(home, "the landing approach")));
         };
         f.push_transit(way);
         f.push_transit(vec![Piece::Line {
@@ -386,24 +417,64 @@ impl<'a> PlaneFlight<'a> {
         Ok(f)
     }
 
-    /// Where the final straight to the landing starts ([`PlaneFlight::final_m`]
-    /// before home): of the clear directions, the one nearest to arriving
-    /// straight from `from`.
-    fn landing(&self, home: Coord<f64>, from: Pose) -> Result<Pose, PlanError> {
+    /// The way to lane `next` from pose `at`: the turn from `prev` (the
+    /// lane before in its cell) if any, else a transit, after the
+    /// overshoot `over` of the lane last flown if any.
+    fn way_to(
+        &self,
+        at: Pose,
+        over: Option<f64>,
+        prev: Option<&Entered>,
+        next: &Entered,
+    ) -> Result<Vec<Piece>, PlanError> {
+        let (start, _) = lane_poses(&next.lane);
+        if let Some(p) = prev {
+            return self.lane_turn(p, next);
+        }
+        if let Some(over) = over {
+            return self.around(at, over, start, next.lead);
+        }
+        let lead = start.ahead(-next.lead);
+        let mut w = self.connect(at, lead)?;
+        w.push(Piece::Line {
+            from: lead.at,
+            to: start.at,
+        });
+        Ok(w)
+    }
+
+    /// Where the final straight to the landing may start ([`PlaneFlight::final_m`]
+    /// before home): the clear directions, the one nearest to arriving
+    /// straight from `from` first.
+    fn landings(&self, home: Coord<f64>, from: Pose) -> Result<Vec<Pose>, PlanError> {
         let base = if dist(from.at, home) > 1e-9 {
             Pose::towards(from.at, home).heading
         } else {
             from.heading
         };
-        self.straight_at_home(home, base, -self.final_m)
-            .ok_or_else(|| self.fault(home, "the landing approach"))
+        let out: Vec<Pose> = self.straights_at_home(home, base, -self.final_m).collect();
+        if out.is_empty() {
+            return Err(self.fault(home, "the landing approach"));
+        }
+        Ok(out)
     }
 
     /// A straight of `length` m out of `home` (into it when negative),
     /// headed as near `base` as the keep-out area allows (in 15° steps);
     /// its far end.
     fn straight_at_home(&self, home: Coord<f64>, base: f64, length: f64) -> Option<Pose> {
-        (0..24).find_map(|k| {
+        self.straights_at_home(home, base, length).next()
+    }
+
+    /// Every clear straight of [`PlaneFlight::straight_at_home`], the
+    /// nearest to `base` first.
+    fn straights_at_home(
+        &self,
+        home: Coord<f64>,
+        base: f64,
+        length: f64,
+    ) -> impl Iterator<Item = Pose> + '_ {
+        (0..24).filter_map(move |k| {
             let turn = (k as f64 / 2.0).ceil() * if k % 2 == 0 { 1.0 } else { -1.0 };
             let pose = Pose::new(home, base + turn * std::f64::consts::PI / 12.0).ahead(length);
             (self.obstacles.is_clear(pose.at, home) && !self.blocked_at(pose.at)).then_some(pose)
@@ -606,10 +677,25 @@ impl PlaneFlight<'_> {
 
 /// A lane as flown (pulled back from the NFZs it faces) and the straight
 /// runs before and after it.
+#[derive(Clone, Copy)]
 struct Entered {
     lane: Lane,
     lead: f64,
     over: f64,
+}
+
+impl Entered {
+    /// The same lane flown the other way.
+    fn reversed(&self) -> Entered {
+        Entered {
+            lane: Lane {
+                start: self.lane.end,
+                end: self.lane.start,
+            },
+            lead: self.over,
+            over: self.lead,
+        }
+    }
 }
 
 /// The pieces of a sortie and what they add up to.
