@@ -315,11 +315,18 @@ pub(super) fn left_out_warnings(
 /// The cells as planned: area, lane direction and lanes of each, and its
 /// polygon in WGS84.
 pub(super) fn cells_out(d: &Decomposition, proj: &UtmProjection) -> Result<Vec<CellOut>, GeoError> {
+    // Each cell's (first) plan, found by index: there may be thousands.
+    let mut plan_of: Vec<Option<&CellPlan>> = vec![None; d.cells.len()];
+    for p in d.plans.iter().rev() {
+        if let Some(slot) = plan_of.get_mut(p.cell_index) {
+            *slot = Some(p);
+        }
+    }
     d.cells
         .iter()
         .enumerate()
         .map(|(i, c)| {
-            let plan = d.plans.iter().find(|p| p.cell_index == i);
+            let plan = plan_of[i];
             Ok(CellOut {
                 id: i,
                 area_m2: c.unsigned_area(),

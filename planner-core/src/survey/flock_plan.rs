@@ -328,15 +328,17 @@ fn reorder_by_tour(
     let home = input.uavs[u].home;
     let candidate = plan_tour(home, &plans, input.cells, input.free, input.obstacles)
         .map_err(|e| PlanError::Internal(e.to_string()))?;
+    // The job flying each cell, found by cell (a tour has thousands).
+    let job_of: std::collections::HashMap<usize, usize> = route
+        .iter()
+        .map(|v| (parts[v.job].piece.cell, v.job))
+        .collect();
     let mut new_route = Vec::with_capacity(candidate.visits.len());
     for visit in candidate.visits {
-        let Some(old) = route
-            .iter()
-            .find(|v| parts[v.job].piece.cell == visit.cell_index)
-        else {
+        let Some(&old_job) = job_of.get(&visit.cell_index) else {
             return Err(PlanError::Internal("tour lost a cell".into()));
         };
-        let piece = parts[old.job].piece.clone();
+        let piece = parts[old_job].piece.clone();
         let job = add_part(input, flock, parts, Part { piece, plan: visit })?;
         new_route.push(Visit::new(job, 0));
     }

@@ -33,32 +33,36 @@ pub(super) struct FlockSetup {
 }
 
 impl FlockSetup {
-    /// The flock of `req` over `area`, whose free space is `free`.
+    /// The flock of `req` over `area`, whose free space is `free`, and
+    /// with `keep_out` the [`keep_out_area`] of `area`.
     pub(super) fn new(
         req: &SurveyRequest,
         area: &SurveyArea,
         free: &MultiPolygon<f64>,
+        keep_out: MultiPolygon<f64>,
     ) -> Result<FlockSetup, PlanError> {
         let params = &req.params;
         let proj = &area.projection;
-        // Everything flown keeps the clearance from the NFZs (they are exported
-        // as exclusion fences): lanes, links and transits are planned outside
-        // this keep-out area, coverage is still measured over the free space.
         let clearance = params.nfz_clearance_m;
-        let nfz_union = nfz_union(&area.no_fly);
-        let keep_out = crate::geo::keep_out_area(&nfz_union, clearance);
-        let flyable = if clearance > 0.0 {
-            roi_minus(area, &keep_out.0)
-        } else {
-            free.clone()
+        let flyable_of = |keep_out: &MultiPolygon<f64>| -> Result<MultiPolygon<f64>, PlanError> {
+            let flyable = if clearance > 0.0 {
+                roi_minus(area, &keep_out.0)
+            } else {
+                free.clone()
+            };
+            crate::cancel::check()?;
+            if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
+                return Err(nothing_flyable(clearance));
+            }
+            Ok(flyable)
         };
-        crate::cancel::check()?;
-        if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
-            return Err(nothing_flyable(clearance));
-        }
         let mut warnings = Vec::new();
         let default_uav = params.uavs.is_empty();
+        // The default start is looked for outside the keep-out area: only
+        // once there is flyable space (that fault is the one to report).
+        let mut flyable_before_fill = None;
         let specs = if default_uav {
+            flyable_before_fill = Some(flyable_of(&keep_out)?);
             let (start, note) = default_start(&req.roi[0].polygon, area, &keep_out, clearance)?;
             warnings.extend(note);
             vec![UavSpec {
@@ -83,21 +87,21 @@ impl FlockSetup {
         // NFZs narrower than twice the clearance): not flown, unless a UAV
         // takes off inside.
         let (keep_out, enclosed_m2) = crate::geo::fill_enclosed(&keep_out, &homes);
-        let flyable = if enclosed_m2 > 0.0 {
-            roi_minus(area, &keep_out.0)
-        } else {
-            flyable
-        };
-        crate::cancel::check()?;
-        if flyable.unsigned_area() < MIN_FREE_AREA_M2 {
-            return Err(nothing_flyable(clearance));
-        }
+        // The flyable space and the transit planner's map of the keep-out
+        // area are independent: each on its own core.
+        let (flyable, obstacles) = crate::cancel::join(
+            || match flyable_before_fill {
+                Some(flyable) if enclosed_m2 == 0.0 => Ok(flyable),
+                _ => flyable_of(&keep_out),
+            },
+            || ObstacleMap::new(&keep_out, 0.0),
+        );
         let mut flock = FlockSetup {
             specs,
             default_uav,
             homes,
-            flyable,
-            obstacles: ObstacleMap::new(&keep_out, 0.0),
+            flyable: flyable?,
+            obstacles,
             clearance,
             enclosed_m2,
             warnings,
@@ -122,6 +126,14 @@ impl FlockSetup {
     pub(super) fn pointer(&self, i: usize, field: &str) -> String {
         uav_pointer(self.default_uav, i, field)
     }
+}
+
+/// The area every flown point keeps out of: the union of the NFZs grown
+/// by `nfz_clearance_m` (everything flown keeps that clearance, as the NFZs
+/// are exported as exclusion fences; coverage is still measured over the
+/// free space). It needs no free space, so it is made beside it.
+pub(super) fn keep_out_area(no_fly: &[Polygon<f64>], clearance: f64) -> MultiPolygon<f64> {
+    crate::geo::keep_out_area(&nfz_union(no_fly), clearance)
 }
 
 fn uav_pointer(default_uav: bool, i: usize, field: &str) -> String {

@@ -73,10 +73,15 @@ pub fn plan_survey_over(
     let prepared = corridor::prepare(req, limits)?;
     let req = prepared.as_area.as_ref().unwrap_or(req);
     let area = prepared.area;
-    let free = cells::free_space(&area)?;
+    // The keep-out area round the NFZs needs no free space: both at once.
+    let (free, keep_out) = crate::cancel::join(
+        || cells::free_space(&area),
+        || homes::keep_out_area(&area.no_fly, req.params.nfz_clearance_m),
+    );
+    let free = free?;
     let free_area = free.unsigned_area();
     let flight = params.flight(free_area, limits, dem.is_some())?;
-    let setup = homes::FlockSetup::new(req, &area, &free)?;
+    let setup = homes::FlockSetup::new(req, &area, &free, keep_out)?;
     crate::cancel::check()?;
     let mut d = if let Some((line, width)) = &prepared.centre {
         corridor::lay_corridor(line, *width, &setup.flyable, flight.geometry.line_spacing_m)?
