@@ -30,7 +30,7 @@
 use super::arc_model::{ArcModel, ArcRule, Heuristic, Rule};
 use super::bucket_queue::BucketQueue;
 use super::neighbourhood::{Marks, Neighbourhood, flood_budget, opposite};
-use super::tiles::Tiles;
+use super::tiles::{TileLayout, Tiles};
 use super::{CANCEL_CHECK_INTERVAL, Cell, CostGrid, End, Route, RouteError, RouteOptions};
 
 /// Bit pattern of +∞. Labels are stored XOR-ed with it so that a zeroed
@@ -109,6 +109,47 @@ fn search(
     if start == goal {
         return Ok((vec![start], 0));
     }
+    let (path, expanded, _) = search_tree(grid, hood, model, (start, goal), options, cancel)?;
+    Ok((path, expanded))
+}
+
+/// A finished search from a start to a goal (≠ the start): every cell's
+/// label in tiled order, so that D* Lite can read the optimal cost from
+/// the start of each closed cell (`landmark`).
+pub(crate) struct SearchTree {
+    words: Vec<u64>,
+    layout: TileLayout,
+    goal_g: f64,
+}
+
+impl SearchTree {
+    /// The cost from the start of cell (r, c) if the search closed it
+    /// (optimal with `epsilon` = 1), else `None`.
+    #[inline]
+    pub(crate) fn closed_g(&self, r: usize, c: usize) -> Option<f64> {
+        let word = self.words[self.layout.index(r, c)];
+        (word & CLOSED != 0).then(|| Labels::g(word))
+    }
+
+    /// The cost found from the start to the goal, as the labels hold it.
+    pub(crate) fn goal_cost(&self) -> f64 {
+        self.goal_g
+    }
+
+    /// Bytes held per (padded) cell.
+    pub(crate) const BYTES_PER_CELL: usize = 8;
+}
+
+/// A* from `ends` = (start, goal), start ≠ goal: the cell path, the number
+/// of expanded cells and the labels.
+pub(crate) fn search_tree(
+    grid: &CostGrid,
+    hood: &Neighbourhood,
+    model: &ArcModel,
+    (start, goal): (usize, usize),
+    options: &RouteOptions,
+    cancel: &dyn Fn() -> bool,
+) -> Result<(Vec<usize>, u64, SearchTree), RouteError> {
     let width = grid.width();
     let tiles = Tiles::new(grid);
     let mut labels = Labels::new(tiles.len());
@@ -145,7 +186,12 @@ fn search(
         assert!(path.len() <= n, "the parent chain must reach the start");
     }
     path.reverse();
-    Ok((path, expanded))
+    let tree = SearchTree {
+        goal_g: Labels::g(labels.words[tiles.index(goal_rc.0, goal_rc.1)]),
+        words: labels.words,
+        layout: tiles.layout(),
+    };
+    Ok((path, expanded, tree))
 }
 
 /// The goal flood marks cells with the closed bit (before the search).
@@ -249,7 +295,7 @@ fn entry(f: f64, h: f64, cell: usize) -> u128 {
 /// values lie within (1 + epsilon) × the dearest arc of the smallest (an
 /// arc plus the inflated heuristic's change along it), which sets the
 /// number of buckets (capped).
-fn open_list(hood: &Neighbourhood, model: &ArcModel, epsilon: f64) -> BucketQueue {
+pub(crate) fn open_list(hood: &Neighbourhood, model: &ArcModel, epsilon: f64) -> BucketQueue {
     let cheapest = hood.shortest_step() * model.heuristic_factor();
     let dearest = hood.longest_step() * model.largest_factor();
     let spread = (1.0 + epsilon) * dearest;

@@ -1,5 +1,5 @@
-//! A* open list: an exact priority queue that keeps only a thin slice of
-//! the frontier in a heap.
+//! The searches' open list (A*'s and D* Lite's): an exact priority queue
+//! that keeps only a thin slice of the frontier in a heap.
 //!
 //! Entries are `u128`s whose top 64 bits are a non-negative f64 key (whose
 //! bit pattern orders like the number) and whose low bits break ties; they
@@ -18,6 +18,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+#[derive(Clone)]
 pub(crate) struct BucketQueue {
     inverse_width: f64,
     /// The current bucket as it was reached, sorted descending.
@@ -85,6 +86,23 @@ impl BucketQueue {
                 }
                 (Some(_), _) => return self.sorted.pop(),
                 (None, Some(_)) => return self.heap.pop().map(|e| e.0),
+                (None, None) => {
+                    if !self.advance() {
+                        return None;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The entry `pop` would return, left in the queue.
+    #[inline]
+    pub(crate) fn peek(&mut self) -> Option<u128> {
+        loop {
+            match (self.sorted.last(), self.heap.peek()) {
+                (Some(&a), Some(&Reverse(b))) => return Some(a.min(b)),
+                (Some(&a), None) => return Some(a),
+                (None, Some(&Reverse(b))) => return Some(b),
                 (None, None) => {
                     if !self.advance() {
                         return None;
@@ -174,7 +192,9 @@ mod tests {
                     reference.push(Reverse(e));
                 }
                 if rng.below(3) > 0 {
+                    let peeked = queue.peek();
                     let (got, want) = (queue.pop(), reference.pop().map(|r| r.0));
+                    assert_eq!(peeked, got, "peek shows what pop takes");
                     assert_eq!(got, want, "width {width} slots {slots} round {round}");
                     if let Some(e) = got
                         && key(e).is_finite()

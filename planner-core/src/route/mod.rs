@@ -4,16 +4,18 @@
 //! - [`astar()`]: A* on dense arrays (optionally weighted by `epsilon`),
 //!   16 bytes per cell including the costs;
 //! - [`DStarLite`]: incremental replanning when cells become blocked or
-//!   change cost (Koenig & Likhachev 2002, optimised version), 13 bytes
-//!   per cell including the costs;
+//!   change cost (Koenig & Likhachev 2002, optimised version), its first
+//!   search guided by A*'s costs (`landmark`), 21 bytes per cell including
+//!   the costs;
 //! - [`smooth`]: post-smoothing of a cell path into a few waypoints;
 //! - [`changes`]: the replanning rules, how blocked areas and cost
 //!   changes change cells and how a D* Lite search is repaired for them;
 //!
 //! and their parts: the 8-neighbourhood and step lengths
 //! (`neighbourhood`), the arc rules and heuristic (`arc_model`), a tiled
-//! copy of the costs (`tiles`), the open lists (`bucket_queue`,
-//! `quaternary_heap`) and a lazily infinite f64 array (`dist_array`).
+//! copy of the costs (`tiles`), the open list (`bucket_queue`), D* Lite's
+//! landmark heuristic (`landmark`) and a lazily infinite f64 array
+//! (`dist_array`).
 //!
 //! Searches never hang: they end when the goal is reached or the open list
 //! is empty, `RouteOptions::max_expansions` bounds them, and the
@@ -37,10 +39,10 @@ mod bucket_queue;
 pub mod changes;
 mod dist_array;
 pub mod dstar_lite;
+mod landmark;
 pub mod map_route;
 mod neighbourhood;
 pub mod on_map;
-mod quaternary_heap;
 pub mod smooth;
 #[cfg(test)]
 mod testing;

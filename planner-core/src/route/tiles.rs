@@ -31,6 +31,23 @@ const INNER_OFFSETS: [isize; 8] = {
 /// A neighbour outside the padded grid.
 const OUTSIDE: usize = usize::MAX;
 
+/// Where each cell sits in the tiled order: enough to index a search's
+/// tiled labels after its cost copy is gone.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TileLayout {
+    tiles_per_row: usize,
+}
+
+impl TileLayout {
+    /// Tiled index of cell (r, c) of the padded grid.
+    #[inline]
+    pub(crate) fn index(self, r: usize, c: usize) -> usize {
+        (((r >> TILE_BITS) * self.tiles_per_row + (c >> TILE_BITS)) << (2 * TILE_BITS))
+            | ((r & TILE_MASK) << TILE_BITS)
+            | (c & TILE_MASK)
+    }
+}
+
 pub(crate) struct Tiles {
     tiles_per_row: usize,
     /// ⌊2⁶⁴ / tiles_per_row⌋ + 1: exact division of tile numbers (< 2³²)
@@ -77,9 +94,13 @@ impl Tiles {
     /// Tiled index of cell (r, c) of the padded grid.
     #[inline]
     pub(crate) fn index(&self, r: usize, c: usize) -> usize {
-        (((r >> TILE_BITS) * self.tiles_per_row + (c >> TILE_BITS)) << (2 * TILE_BITS))
-            | ((r & TILE_MASK) << TILE_BITS)
-            | (c & TILE_MASK)
+        self.layout().index(r, c)
+    }
+
+    pub(crate) fn layout(&self) -> TileLayout {
+        TileLayout {
+            tiles_per_row: self.tiles_per_row,
+        }
     }
 
     /// (row, col) of tiled index `t`.

@@ -99,14 +99,10 @@ impl SearchCache {
         }
     }
 
-    /// Estimated memory of a search: 13 bytes per cell (cost, g, state
-    /// byte) plus 4 for its open list and slack, and the per-row cell
-    /// widths.
+    /// Estimated memory of a search ([`DStarLite::estimated_bytes`]: its
+    /// costs, g, state and landmark, per cell, and slack for its queue).
     pub fn estimate_bytes(search: &DStarLite) -> usize {
-        let grid = search.grid();
-        grid.cell_count()
-            .saturating_mul(17)
-            .saturating_add(grid.height() * 8)
+        search.estimated_bytes()
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(String, DStarLite, usize)>> {
@@ -170,13 +166,15 @@ mod tests {
 
     #[test]
     fn search_cache_is_lru_by_estimated_bytes() {
-        // 17 bytes a cell and 8 a row: 100 cells are 1708 bytes.
-        assert_eq!(SearchCache::estimate_bytes(&search(100)), 1708);
-        let cache = SearchCache::new(3 * 1708);
+        // 17 bytes a cell, 8 a row, and the landmark's 8 bytes a cell of
+        // the grid padded to 16 × 16 tiles (7 tiles here): 100 cells.
+        let one = 100 * 17 + 8 + 7 * 256 * 8;
+        assert_eq!(SearchCache::estimate_bytes(&search(100)), one);
+        let cache = SearchCache::new(3 * one);
         for id in ["a", "b", "c"] {
             cache.put(id, search(100));
         }
-        assert_eq!(cache.usage(), (3, 3 * 1708));
+        assert_eq!(cache.usage(), (3, 3 * one));
         let a = cache.take("a").expect("held");
         assert_eq!(a.grid().cell_count(), 100);
         assert!(cache.take("a").is_none(), "taken out");
@@ -185,7 +183,7 @@ mod tests {
         assert!(cache.take("b").is_none());
         assert!(cache.take("c").is_some() && cache.take("d").is_some());
         // A search alone over the budget is not kept.
-        cache.put("huge", search(400));
+        cache.put("huge", search(1000));
         assert!(cache.take("huge").is_none());
         cache.remove("e");
         assert_eq!(cache.usage(), (0, 0));
