@@ -285,13 +285,13 @@ fn plane_sorties_fit_their_battery() {
     }
     // No sortie over its battery. (The lanes flown, pulled back at the
     // zones and cut between sorties, sweep 99.25 % of the free area with
-    // flat-ended strips, which the coverage warnings say; the photos'
-    // footprints, reaching past the lane ends, still see 99.5 %.)
+    // flat-ended strips, which a warning says; the photos' footprints,
+    // reaching past the lane ends, still see 99.5 %.)
     let warnings = plan["warnings"].as_array().unwrap();
     assert!(
         warnings
             .iter()
-            .all(|w| w.as_str().unwrap().contains("footprints cover")),
+            .all(|w| w.as_str().unwrap().contains("lanes the plane flies sweep")),
         "{warnings:?}"
     );
     let summary = check_aircraft(&out, &roi, &[&nfz], "fixed_wing", 40.0, 10.0, 100.0);

@@ -231,30 +231,35 @@ pub(super) fn flown_coverage(
     )
 }
 
-/// Why a plane's footprints miss part of the free area, when they miss
-/// more than 0.5 % and its lanes were pulled back: what of the `planned`
-/// lanes it flies (`flown`) and what helps.
+/// Why a plane's lanes sweep less than 99.5 % of the free area (the
+/// coverage figure): what of the `planned` lanes it flies (`flown`), why,
+/// and what helps.
 pub(super) fn pulled_back_warning(
     params: &SurveyParams,
     planned: &[CellPlan],
     flown: &[Lane],
     coverage_ratio: f64,
+    free_area_m2: f64,
 ) -> Option<String> {
     let a = params.plane()?;
     let length = |l: &Lane| (l.end.x - l.start.x).hypot(l.end.y - l.start.y);
     let planned_m: f64 = planned.iter().flat_map(|p| &p.lanes).map(length).sum();
     let flown_m: f64 = flown.iter().map(length).sum();
-    (coverage_ratio < 0.995 && flown_m < planned_m - 1.0).then(|| {
+    (coverage_ratio < 0.995).then(|| {
         format!(
-            "the plane flies {:.2} of the {:.2} km of lanes planned: lane ends facing no-fly zones \
-             are pulled back (or lanes it cannot reach left out) so that it can turn at \
-             turn_radius_m = {} m with lead_in_m = {} m, so footprints cover {:.2} % of the free \
-             area; lower turn_radius_m or lead_in_m, or fly higher for wider footprints",
+            "the lanes the plane flies sweep {:.2} % of the free area ({:.0} m² left out; \
+             strips a footprint wide with flat ends, the coverage figure: the photos reach half \
+             a footprint further at each lane's ends): it flies {:.2} of the {:.2} km of lanes \
+             laid, as lane ends facing no-fly zones are pulled back so that it can turn at \
+             turn_radius_m = {} m with lead_in_m = {} m, lanes it cannot reach are left out \
+             and the camera is off round a corridor's bends; lower turn_radius_m or lead_in_m, \
+             or fly higher for wider footprints",
+            coverage_ratio * 100.0,
+            (1.0 - coverage_ratio) * free_area_m2,
             flown_m / 1000.0,
             planned_m / 1000.0,
             a.turn_radius(),
             a.lead_in(),
-            coverage_ratio * 100.0
         )
     })
 }

@@ -26,6 +26,7 @@ mod photo_overlap;
 mod photos;
 mod photos_file;
 mod photos_mission;
+mod plane_bends;
 mod plane_clearance;
 mod plane_escape;
 mod plane_flight;
@@ -142,12 +143,18 @@ pub fn plan_survey_over(
         &d.plans,
         &plane_lanes,
         coverage_ratio,
+        free_area,
     ));
     warnings.extend(over_dem.as_ref().and_then(|o| o.terrain.warning()));
     warnings.extend(cells::left_out_warnings(
         setup.enclosed_m2,
         setup.clearance,
-        coverage_ratio,
+        // A plane's shortfall is explained by its own warning.
+        if params.plane().is_some() {
+            1.0
+        } else {
+            coverage_ratio
+        },
         free_area,
     ));
     let mut cells_out = cells::cells_out(&d, proj)?;

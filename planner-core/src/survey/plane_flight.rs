@@ -196,6 +196,12 @@ impl<'a> PlaneFlight<'a> {
     /// [`MIN_RUN`]) and then a half turn to either side; the least pulled back,
     /// then the longest straight. `None` when nothing of it is left.
     fn trim(&self, lane: &Lane) -> Option<Entered> {
+        self.trim_ends(lane, true, true)
+    }
+
+    /// [`PlaneFlight::trim`] at the start and/or the end only (a bent
+    /// lane's end at a bend it rounds is left where it is).
+    pub(super) fn trim_ends(&self, lane: &Lane, at_start: bool, at_end: bool) -> Option<Entered> {
         let len = dist(lane.start, lane.end);
         let (start, end) = lane_poses(lane);
         let step = (self.radius * TRIM_STEP).max(1.0);
@@ -229,8 +235,19 @@ impl<'a> PlaneFlight<'a> {
             }
             None
         };
-        let (cut_end, over) = pull(end, self.turns.overshoot_m, -1.0)?;
-        let (cut_start, lead) = pull(start, self.turns.lead_in_m, 1.0)?;
+        // A bend's end keeps its place (the run is the shortest straight,
+        // should the bend not be rounded after all).
+        let bend_run = (0.0, (MIN_RUN * self.radius).min(self.turns.lead_in_m));
+        let (cut_end, over) = if at_end {
+            pull(end, self.turns.overshoot_m, -1.0)?
+        } else {
+            bend_run
+        };
+        let (cut_start, lead) = if at_start {
+            pull(start, self.turns.lead_in_m, 1.0)?
+        } else {
+            bend_run
+        };
         (len - cut_end - cut_start >= MIN_LANE_M).then(|| Entered {
             lane: Lane {
                 start: start.ahead(cut_start).at,
@@ -238,6 +255,7 @@ impl<'a> PlaneFlight<'a> {
             },
             lead,
             over,
+            bend: None,
         })
     }
 
@@ -315,8 +333,14 @@ impl<'a> PlaneFlight<'a> {
         let mut lanes: Vec<Vec<Entered>> = Vec::new();
         for visit in &tour.visits {
             let mut kept = Vec::new();
-            for lane in &visit.lanes {
-                kept.extend(self.trim(lane));
+            // A corridor's bent lane is a run of legs (an area's lanes are
+            // runs of one).
+            for run in visit.runs() {
+                if run.len() == 1 {
+                    kept.extend(self.trim(&visit.lanes[run.start]));
+                } else {
+                    kept.extend(self.bent_lane(&visit.lanes[run]));
+                }
             }
             if !kept.is_empty() {
                 lanes.push(kept);
@@ -350,7 +374,15 @@ impl<'a> PlaneFlight<'a> {
             let mut prev: Option<Entered> = None;
             for entered in cell {
                 let mut reached = None;
-                for way_round in [*entered, entered.reversed()] {
+                // A leg of a bent lane is flown the way its bends go.
+                let in_chain =
+                    entered.bend.is_some() || prev.as_ref().is_some_and(|p| p.bend.is_some());
+                let ways = if in_chain {
+                    vec![entered.clone()]
+                } else {
+                    vec![entered.clone(), entered.reversed()]
+                };
+                for way_round in ways {
                     match self.way_to(at, from_lane, prev.as_ref(), &way_round) {
                         Ok(way) => {
                             reached = Some((way_round, way));
@@ -429,6 +461,14 @@ impl<'a> PlaneFlight<'a> {
     ) -> Result<Vec<Piece>, PlanError> {
         let (start, _) = lane_poses(&next.lane);
         if let Some(p) = prev {
+            // Round the bend into the next leg of a bent lane.
+            if let Some(bend) = &p.bend
+                && bend
+                    .last()
+                    .is_some_and(|b| dist(b.end(), next.lane.start) < 1e-6)
+            {
+                return Ok(bend.clone());
+            }
             return self.lane_turn(p, next);
         }
         if let Some(over) = over {
@@ -676,12 +716,14 @@ impl PlaneFlight<'_> {
 }
 
 /// A lane as flown (pulled back from the NFZs it faces) and the straight
-/// runs before and after it.
-#[derive(Clone, Copy)]
-struct Entered {
-    lane: Lane,
-    lead: f64,
-    over: f64,
+/// runs before and after it; for a leg of a corridor's bent lane, the way
+/// round the bend to the next leg (camera off).
+#[derive(Clone)]
+pub(super) struct Entered {
+    pub lane: Lane,
+    pub lead: f64,
+    pub over: f64,
+    pub bend: Option<Vec<Piece>>,
 }
 
 impl Entered {
@@ -694,6 +736,7 @@ impl Entered {
             },
             lead: self.over,
             over: self.lead,
+            bend: None,
         }
     }
 }
