@@ -53,6 +53,10 @@ pub struct ServeConfig {
     /// Most survey-lane kilometres one plan may need (area / line spacing).
     #[arg(long, env = "TERRAPLAN_MAX_LANE_KM", default_value_t = Limits::default().max_lane_km)]
     pub max_lane_km: f64,
+    /// Most Features one photos.geojson download holds; beyond it every
+    /// k-th photo is written and the file's properties say so.
+    #[arg(long, env = "TERRAPLAN_MAX_PHOTO_FEATURES", default_value_t = Limits::default().max_photo_features, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_photo_features: usize,
     /// Plans computed at once; further requests wait their turn.
     #[arg(long, env = "TERRAPLAN_PLANNER_THREADS", default_value_t = default_threads())]
     pub planner_threads: usize,
@@ -192,6 +196,7 @@ impl ServeConfig {
             max_vertices: self.max_vertices,
             max_no_fly_zones: self.max_no_fly_zones,
             max_lane_km: self.max_lane_km,
+            max_photo_features: self.max_photo_features,
         }
     }
 

@@ -329,3 +329,86 @@ fn service_serves_photos_geojson() {
     let missing = get(&server.url(&format!("/api/v1/surveys/{id}/uavs/zz/photos.geojson")));
     assert_eq!(missing.status, 404);
 }
+
+/// The photos file is bounded (`--max-photo-features`, the service's
+/// `--max-photo-features` / TERRAPLAN_MAX_PHOTO_FEATURES, default 50 000):
+/// over the limit it holds every k-th photo and says so in its properties
+/// (the plan's photo count, the features written, k, the limit); under it
+/// the file is as before. A limit of 0 is refused (exit 2).
+#[test]
+fn photos_files_are_capped_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let nfz = write_json(dir.path(), "nfz.geojson", &nfzs());
+    let params = write_json(dir.path(), "params.json", &json!({"altitude_m": 40}));
+    let run = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let paths = [field(), nfz.clone(), params.clone(), out.clone()];
+        let [roi, zones, params, out_dir] = paths.each_ref().map(|p| p.to_str().unwrap());
+        let mut args = vec![
+            "survey", "--roi", roi, "--no-fly", zones, "--params", params, "--out", out_dir,
+        ];
+        args.extend_from_slice(extra);
+        (terraplan_e2e::terraplan(&args), out)
+    };
+    let read = |p: PathBuf| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (o, full) = run("full", &[]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let plan = read(full.join("plan.json"));
+    let photos = plan["stats"]["photos"].as_u64().unwrap();
+    assert!(photos > 1000, "{photos}");
+    let all = read(full.join("uav1.photos.geojson"));
+    assert_eq!(all["features"].as_array().unwrap().len() as u64, photos);
+    assert!(
+        all["properties"].get("truncated").is_none(),
+        "{}",
+        all["properties"]
+    );
+
+    let (o, capped) = run("capped", &["--max-photo-features", "100"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let file = read(capped.join("uav1.photos.geojson"));
+    let p = &file["properties"];
+    let features = file["features"].as_array().unwrap();
+    let k = p["every_kth_photo"].as_u64().unwrap();
+    assert_eq!(p["truncated"], json!(true));
+    assert_eq!(p["photos"].as_u64().unwrap(), photos);
+    assert_eq!(p["max_photo_features"], json!(100));
+    assert_eq!(k, photos.div_ceil(100));
+    assert_eq!(p["features"].as_u64().unwrap(), features.len() as u64);
+    assert!(features.len() <= 100 && features.len() as u64 == photos.div_ceil(k));
+    assert!(p["note"].as_str().unwrap().contains(&photos.to_string()));
+    // Every k-th photo, as in the whole file.
+    let whole = all["features"].as_array().unwrap();
+    for (n, f) in features.iter().enumerate() {
+        assert_eq!(f, &whole[n * k as usize], "feature {n}");
+    }
+    // The other files are those of the plan without the limit.
+    for name in ["plan.json", "uav1.waypoints", "cells.geojson"] {
+        assert_eq!(
+            std::fs::read(full.join(name)).unwrap(),
+            std::fs::read(capped.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    let (o, _) = run("zero", &["--max-photo-features", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("--max-photo-features"));
+
+    // The service's limit applies to every download of the file.
+    let data = tempfile::tempdir().unwrap();
+    let server = Server::start(data.path(), &["--max-photo-features", "50"]);
+    let mut body = json!({"altitude_m": 40, "no_fly_zones": nfzs()["features"]
+        .as_array().unwrap().iter().map(|f| f["geometry"].clone()).collect::<Vec<_>>()});
+    body["roi"] = read(field());
+    let r = post_json(&server.url("/api/v1/surveys"), &body);
+    assert_eq!(r.status, 201, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let got = get(&server.url(&format!("/api/v1/surveys/{id}/uavs/uav1/photos.geojson")));
+    assert_eq!(got.status, 200);
+    let file: Value = serde_json::from_slice(&got.body).unwrap();
+    assert_eq!(file["properties"]["photos"].as_u64().unwrap(), photos);
+    assert_eq!(file["properties"]["max_photo_features"], json!(50));
+    assert!(file["features"].as_array().unwrap().len() <= 50);
+}

@@ -127,7 +127,14 @@ pub struct Limits {
     /// Most survey-lane kilometres (free area / line spacing) one plan may
     /// need: bounds the planner's time and memory for tiny spacings.
     pub max_lane_km: f64,
+    /// Most Features one `photos.geojson` holds; beyond it every k-th
+    /// photo is written (the file says so).
+    pub max_photo_features: usize,
 }
+
+/// Most Features one `photos.geojson` holds by default (about 400 bytes
+/// each: some 20 MB).
+pub const DEFAULT_MAX_PHOTO_FEATURES: usize = 50_000;
 
 impl Default for Limits {
     fn default() -> Self {
@@ -136,6 +143,7 @@ impl Default for Limits {
             max_vertices: 50_000,
             max_no_fly_zones: 5_000,
             max_lane_km: 10_000.0,
+            max_photo_features: DEFAULT_MAX_PHOTO_FEATURES,
         }
     }
 }

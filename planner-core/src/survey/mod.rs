@@ -197,6 +197,7 @@ pub fn plan_survey_over(
         fences,
         rally_points,
         warnings,
+        max_photo_features: limits.max_photo_features,
     })
 }
 

@@ -1,6 +1,8 @@
 //! `photos.geojson`: a UAV's planned photos as GeoJSON, one Feature per
 //! photo — its footprint Polygon on the ground, the camera's position,
-//! time since take-off, pitch, heading, cell and GSD as properties.
+//! time since take-off, pitch, heading, cell and GSD as properties — up to
+//! a limit of features, beyond which every k-th photo is written and the
+//! file says so.
 
 use super::files::PlanFile;
 use super::photos::{Photo, SortiePhotos};
@@ -10,6 +12,11 @@ use crate::geo::{GeoError, UtmProjection};
 /// Suffix of the photos file, after `<uav id>.` (all its sorties) or
 /// `<sortie stem>.` (that sortie's).
 pub(super) const PHOTOS_FILE_SUFFIX: &str = "photos.geojson";
+
+/// [`crate::geo::DEFAULT_MAX_PHOTO_FEATURES`], for serde's default.
+pub(super) fn default_max_photo_features() -> usize {
+    crate::geo::DEFAULT_MAX_PHOTO_FEATURES
+}
 
 impl SurveyPlan {
     /// Names of the photo files: `<uav>.photos.geojson` for each UAV whose
@@ -61,20 +68,55 @@ impl SurveyPlan {
         } else {
             "heights above the take-off point; footprints on level ground at its height"
         };
-        let mut out: Vec<u8> = Vec::new();
+        // Over the limit, every k-th photo (of all the file's sorties) is
+        // written: the whole survey, thinned, in a bounded file.
+        let total: usize = sorties
+            .iter()
+            .filter_map(|(_, s)| s.photos.as_ref())
+            .flat_map(|p| &p.lanes)
+            .map(|l| l.count)
+            .sum();
+        let limit = self.max_photo_features.max(1);
+        let every = total.div_ceil(limit).max(1);
+        let written = total.div_ceil(every);
+        let mut out: Vec<u8> = Vec::with_capacity(written.min(limit) * 450 + 512);
         out.extend_from_slice(b"{\"type\":\"FeatureCollection\",\"properties\":{\"uav\":");
         json(&mut out, uav);
         out.extend_from_slice(b",\"heights\":");
         json(&mut out, reference);
         out.extend_from_slice(b",\"utm_epsg\":");
         json(&mut out, &epsg);
+        if every > 1 {
+            out.extend_from_slice(b",\"truncated\":true,\"photos\":");
+            json(&mut out, &total);
+            out.extend_from_slice(b",\"features\":");
+            json(&mut out, &written);
+            out.extend_from_slice(b",\"every_kth_photo\":");
+            json(&mut out, &every);
+            out.extend_from_slice(b",\"max_photo_features\":");
+            json(&mut out, &limit);
+            out.extend_from_slice(b",\"note\":");
+            json(
+                &mut out,
+                &format!(
+                    "the plan has {total} photos, more than the {limit} features this file may \
+                     hold (max_photo_features): one photo in every {every} is written, each with its \
+                     own sortie and index"
+                ),
+            );
+        }
         out.extend_from_slice(b"},\"features\":[");
         let mut first = true;
+        let mut seen = 0usize;
         for (k, sortie) in sorties {
             let Some(photos) = &sortie.photos else {
                 continue;
             };
             for (index, p) in photos.photos().enumerate() {
+                seen += 1;
+                if !(seen - 1).is_multiple_of(every) {
+                    continue;
+                }
                 out.extend_from_slice(if first { b"\n" } else { b",\n" });
                 first = false;
                 let place = Place {

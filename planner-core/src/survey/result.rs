@@ -247,6 +247,11 @@ pub struct SurveyPlan {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rally_points: Vec<RallyPoint>,
     pub warnings: Vec<String>,
+    /// Most Features a `photos.geojson` of the plan holds (every k-th
+    /// photo beyond): the planner's [`crate::geo::Limits`], set again by
+    /// whoever renders a stored plan; not part of `plan.json`.
+    #[serde(skip, default = "super::photos_file::default_max_photo_features")]
+    pub max_photo_features: usize,
 }
 
 /// A rally point of a planned survey.

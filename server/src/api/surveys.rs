@@ -586,9 +586,16 @@ async fn download(
     let row = visible_survey(state, caller, id, Role::Viewer).await?;
     // Rendering a big mission is work: off the runtime threads.
     let name = file_name.to_string();
-    let file = off_runtime(move || parse_plan(&row.plan).map(|plan| plan.file(&name)))
-        .await??
-        .ok_or_else(|| ApiError::NotFound(missing()))?;
+    // A stored plan keeps no limit of photo features: the server's own.
+    let max_photo_features = state.limits.max_photo_features;
+    let file = off_runtime(move || {
+        parse_plan(&row.plan).map(|mut plan| {
+            plan.max_photo_features = max_photo_features;
+            plan.file(&name)
+        })
+    })
+    .await??
+    .ok_or_else(|| ApiError::NotFound(missing()))?;
     let disposition = format!("attachment; filename=\"{download_name}\"");
     let mut res = file.content.into_response();
     let headers = res.headers_mut();

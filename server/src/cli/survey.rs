@@ -35,6 +35,10 @@ pub(super) struct SurveyArgs {
     /// Largest ROI accepted, km².
     #[arg(long, default_value_t = Limits::default().max_roi_area_km2)]
     max_roi_area_km2: f64,
+    /// Most Features one `<uav>.photos.geojson` holds; beyond it every
+    /// k-th photo is written and the file's properties say so.
+    #[arg(long, value_name = "N", default_value_t = Limits::default().max_photo_features, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    max_photo_features: usize,
     /// A DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) to follow the terrain
     /// over (the params' `agl_tolerance_m`, `transit_clearance_m`, … apply).
     #[arg(long, value_name = "FILE")]
@@ -98,6 +102,7 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
 
     let limits = Limits {
         max_roi_area_km2: args.max_roi_area_km2,
+        max_photo_features: args.max_photo_features,
         ..Limits::default()
     };
     let describe = |issues: &[Issue]| describe_issues(issues, args);
