@@ -170,6 +170,7 @@ pub(crate) fn sweep_linked(rings: &[Vec<Coord<f64>>], eps: f64) -> Result<Swept,
         slots: Vec::new(),
         cells: Vec::new(),
         links: Vec::new(),
+        scratch: Scratch::default(),
     };
     let (mut i, mut j) = (0, 0);
     while i < by_start.len() || j < by_end.len() {
@@ -240,6 +241,33 @@ struct Sweep<'a> {
     slots: Vec<Slot>,
     cells: Vec<Cell>,
     links: Vec<Link>,
+    scratch: Scratch,
+}
+
+/// Work lists of one event, kept from event to event: a sweep has an
+/// event per vertex, and allocating them anew took a third of its time.
+#[derive(Default)]
+struct Scratch {
+    points: Vec<(f64, i32, u32)>,
+    clusters: Vec<Cluster>,
+    grouped: Vec<Window>,
+    windows: Vec<Window>,
+    /// The new slots of each window.
+    rebuilt: Vec<Vec<Slot>>,
+    new_ranges: Vec<Range<usize>>,
+    window: WindowScratch,
+}
+
+/// Work lists of rebuilding one window.
+#[derive(Default)]
+struct WindowScratch {
+    order: Vec<(usize, f64, u32)>,
+    old_runs: Vec<Run>,
+    new_runs: Vec<Run>,
+    live: Vec<bool>,
+    right: Links,
+    left: Links,
+    pairs: Vec<(usize, usize)>,
 }
 
 impl Sweep<'_> {
@@ -250,11 +278,26 @@ impl Sweep<'_> {
     /// Processes all vertices on the slice line `x`: removes the edges
     /// ending there, inserts those starting there and updates the cells.
     fn event(&mut self, x: f64, starting: &[u32], ending: &[u32]) -> Result<(), SweepFailure> {
+        // Taken out for the event and put back (a failed sweep ends anyway).
+        let mut sc = std::mem::take(&mut self.scratch);
+        self.event_with(x, starting, ending, &mut sc)?;
+        self.scratch = sc;
+        Ok(())
+    }
+
+    fn event_with(
+        &mut self,
+        x: f64,
+        starting: &[u32],
+        ending: &[u32],
+        sc: &mut Scratch,
+    ) -> Result<(), SweepFailure> {
         let eps = self.eps;
 
         // Change points (y, winding change, starting edge or NO_EDGE), sorted
         // along the slice line and grouped into clusters of coincident vertices.
-        let mut points: Vec<(f64, i32, u32)> = Vec::with_capacity(starting.len() + ending.len());
+        let points = &mut sc.points;
+        points.clear();
         points.extend(
             ending
                 .iter()
@@ -266,7 +309,8 @@ impl Sweep<'_> {
                 .map(|&e| (self.edge(e).y0, self.edge(e).wind, e)),
         );
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut clusters: Vec<Cluster> = Vec::new();
+        let clusters = &mut sc.clusters;
+        clusters.clear();
         for (k, &(y, dw, _)) in points.iter().enumerate() {
             match clusters.last_mut() {
                 Some(c) if y - c.yhi <= eps => {
@@ -283,7 +327,7 @@ impl Sweep<'_> {
                 }),
             }
         }
-        for c in &mut clusters {
+        for c in clusters.iter_mut() {
             let a = self
                 .slots
                 .partition_point(|s| self.edges[s.edge as usize].y_at(x) < c.ylo - eps);
@@ -293,7 +337,8 @@ impl Sweep<'_> {
             c.slots = a..b.max(a);
         }
 
-        let windows = self.windows(&clusters)?;
+        self.windows(&sc.clusters, &mut sc.grouped, &mut sc.windows)?;
+        let windows = &sc.windows;
 
         // Every ending edge must be inside a window, or it would linger.
         let found: usize = windows
@@ -309,22 +354,25 @@ impl Sweep<'_> {
             return Err(SweepFailure::Inconsistent);
         }
 
-        let mut rebuilt = Vec::with_capacity(windows.len());
-        for w in &windows {
-            rebuilt.push(self.rebuild(x, w, &clusters, &points)?);
+        if sc.rebuilt.len() < windows.len() {
+            sc.rebuilt.resize_with(windows.len(), Vec::new);
+        }
+        for (w, new_slots) in windows.iter().zip(sc.rebuilt.iter_mut()) {
+            self.rebuild(x, w, &sc.clusters, &sc.points, new_slots, &mut sc.window)?;
         }
         // Splice from the top so the lower windows' indices stay valid.
-        let mut new_ranges = Vec::with_capacity(windows.len());
+        let new_ranges = &mut sc.new_ranges;
+        new_ranges.clear();
         let mut shift = 0isize;
-        for (w, new_slots) in windows.iter().zip(&rebuilt) {
+        for (w, new_slots) in windows.iter().zip(&sc.rebuilt) {
             let start = w.slots.start.wrapping_add_signed(shift);
             new_ranges.push(start..start + new_slots.len());
             shift += new_slots.len() as isize - w.slots.len() as isize;
         }
-        for (w, new_slots) in windows.iter().zip(rebuilt).rev() {
-            self.slots.splice(w.slots.clone(), new_slots);
+        for (w, new_slots) in windows.iter().zip(sc.rebuilt.iter_mut()).rev() {
+            self.slots.splice(w.slots.clone(), new_slots.drain(..));
         }
-        for r in new_ranges {
+        for r in new_ranges.iter() {
             self.check_order(x, r.start.saturating_sub(1), r.end + 1)?;
         }
         Ok(())
@@ -334,8 +382,13 @@ impl Sweep<'_> {
     /// non-free gaps, so that runs outside them are untouched. Clusters are
     /// joined while the winding change so far is non-zero (e.g. the two ends
     /// of a wall parallel to the slice) or when their slots overlap.
-    fn windows(&self, clusters: &[Cluster]) -> Result<Vec<Window>, SweepFailure> {
-        let mut grouped: Vec<Window> = Vec::new();
+    fn windows(
+        &self,
+        clusters: &[Cluster],
+        grouped: &mut Vec<Window>,
+        windows: &mut Vec<Window>,
+    ) -> Result<(), SweepFailure> {
+        grouped.clear();
         for (ci, c) in clusters.iter().enumerate() {
             match grouped.last_mut() {
                 Some(w) if w.net != 0 || c.slots.start <= w.slots.end => {
@@ -351,8 +404,8 @@ impl Sweep<'_> {
             }
         }
         let n = self.slots.len();
-        let mut windows: Vec<Window> = Vec::with_capacity(grouped.len());
-        for mut w in grouped {
+        windows.clear();
+        for mut w in grouped.drain(..) {
             // Grow to the enclosing free runs: stop where the gap is not free.
             while w.slots.start > 0 && self.slots[w.slots.start - 1].wind > 0 {
                 w.slots.start -= 1;
@@ -372,7 +425,7 @@ impl Sweep<'_> {
         if windows.iter().any(|w| w.net != 0) {
             return Err(SweepFailure::Inconsistent);
         }
-        Ok(windows)
+        Ok(())
     }
 
     /// Rebuilds one window: the new slot order right of `x`, the windings,
@@ -383,22 +436,32 @@ impl Sweep<'_> {
         w: &Window,
         clusters: &[Cluster],
         points: &[(f64, i32, u32)],
-    ) -> Result<Vec<Slot>, SweepFailure> {
+        new_slots: &mut Vec<Slot>,
+        sc: &mut WindowScratch,
+    ) -> Result<(), SweepFailure> {
         let eps = self.eps;
         let cl = &clusters[w.clusters.clone()];
         let old = &self.slots[w.slots.clone()];
-        let order = self.order_right_of(x, cl, old, points);
+        self.order_right_of(x, cl, old, points, &mut sc.order);
 
         let base = match w.slots.start {
             0 => 0,
             a => self.slots[a - 1].wind,
         };
-        let mut new_slots = self.wound_slots(&order, old, base)?;
+        self.wound_slots(&sc.order, old, base, new_slots)?;
 
-        let old_runs = self.runs(old, base, x)?;
-        let new_runs = self.runs(&new_slots, base, x)?;
-        let live = self.live_runs(&new_runs, &new_slots);
-        let (right, left, pairs) = neighbours(&old_runs, &new_runs, &live, eps);
+        self.runs(old, base, x, &mut sc.old_runs)?;
+        self.runs(new_slots, base, x, &mut sc.new_runs)?;
+        self.live_runs(&sc.new_runs, new_slots, &mut sc.live);
+        neighbours(
+            &sc.old_runs,
+            &sc.new_runs,
+            &sc.live,
+            eps,
+            (&mut sc.right, &mut sc.left, &mut sc.pairs),
+        );
+        let (old_runs, new_runs, live) = (&sc.old_runs, &sc.new_runs, &sc.live);
+        let (right, left, pairs) = (&sc.right, &sc.left, &sc.pairs);
 
         for (i, o) in old_runs.iter().enumerate() {
             if o.cell == NO_CELL {
@@ -431,13 +494,13 @@ impl Sweep<'_> {
                 });
             }
         }
-        for (i, j) in pairs {
+        for &(i, j) in pairs {
             let (a, b) = (old_runs[i].cell, new_slots[new_runs[j].lower].cell);
             if a != NO_CELL && b != NO_CELL && a != b {
                 self.links.push((a, b));
             }
         }
-        Ok(new_slots)
+        Ok(())
     }
 
     /// The edges of a window right of `x` in their new order: kept edges
@@ -449,7 +512,8 @@ impl Sweep<'_> {
         cl: &[Cluster],
         old: &[Slot],
         points: &[(f64, i32, u32)],
-    ) -> Vec<(usize, f64, u32)> {
+        order: &mut Vec<(usize, f64, u32)>,
+    ) {
         let eps = self.eps;
         // Right of x, edges through the same vertex are ordered by slope;
         // edges between clusters keep their (still valid) old order, which the
@@ -463,7 +527,7 @@ impl Sweep<'_> {
                 2 * i
             }
         };
-        let mut order: Vec<(usize, f64, u32)> = Vec::with_capacity(old.len() + 4);
+        order.clear();
         for s in old {
             let e = self.edge(s.edge);
             if e.x1 > x {
@@ -481,7 +545,6 @@ impl Sweep<'_> {
             }
         }
         order.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        order
     }
 
     /// The window's new slots in `order`, with their windings counted up
@@ -491,8 +554,9 @@ impl Sweep<'_> {
         order: &[(usize, f64, u32)],
         old: &[Slot],
         base: i32,
-    ) -> Result<Vec<Slot>, SweepFailure> {
-        let mut new_slots = Vec::with_capacity(order.len());
+        new_slots: &mut Vec<Slot>,
+    ) -> Result<(), SweepFailure> {
+        new_slots.clear();
         let mut wind = base;
         for &(_, _, edge) in order {
             wind += self.edge(edge).wind;
@@ -506,31 +570,35 @@ impl Sweep<'_> {
         if wind != old_top {
             return Err(SweepFailure::Inconsistent);
         }
-        Ok(new_slots)
+        Ok(())
     }
 
     /// Which new runs enclose something: a run whose edges coincide up to
     /// the next vertex encloses nothing.
-    fn live_runs(&self, new_runs: &[Run], new_slots: &[Slot]) -> Vec<bool> {
+    fn live_runs(&self, new_runs: &[Run], new_slots: &[Slot], live: &mut Vec<bool>) {
         let eps = self.eps;
-        new_runs
-            .iter()
-            .map(|r| {
-                let (lo, hi) = (
-                    self.edge(new_slots[r.lower].edge),
-                    self.edge(new_slots[r.upper].edge),
-                );
-                let xr = lo.x1.min(hi.x1);
-                r.yhi - r.ylo > eps || hi.y_at(xr) - lo.y_at(xr) > eps
-            })
-            .collect()
+        live.clear();
+        live.extend(new_runs.iter().map(|r| {
+            let (lo, hi) = (
+                self.edge(new_slots[r.lower].edge),
+                self.edge(new_slots[r.upper].edge),
+            );
+            let xr = lo.x1.min(hi.x1);
+            r.yhi - r.ylo > eps || hi.y_at(xr) - lo.y_at(xr) > eps
+        }));
     }
 
     /// The free runs (winding > 0) of a window's slots, with their extent on
     /// the line `x`. Windows start and end in non-free gaps, so every run
     /// closes inside.
-    fn runs(&self, slots: &[Slot], base: i32, x: f64) -> Result<Vec<Run>, SweepFailure> {
-        let mut runs = Vec::new();
+    fn runs(
+        &self,
+        slots: &[Slot],
+        base: i32,
+        x: f64,
+        runs: &mut Vec<Run>,
+    ) -> Result<(), SweepFailure> {
+        runs.clear();
         let mut below = base;
         let mut open = None;
         for (k, s) in slots.iter().enumerate() {
@@ -551,7 +619,7 @@ impl Sweep<'_> {
         if below > 0 || open.is_some() {
             return Err(SweepFailure::Inconsistent);
         }
-        Ok(runs)
+        Ok(())
     }
 
     /// Checks that neighbouring active edges in `from..to` are in order at `x`
@@ -588,10 +656,13 @@ fn neighbours(
     new_runs: &[Run],
     live: &[bool],
     eps: f64,
-) -> (Links, Links, Vec<(usize, usize)>) {
-    let mut right: Links = vec![(0, 0); old_runs.len()];
-    let mut left: Links = vec![(0, 0); new_runs.len()];
-    let mut pairs = Vec::new();
+    (right, left, pairs): (&mut Links, &mut Links, &mut Vec<(usize, usize)>),
+) {
+    right.clear();
+    right.resize(old_runs.len(), (0, 0));
+    left.clear();
+    left.resize(new_runs.len(), (0, 0));
+    pairs.clear();
     let (mut i, mut j) = (0, 0);
     while i < old_runs.len() && j < new_runs.len() {
         let (o, n) = (&old_runs[i], &new_runs[j]);
@@ -614,7 +685,6 @@ fn neighbours(
             j += 1;
         }
     }
-    (right, left, pairs)
 }
 
 /// Appends the points of a boundary on the slice line `x` going from `from`
