@@ -131,6 +131,9 @@ pub struct DStarLite {
     queue: BucketQueue,
     restarts: u64,
     landmark_restarts: u64,
+    /// Expansions the next search may spend settling cells beyond the
+    /// start (set with a new landmark).
+    band: u64,
 }
 
 /// Whether the heuristic has a landmark (see `landmark`).
@@ -188,6 +191,7 @@ impl DStarLite {
             queue,
             restarts: 0,
             landmark_restarts: 0,
+            band: 0,
         };
         planner.update_vertex(goal, 0.0);
         Ok(planner)
@@ -371,12 +375,41 @@ impl DStarLite {
             // A fresh search with a new landmark also settles a band of
             // cells around the route, a tenth of A*'s effort (see the
             // module docs).
-            let first = self.prepare_landmark(cancel)?;
-            let expanded = first + self.compute_shortest_path(first, first / BAND_SHARE, cancel)?;
+            let (first, _) = self.prepare_landmark(cancel)?;
+            let expanded = first + self.compute_shortest_path(first, self.band, cancel)?;
+            self.band = 0;
             if self.rhs(start) == f64::INFINITY {
                 return Err(RouteError::Unreachable);
             }
             (self.extract_path()?, expanded)
+        };
+        Ok(super::finish_route(
+            &self.grid,
+            &self.hood,
+            &self.model,
+            &path,
+            expanded,
+            self.options.smooth,
+        ))
+    }
+
+    /// A* from the start of a fresh planner: the route [`astar`](super::astar())
+    /// finds (the same search), whose costs become this planner's landmark
+    /// so that the next [`plan`](Self::plan) only walks back along the
+    /// route and settles the cells around it. For a new route whose
+    /// replans this planner will repair: the route answers at A*'s speed
+    /// and the rest of the first search can follow later. On a planner
+    /// that has searched already it is `plan`.
+    pub fn plan_with_astar(&mut self, cancel: &dyn Fn() -> bool) -> Result<Route, RouteError> {
+        if !matches!(self.landmark, LandmarkState::Pending) {
+            return self.plan(cancel);
+        }
+        let start = self.grid.endpoint(self.start(), End::Start)?;
+        let goal = self.grid.endpoint(self.goal(), End::Goal)?;
+        let (expanded, path) = if start == goal {
+            (0, vec![start])
+        } else {
+            self.prepare_landmark(cancel)?
         };
         Ok(super::finish_route(
             &self.grid,
@@ -406,9 +439,13 @@ impl DStarLite {
     /// expansions it took; on cancellation the planner stays fresh, and
     /// when it runs out of `max_expansions` the search goes on without a
     /// landmark.
-    fn prepare_landmark(&mut self, cancel: &dyn Fn() -> bool) -> Result<u64, RouteError> {
+    /// Also the A* route's cells (none when there was nothing to do).
+    fn prepare_landmark(
+        &mut self,
+        cancel: &dyn Fn() -> bool,
+    ) -> Result<(u64, Vec<usize>), RouteError> {
         if !matches!(self.landmark, LandmarkState::Pending) {
-            return Ok(0);
+            return Ok((0, Vec::new()));
         }
         let ends = (self.start, self.goal);
         match search_tree(
@@ -419,7 +456,7 @@ impl DStarLite {
             &self.options,
             cancel,
         ) {
-            Ok((_, expanded, tree)) => {
+            Ok((path, expanded, tree)) => {
                 let cheapest_arc = self.hood.shortest_step() * self.model.heuristic_factor();
                 let factor = self.model.heuristic_factor();
                 self.landmark =
@@ -430,7 +467,8 @@ impl DStarLite {
                 // Only the goal is queued, with a key that stays a lower
                 // bound: the new heuristic is never smaller.
                 self.heuristic = self.heuristic_from(self.start);
-                Ok(expanded)
+                self.band = expanded / BAND_SHARE;
+                Ok((expanded, path))
             }
             Err(e @ RouteError::TooManyExpansions { .. }) => {
                 self.landmark = LandmarkState::Off;
@@ -1117,6 +1155,38 @@ mod tests {
             assert_eq!(p.landmark_restarts(), 0, "trial {trial}");
         }
         assert!(replans > 30, "{replans}");
+    }
+
+    #[test]
+    fn astar_first_then_the_rest_of_the_first_search() {
+        // plan_with_astar answers with A*'s route; the next plan completes
+        // the first search (the walk back and the band) without a second A*,
+        // and replans from there equal A* from scratch.
+        let mut rng = Rng::new(23);
+        let grid = crate::route::testing::smooth_costmap(&mut rng, 200, 180, 0.05);
+        let (start, goal) = crate::route::testing::far_corners(&grid);
+        let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
+        let mut p = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+        let route = p.plan_with_astar(&|| false).unwrap();
+        assert_eq!(route, scratch, "the same search");
+        let rest = p.plan(&|| false).unwrap();
+        assert!((rest.cost - scratch.cost).abs() <= 1e-9 * scratch.cost);
+        assert!(
+            rest.expanded <= scratch.expanded / BAND_SHARE + 4 * scratch.cells.len() as u64,
+            "{} expanded after A*'s {}",
+            rest.expanded,
+            scratch.expanded
+        );
+        let w = p.grid().width();
+        let (r, c) = route.cells[route.cells.len() / 2];
+        p.move_start(route.cells[route.cells.len() / 3]).unwrap();
+        p.update_cells(&[(r * w + c, X), (r * w + c + 1, X), ((r + 1) * w + c, X)])
+            .unwrap();
+        check_against_scratch(&mut p, ArcCost::Integrated, "after a block");
+        // Start = goal: nothing to search.
+        let grid = CostGrid::with_cell_size(3, 3, vec![1.0; 9], 1.0, 1.0).unwrap();
+        let mut p = DStarLite::new(grid, (1, 1), (1, 1), RouteOptions::default()).unwrap();
+        assert_eq!(p.plan_with_astar(&|| false).unwrap().cells, vec![(1, 1)]);
     }
 
     #[test]

@@ -148,12 +148,12 @@ pub async fn create_route(
     let (start, goal, options) = (req.start, req.goal, req.options.clone());
     let source = src.clone();
     // Stopped when the client goes away or after --route-timeout-s.
-    let planned = state
+    let mut planned = state
         .run_planner(Work::Route, move |stop| {
             plan_route(&source, &start, &goal, &options, stop)
         })
         .await??;
-    let warm = planned.warm;
+    let warm = planned.warm.take();
     let new = NewRoute {
         name: req.name,
         costmap_id,
@@ -168,15 +168,17 @@ pub async fn create_route(
         changes: Changes::default(),
     };
     let row = store(&state, new, planned).await?;
-    if let Some(ends) = warm {
+    if let Some(search) = warm {
         let warming = state.routes.begin_warming(&row.id);
-        let (held, id, options) = (state.clone(), row.id.clone(), req.options);
+        let (held, id) = (state.clone(), row.id.clone());
         tokio::spawn(async move {
             let _warming = warming;
             // Not the client's: stopped only by --route-timeout-s.
             let built = held
                 .run_planner(Work::Route, move |stop| {
-                    warm_search(&src, ends, &options, stop)
+                    // The source holds the search's room in the memory budget.
+                    let _room = &src;
+                    warm_search(search, stop)
                 })
                 .await
                 .map_err(|e| e.to_string())
