@@ -133,9 +133,32 @@ pub fn plan_survey_over(
         proj,
     )?;
     crate::cancel::check()?;
-    let (lane_count, coverage_ratio) = planned_coverage.unwrap_or_else(|| {
-        aircraft::flown_coverage(&plane_lanes, flight.geometry.footprint_side_m, &free)
-    });
+    // A plane's coverage (of the lanes it flies) on another core while
+    // the cells' figures and the fences are made.
+    let fly_coverage = planned_coverage.is_none();
+    let (made, flown_coverage) = crate::cancel::join(
+        || -> Result<_, PlanError> {
+            let mut cells_out = cells::cells_out(&d, proj)?;
+            photo_overlap::fill(&mut cells_out, &uavs);
+            // The inclusion fence holds the rally points (a UAV flies there on
+            // RTL) and keeps the NFZs' clearance too: a vehicle flying on its edge
+            // would breach it with ordinary GPS error.
+            flown.extend(rally_utm);
+            let fences = mission::fences(
+                &area,
+                &flown,
+                params.fence_margin_m.max(params.nfz_clearance_m),
+            )?;
+            Ok((cells_out, fences))
+        },
+        || {
+            fly_coverage.then(|| {
+                aircraft::flown_coverage(&plane_lanes, flight.geometry.footprint_side_m, &free)
+            })
+        },
+    );
+    let (cells_out, fences) = made?;
+    let (lane_count, coverage_ratio) = planned_coverage.or(flown_coverage).unwrap_or_default();
     let mut warnings = setup.warnings.clone();
     warnings.extend(aircraft::battery_warnings(params, &uavs));
     warnings.extend(aircraft::pulled_back_warning(
@@ -157,17 +180,6 @@ pub fn plan_survey_over(
         },
         free_area,
     ));
-    let mut cells_out = cells::cells_out(&d, proj)?;
-    photo_overlap::fill(&mut cells_out, &uavs);
-    // The inclusion fence holds the rally points (a UAV flies there on
-    // RTL) and keeps the NFZs' clearance too: a vehicle flying on its edge
-    // would breach it with ordinary GPS error.
-    flown.extend(rally_utm);
-    let fences = mission::fences(
-        &area,
-        &flown,
-        params.fence_margin_m.max(params.nfz_clearance_m),
-    )?;
     let figures = result::Figures {
         area_m2: area.roi.unsigned_area(),
         free_area_m2: free_area,

@@ -153,6 +153,12 @@ impl<'a> PlaneFlight<'a> {
                         }
                 };
                 let outer = radius / (step.abs() / 2.0).cos();
+                // The arc and the polygon round it lie within `outer` of
+                // the centre: clear at once where the raster keeps the
+                // centre farther than that from the keep-out area.
+                if self.grid.as_ref().is_some_and(|g| g.sure(centre) > outer) {
+                    return true;
+                }
                 let mut inner = vec![piece.start()];
                 let mut around = vec![piece.start()];
                 for k in 0..n {
