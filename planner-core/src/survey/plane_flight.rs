@@ -376,9 +376,19 @@ impl<'a> PlaneFlight<'a> {
         // coverage figure of the lanes flown shows it; the first such
         // fault is the plan's when no lane is reached at all.
         let mut fault = None;
+        let mut ahead = self.ways_ahead(&lanes);
+        // The lane last flown: its place in `ahead` and whether reversed.
+        let mut last: Option<(usize, bool)> = None;
+        let mut k = 0;
         for cell in &lanes {
             let mut prev: Option<Entered> = None;
             for entered in cell {
+                k += 1;
+                // The way worked out ahead is this one's if the lane before
+                // was flown as laid.
+                let mut known = (k >= 2 && last == Some((k - 2, false)))
+                    .then(|| ahead.get_mut(k - 2).and_then(Option::take))
+                    .flatten();
                 let mut reached = None;
                 // A leg of a bent lane is flown the way its bends go.
                 let in_chain =
@@ -388,10 +398,14 @@ impl<'a> PlaneFlight<'a> {
                 } else {
                     vec![entered.clone(), entered.reversed()]
                 };
-                for way_round in ways {
-                    match self.way_to(at, from_lane, prev.as_ref(), &way_round) {
+                for (n, way_round) in ways.into_iter().enumerate() {
+                    let way = match known.take().filter(|_| n == 0) {
+                        Some(way) => way,
+                        None => self.way_to(at, from_lane, prev.as_ref(), &way_round),
+                    };
+                    match way {
                         Ok(way) => {
-                            reached = Some((way_round, way));
+                            reached = Some((way_round, way, n == 1));
                             break;
                         }
                         Err(e @ PlanError::Invalid(_)) => {
@@ -400,9 +414,10 @@ impl<'a> PlaneFlight<'a> {
                         Err(e) => return Err(e),
                     }
                 }
-                let Some((entered, way)) = reached else {
+                let Some((entered, way, reversed)) = reached else {
                     continue;
                 };
+                last = Some((k - 1, reversed));
                 if prev.is_some() {
                     f.push_turn(way);
                 } else {
@@ -453,6 +468,29 @@ impl<'a> PlaneFlight<'a> {
             to: home,
         }]);
         Ok(f)
+    }
+
+    /// The way from each lane to the next as laid (`[k]` from the k-th to
+    /// the (k + 1)-th, a turn within a cell, a transit between cells),
+    /// worked out side by side: each depends on those two lanes alone, and
+    /// the flight takes it where it flies them in turn (no lane between
+    /// left out or reversed).
+    fn ways_ahead(&self, lanes: &[Vec<Entered>]) -> Vec<Option<Result<Vec<Piece>, PlanError>>> {
+        use rayon::prelude::*;
+        let flat: Vec<(usize, &Entered)> = lanes
+            .iter()
+            .enumerate()
+            .flat_map(|(c, cell)| cell.iter().map(move |e| (c, e)))
+            .collect();
+        let token = crate::cancel::current();
+        flat.par_windows(2)
+            .map(|w| {
+                let ((ca, a), (cb, b)) = (w[0], w[1]);
+                let end = lane_poses(&a.lane).1;
+                let prev = (ca == cb).then_some(a);
+                Some(token.scope(|| self.way_to(end, Some(a.over), prev, b)))
+            })
+            .collect()
     }
 
     /// The way to lane `next` from pose `at`: the turn from `prev` (the
