@@ -116,7 +116,7 @@ struct FencePolygons<'a>(&'a [FencePolygon]);
 
 impl Serialize for FencePolygons<'_> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(self.0.iter().map(|p| FenceEntry(p)))
+        s.collect_seq(self.0.iter().map(FenceEntry))
     }
 }
 
