@@ -336,22 +336,30 @@ impl<'a> PlaneFlight<'a> {
     /// (lanes, transits).
     fn pieces(&self, tour: &Tour, home: Coord<f64>) -> Result<Flight, PlanError> {
         let mut f = Flight::default();
-        let mut lanes: Vec<Vec<Entered>> = Vec::new();
-        for visit in &tour.visits {
-            let mut kept = Vec::new();
-            // A corridor's bent lane is a run of legs (an area's lanes are
-            // runs of one).
-            for run in visit.runs() {
-                if run.len() == 1 {
-                    kept.extend(self.trim(&visit.lanes[run.start]));
-                } else {
-                    kept.extend(self.bent_lane(&visit.lanes[run]));
-                }
-            }
-            if !kept.is_empty() {
-                lanes.push(kept);
-            }
-        }
+        // Each cell's lanes pulled back, the cells side by side.
+        let token = crate::cancel::current();
+        let lanes: Vec<Vec<Entered>> = {
+            use rayon::prelude::*;
+            tour.visits
+                .par_iter()
+                .map(|visit| {
+                    token.scope(|| {
+                        let mut kept = Vec::new();
+                        // A corridor's bent lane is a run of legs (an
+                        // area's lanes are runs of one).
+                        for run in visit.runs() {
+                            if run.len() == 1 {
+                                kept.extend(self.trim(&visit.lanes[run.start]));
+                            } else {
+                                kept.extend(self.bent_lane(&visit.lanes[run]));
+                            }
+                        }
+                        kept
+                    })
+                })
+                .filter(|kept| !kept.is_empty())
+                .collect()
+        };
         // Departure: straight out of the take-off, towards the first lane.
         let first_target = lanes
             .first()
