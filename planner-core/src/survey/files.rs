@@ -49,6 +49,20 @@ impl SurveyPlan {
             .collect()
     }
 
+    /// Renders every file of the plan side by side and hands each to
+    /// `take` as soon as it is made (so a caller writing them to disk
+    /// overlaps the writing with the rendering and holds few in memory);
+    /// stops at the first error `take` returns.
+    pub fn each_file<E: Send>(
+        &self,
+        take: impl Fn(PlanFile) -> Result<(), E> + Sync,
+    ) -> Result<(), E> {
+        self.file_names()
+            .par_iter()
+            .filter_map(|n| self.file(n))
+            .try_for_each(&take)
+    }
+
     /// One file of the plan by name (see [`SurveyPlan::file_names`]),
     /// rendered alone; `None` for an unknown name.
     pub fn file(&self, name: &str) -> Option<PlanFile> {

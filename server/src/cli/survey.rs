@@ -159,8 +159,7 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
             text.push('\n');
             write("plan.json", &text)
         });
-        let files = plan.files();
-        let written = files.iter().try_for_each(|f| write(&f.name, &f.content));
+        let written = plan.each_file(|f| write(&f.name, &f.content));
         let plan_json = plan_json
             .join()
             .unwrap_or_else(|_| Err(Failure::other("plan.json could not be written")));
