@@ -31,6 +31,7 @@ mod plane_clearance;
 mod plane_escape;
 mod plane_flight;
 mod plane_heights;
+mod plane_pieces;
 mod plane_transit;
 mod rally;
 mod request;
