@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use geo_types::MultiPolygon;
 
 use super::cells::Decomposition;
+use super::homes::FlockSetup;
 use super::request::SurveyParams;
 use crate::coverage::airframe::PlaneTurns;
 use crate::coverage::arcs::ARC_SLACK;
@@ -231,10 +232,34 @@ pub(super) fn flown_coverage(
     )
 }
 
+/// What the footprints leave out of the free area (`free_area_m2`): the
+/// pockets enclosed by the keep-out area and, under 99.5 %, the shortfall
+/// of the coverage figure, for a plane with what of the lanes laid
+/// (`lanes.0`) it flies (`lanes.1`) and why.
+pub(super) fn left_out_warnings(
+    params: &SurveyParams,
+    setup: &FlockSetup,
+    lanes: (&[CellPlan], &[Lane]),
+    coverage_ratio: f64,
+    free_area_m2: f64,
+) -> Vec<String> {
+    let plane = pulled_back_warning(params, lanes.0, lanes.1, coverage_ratio, free_area_m2);
+    // A plane's shortfall is explained by its own warning.
+    let ratio = if params.plane().is_some() {
+        1.0
+    } else {
+        coverage_ratio
+    };
+    let mut out =
+        super::cells::left_out_warnings(setup.enclosed_m2, setup.clearance, ratio, free_area_m2);
+    out.extend(plane);
+    out
+}
+
 /// Why a plane's lanes sweep less than 99.5 % of the free area (the
 /// coverage figure): what of the `planned` lanes it flies (`flown`), why,
 /// and what helps.
-pub(super) fn pulled_back_warning(
+fn pulled_back_warning(
     params: &SurveyParams,
     planned: &[CellPlan],
     flown: &[Lane],

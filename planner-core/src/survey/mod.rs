@@ -125,7 +125,7 @@ pub fn plan_survey_over(
     );
     let outcome = outcome?;
     let proj = &area.projection;
-    let (uavs, mut flown, plane_lanes) = mission::uav_plans(
+    let (uavs, flown, plane_lanes) = mission::uav_plans(
         &setup,
         outcome.sorties,
         over_dem.as_ref(),
@@ -136,49 +136,25 @@ pub fn plan_survey_over(
     crate::cancel::check()?;
     // A plane's coverage (of the lanes it flies) on another core while
     // the cells' figures and the fences are made.
-    let fly_coverage = planned_coverage.is_none();
+    let side = flight.geometry.footprint_side_m;
     let (made, flown_coverage) = crate::cancel::join(
-        || -> Result<_, PlanError> {
-            let mut cells_out = cells::cells_out(&d, proj)?;
-            photo_overlap::fill(&mut cells_out, &uavs);
-            // The inclusion fence holds the rally points (a UAV flies there on
-            // RTL) and keeps the NFZs' clearance too: a vehicle flying on its edge
-            // would breach it with ordinary GPS error.
-            flown.extend(rally_utm);
-            let fences = mission::fences(
-                &area,
-                &flown,
-                params.fence_margin_m.max(params.nfz_clearance_m),
-            )?;
-            Ok((cells_out, fences))
-        },
+        || cells_and_fences(&d, &area, &uavs, flown, rally_utm, params),
         || {
-            fly_coverage.then(|| {
-                aircraft::flown_coverage(&plane_lanes, flight.geometry.footprint_side_m, &free)
-            })
+            let fly = planned_coverage.is_none();
+            fly.then(|| aircraft::flown_coverage(&plane_lanes, side, &free))
         },
     );
     let (cells_out, fences) = made?;
     let (lane_count, coverage_ratio) = planned_coverage.or(flown_coverage).unwrap_or_default();
     let mut warnings = setup.warnings.clone();
     warnings.extend(aircraft::battery_warnings(params, &uavs));
-    warnings.extend(aircraft::pulled_back_warning(
-        params,
-        &d.plans,
-        &plane_lanes,
-        coverage_ratio,
-        free_area,
-    ));
     warnings.extend(over_dem.as_ref().and_then(|o| o.terrain.warning()));
-    warnings.extend(cells::left_out_warnings(
-        setup.enclosed_m2,
-        setup.clearance,
-        // A plane's shortfall is explained by its own warning.
-        if params.plane().is_some() {
-            1.0
-        } else {
-            coverage_ratio
-        },
+    let lanes = (&d.plans[..], &plane_lanes[..]);
+    warnings.extend(aircraft::left_out_warnings(
+        params,
+        &setup,
+        lanes,
+        coverage_ratio,
         free_area,
     ));
     let figures = result::Figures {
@@ -212,6 +188,26 @@ pub fn plan_survey_over(
         warnings,
         max_photo_features: limits.max_photo_features,
     })
+}
+
+/// The cells as planned with the overlaps their photos achieve, and the
+/// fences: the inclusion fence round everything `flown` and the rally
+/// points (a UAV flies there on RTL), keeping the NFZs' clearance too (a
+/// vehicle flying on its edge would breach it with ordinary GPS error).
+fn cells_and_fences(
+    d: &cells::Decomposition,
+    area: &crate::geo::SurveyArea,
+    uavs: &[UavPlan],
+    mut flown: Vec<geo_types::Coord<f64>>,
+    rally_utm: Vec<geo_types::Coord<f64>>,
+    params: &SurveyParams,
+) -> Result<(Vec<CellOut>, Vec<crate::export::FencePolygon>), PlanError> {
+    let mut cells_out = cells::cells_out(d, &area.projection)?;
+    photo_overlap::fill(&mut cells_out, uavs);
+    flown.extend(rally_utm);
+    let margin = params.fence_margin_m.max(params.nfz_clearance_m);
+    let fences = mission::fences(area, &flown, margin)?;
+    Ok((cells_out, fences))
 }
 
 #[cfg(test)]
