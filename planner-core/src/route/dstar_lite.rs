@@ -1063,16 +1063,24 @@ mod tests {
         );
     }
 
+    /// A smooth random costmap (`seed`, `width` × `height`), A*'s route
+    /// between the traversable cells nearest its far corners, and a D* Lite
+    /// planner for the same ends.
+    fn across_a_smooth_map(seed: u64, width: usize, height: usize) -> (Route, DStarLite) {
+        let mut rng = Rng::new(seed);
+        let grid = crate::route::testing::smooth_costmap(&mut rng, width, height, 0.05);
+        let (start, goal) = crate::route::testing::far_corners(&grid);
+        let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
+        let planner = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+        (scratch, planner)
+    }
+
     #[test]
     fn first_search_follows_the_route() {
         // The landmark A* plus the backward walk along the route plus the
         // settled band (a tenth of A*): far below the octile-only backward
         // search, which floods most of this map.
-        let mut rng = Rng::new(17);
-        let grid = crate::route::testing::smooth_costmap(&mut rng, 300, 300, 0.05);
-        let (start, goal) = crate::route::testing::far_corners(&grid);
-        let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
-        let mut p = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+        let (scratch, mut p) = across_a_smooth_map(17, 300, 300);
         let first = p.plan(&|| false).unwrap();
         assert!((first.cost - scratch.cost).abs() <= 1e-9 * scratch.cost);
         let backward = first.expanded - scratch.expanded;
@@ -1162,11 +1170,7 @@ mod tests {
         // plan_with_astar answers with A*'s route; the next plan completes
         // the first search (the walk back and the band) without a second A*,
         // and replans from there equal A* from scratch.
-        let mut rng = Rng::new(23);
-        let grid = crate::route::testing::smooth_costmap(&mut rng, 200, 180, 0.05);
-        let (start, goal) = crate::route::testing::far_corners(&grid);
-        let scratch = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
-        let mut p = DStarLite::new(grid, start, goal, RouteOptions::default()).unwrap();
+        let (scratch, mut p) = across_a_smooth_map(23, 200, 180);
         let route = p.plan_with_astar(&|| false).unwrap();
         assert_eq!(route, scratch, "the same search");
         let rest = p.plan(&|| false).unwrap();
