@@ -108,6 +108,11 @@ impl ClearanceGrid {
         ((y - self.y0) / self.cell).floor() as isize
     }
 
+    /// The raster's cell size, m.
+    pub(super) fn cell(&self) -> f64 {
+        self.cell
+    }
+
     /// A distance `p` surely keeps from the keep-out area (≤ 0: unknown).
     pub(super) fn sure(&self, p: Coord<f64>) -> f64 {
         let (c, r) = (self.col(p.x), self.row(p.y));
