@@ -383,14 +383,7 @@ impl DStarLite {
             }
             (self.extract_path()?, expanded)
         };
-        Ok(super::finish_route(
-            &self.grid,
-            &self.hood,
-            &self.model,
-            &path,
-            expanded,
-            self.options.smooth,
-        ))
+        Ok(self.route_along(&path, expanded))
     }
 
     /// A* from the start of a fresh planner: the route [`astar`](super::astar())
@@ -411,14 +404,20 @@ impl DStarLite {
         } else {
             self.prepare_landmark(cancel)?
         };
-        Ok(super::finish_route(
+        Ok(self.route_along(&path, expanded))
+    }
+
+    /// The route along `path` (cell indices), as [`plan`](Self::plan) and
+    /// [`plan_with_astar`](Self::plan_with_astar) answer it.
+    fn route_along(&self, path: &[usize], expanded: u64) -> Route {
+        super::finish_route(
             &self.grid,
             &self.hood,
             &self.model,
-            &path,
+            path,
             expanded,
             self.options.smooth,
-        ))
+        )
     }
 
     fn cell(&self, i: usize) -> Cell {
