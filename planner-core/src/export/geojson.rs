@@ -160,17 +160,6 @@ pub fn polygon_geometry(p: &Polygon<f64>) -> Value {
     json!({ "type": "Polygon", "coordinates": rings })
 }
 
-/// A FeatureCollection from (geometry, properties) pairs.
-pub fn feature_collection(
-    features: impl IntoIterator<Item = (Value, Map<String, Value>)>,
-) -> Value {
-    let features: Vec<Value> = features
-        .into_iter()
-        .map(|(geometry, properties)| json!({"type": "Feature", "properties": properties, "geometry": geometry}))
-        .collect();
-    json!({ "type": "FeatureCollection", "features": features })
-}
-
 /// A lon/lat polyline as a GeoJSON LineString geometry.
 pub fn line_geometry(coords: &[Coord<f64>]) -> Value {
     json!({ "type": "LineString", "coordinates": coords.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>() })

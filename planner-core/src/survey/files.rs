@@ -74,9 +74,7 @@ impl SurveyPlan {
             })
         };
         if name == CELLS_FILE {
-            let mut text = serde_json::to_string_pretty(&CellsDocument(self)).unwrap_or_default();
-            text.push('\n');
-            return done(text);
+            return done(pretty(&CellsDocument(self)));
         }
         if let Some(rally) = self.rally_file(name) {
             return Some(rally);
@@ -220,7 +218,8 @@ fn geojson_exterior(polygon: &Value) -> Vec<[f64; 2]> {
         .unwrap_or_default()
 }
 
-fn pretty(v: &Value) -> String {
+/// `v` as indented JSON with a final newline.
+fn pretty<T: Serialize + ?Sized>(v: &T) -> String {
     let mut s = serde_json::to_string_pretty(v).unwrap_or_default();
     s.push('\n');
     s
