@@ -12,6 +12,7 @@
 #   FILE  fields2cover-2.1.0.tar.gz (default: pip download from PyPI).
 # Exit status 1 with a message naming what is missing.
 set -euo pipefail
+start=$PWD
 cd "$(dirname "$0")/../.."
 
 F2C_VERSION=2.1.0
@@ -28,6 +29,21 @@ while [ $# -gt 0 ]; do
     *) echo "build.sh: unknown argument $1" >&2; exit 1 ;;
   esac
 done
+
+# Paths given relative to where the script was started from.
+case "$sf_dir" in /*|"") ;; *) sf_dir=$start/$sf_dir ;; esac
+case "$sdist" in /*|"") ;; *) sdist=$start/$sdist ;; esac
+here=scripts/f2c
+[ -n "$sdist" ] || sdist=$out/dl/fields2cover-$F2C_VERSION.tar.gz
+stamp_of() {
+  { echo "$SF_COMMIT"; cat "$sdist" "$here/no-ortools.patch" "$here/F2CUtils.cmake" \
+    "$here/CMakeLists.txt" "$here/f2c_bench.cpp"; } | sha1sum | cut -c1-12
+}
+# Built from these very inputs already: nothing to do (and nothing needed).
+if [ -f "$sdist" ] && [ -x "$out/bin/f2c_bench" ] &&
+  [ "$(cat "$out/.stamp" 2>/dev/null)" = "$(stamp_of)" ]; then
+  exit 0
+fi
 
 missing=()
 for deb in "${DEBS[@]}"; do
@@ -66,8 +82,7 @@ else
   exit 1
 fi
 
-if [ -z "$sdist" ]; then
-  sdist=$out/dl/fields2cover-$F2C_VERSION.tar.gz
+if [ "$sdist" = "$out/dl/fields2cover-$F2C_VERSION.tar.gz" ]; then
   if [ ! -f "$sdist" ]; then
     # pip prepares the sdist's metadata, which needs its build backend
     # (scikit-build-core); a small venv of its own keeps that out of others.
@@ -83,12 +98,7 @@ if [ -z "$sdist" ]; then
 fi
 [ -f "$sdist" ] || { echo "build.sh: no sdist at $sdist" >&2; exit 1; }
 
-here=scripts/f2c
-stamp=$(cat "$sdist" "$here/no-ortools.patch" "$here/F2CUtils.cmake" \
-  "$here/CMakeLists.txt" "$here/f2c_bench.cpp" | sha1sum | cut -c1-12)
-if [ -x "$out/bin/f2c_bench" ] && [ "$(cat "$out/.stamp" 2>/dev/null)" = "$stamp" ]; then
-  exit 0
-fi
+stamp=$(stamp_of)
 src=$out/src/fields2cover-$F2C_VERSION
 rm -rf "$out/src" && mkdir -p "$out/src"
 tar -xzf "$sdist" -C "$out/src"
