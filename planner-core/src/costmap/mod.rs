@@ -17,6 +17,7 @@
 //!
 //! and [`preview`] (PNG + legend) and [`stats`] for the results.
 
+mod bands;
 pub mod distance;
 pub mod grid;
 pub mod inflate;

@@ -65,27 +65,105 @@ pub fn normals(
     if width == 0 || height == 0 {
         return Ok((zcomp, rough));
     }
-    // Rows above and below a row that its neighbourhood reads.
-    let reach = row_size_m
-        .iter()
-        .map(|&[sx, sy]| {
-            neighbourhood(radius_m, sx, sy)
-                .iter()
-                .map(|h| h.1.unsigned_abs())
-                .max()
-                .unwrap_or(0)
-        })
-        .max()
-        .unwrap_or(0);
-    let band_job = |b: usize,
-                    zc_band: &mut [f32],
-                    mut rough_band: Option<&mut [f32]>,
-                    (smoothed, scratch): &mut (Vec<f64>, Vec<f64>)| {
-        let r0 = b * BAND_ROWS;
+    let job = NormalsJob::new(z, width, height, row_size_m, radius_m, smoother);
+    let band = BAND_ROWS * width;
+    match rough.as_mut() {
+        Some(rough) => zcomp
+            .par_chunks_mut(band)
+            .zip(rough.par_chunks_mut(band))
+            .enumerate()
+            .for_each_init(Default::default, |buf, (b, (a, r))| {
+                job.band(b * BAND_ROWS, a, Some(r), buf, ticker)
+            }),
+        None => zcomp
+            .par_chunks_mut(band)
+            .enumerate()
+            .for_each_init(Default::default, |buf, (b, a)| {
+                job.band(b * BAND_ROWS, a, None, buf, ticker)
+            }),
+    }
+    if ticker.cancelled() {
+        return Err(CostmapError::Cancelled);
+    }
+    Ok((zcomp, rough))
+}
+
+/// The normals of any band of rows of a grid on its own, smoothing the
+/// rows it reads first.
+pub(super) struct NormalsJob<'a> {
+    z: &'a [f64],
+    width: usize,
+    height: usize,
+    row_size_m: &'a [[f64; 2]],
+    radius_m: f64,
+    smoother: Option<&'a Smoother>,
+    /// Rows above and below a row that its neighbourhood reads.
+    reach: usize,
+}
+
+/// What [`NormalsJob::band`] reuses from band to band: the smoothed rows
+/// and the smoother's scratch.
+pub(super) type NormalsScratch = (Vec<f64>, Vec<f64>);
+
+impl<'a> NormalsJob<'a> {
+    pub(super) fn new(
+        z: &'a [f64],
+        width: usize,
+        height: usize,
+        row_size_m: &'a [[f64; 2]],
+        radius_m: f64,
+        smoother: Option<&'a Smoother>,
+    ) -> NormalsJob<'a> {
+        let reach = row_size_m
+            .iter()
+            .map(|&[sx, sy]| {
+                neighbourhood(radius_m, sx, sy)
+                    .iter()
+                    .map(|h| h.1.unsigned_abs())
+                    .max()
+                    .unwrap_or(0)
+            })
+            .max()
+            .unwrap_or(0);
+        NormalsJob {
+            z,
+            width,
+            height,
+            row_size_m,
+            radius_m,
+            smoother,
+            reach,
+        }
+    }
+
+    pub(super) fn z(&self) -> &'a [f64] {
+        self.z
+    }
+
+    pub(super) fn width(&self) -> usize {
+        self.width
+    }
+
+    pub(super) fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Zcomp (and roughness) of the rows from `r0` into `zc_band` (whole
+    /// rows, pre-filled with NaN) and `rough_band`, a tick of `ticker` per
+    /// row; stops early once it is cancelled.
+    pub(super) fn band(
+        &self,
+        r0: usize,
+        zc_band: &mut [f32],
+        mut rough_band: Option<&mut [f32]>,
+        (smoothed, scratch): &mut NormalsScratch,
+        ticker: &Ticker,
+    ) {
+        let (z, width, height) = (self.z, self.width, self.height);
         let r1 = r0 + zc_band.len() / width;
         // The rows the band's neighbourhoods read, smoothed if asked.
-        let (l0, l1) = (r0.saturating_sub(reach), (r1 + reach).min(height));
-        let local: &[f64] = match smoother {
+        let (l0, l1) = (r0.saturating_sub(self.reach), (r1 + self.reach).min(height));
+        let local: &[f64] = match self.smoother {
             Some(s) => {
                 smoothed.resize((l1 - l0) * width, 0.0);
                 s.smooth_rows(z, width, height, l0..l1, smoothed, scratch);
@@ -106,31 +184,13 @@ pub fn normals(
                 width,
                 l1 - l0,
                 r - l0,
-                row_size_m[r],
-                radius_m,
+                self.row_size_m[r],
+                self.radius_m,
                 zc_row,
                 rough_row,
             );
         }
-    };
-    let band = BAND_ROWS * width;
-    match rough.as_mut() {
-        Some(rough) => zcomp
-            .par_chunks_mut(band)
-            .zip(rough.par_chunks_mut(band))
-            .enumerate()
-            .for_each_init(Default::default, |buf, (b, (a, r))| {
-                band_job(b, a, Some(r), buf)
-            }),
-        None => zcomp
-            .par_chunks_mut(band)
-            .enumerate()
-            .for_each_init(Default::default, |buf, (b, a)| band_job(b, a, None, buf)),
     }
-    if ticker.cancelled() {
-        return Err(CostmapError::Cancelled);
-    }
-    Ok((zcomp, rough))
 }
 
 /// Zcomp (and roughness) of row `r` of the `width`×`height` heights `z`

@@ -6,17 +6,18 @@ use std::io::{Seek, Write};
 
 use rayon::prelude::*;
 
+use super::bands::{Limits, Surface, surface};
 use super::grid::{WorkGrid, work_grid};
 use super::inflate::inflation;
 use super::landcover::landcover_costs;
-use super::normals::normals;
+use super::normals::NormalsJob;
 pub use super::params::check_against_dem;
 use super::params::{negative_radius, resolve};
 use super::progress::{Monotone, Ticker};
 use super::regions::fill_enclosed;
 use super::smooth::Smoother;
 use super::stats::{CostmapStats, costmap_stats};
-use super::steps::{depth_below_plane, step_heights};
+use super::steps::depth_below_plane;
 use super::{
     Class, Costmap, CostmapError, CostmapOptions, Layer, Progress, ResolvedParams, Stage, StepMode,
     Vehicle,
@@ -76,12 +77,11 @@ fn run(
     let grid = resample(dem, vehicle, options, &params, progress, &mut warnings)?;
     let (w, h) = (grid.width, grid.height);
     let cell = grid.centre_size_m();
-    // Step 4 before 2: steps are judged on the heights before smoothing
-    // (smoothing would shave them).
-    let steps = step_grid(&grid, vehicle, options, &params, progress)?;
-    let (zcomp, roughness) = surface_normals(&grid, options, &params, progress)?;
+    // Steps are judged on the heights before smoothing (smoothing would
+    // shave them), normals after; both band by band in one pass.
+    let surface = surface_and_classes(&grid, vehicle, options, &params, progress)?;
+    let negative = negative_steps(&grid, vehicle, options, progress)?;
     let transform = grid.transform;
-    drop(grid);
     let landcover_cost = match (&options.landcover, landcover) {
         (Some(table), Some(raster)) => {
             Ticker::new(progress, Stage::Layers, 1).check()?;
@@ -90,23 +90,18 @@ fn run(
         _ => None,
     };
     let layers = CellLayers {
-        step: steps.step,
-        negative: steps.negative,
-        zcomp,
-        roughness,
+        step: surface.step,
+        negative,
+        zcomp: surface.zcomp,
+        roughness: surface.roughness,
         landcover_cost,
     };
-
-    let mut class = classify(&layers, &steps.unknown_height, vehicle, options);
+    let mut class = surface.class;
+    add_layer_obstacles(&mut class, &layers);
     fill_pockets(&mut class, [w, h], cell, &params, progress)?;
-    let inflated = inflate(
-        &class,
-        steps.unknown_height,
-        [w, h],
-        cell,
-        &params,
-        progress,
-    )?;
+    let obstacle = obstacles(&class, &grid.z);
+    drop(grid);
+    let inflated = inflate(obstacle, [w, h], cell, &params, progress)?;
     let (cost, inflation_layer) = costs(inflated, &class, &layers, vehicle, options, progress)?;
 
     let stats = statistics(&cost, &class, [w, h], cell, vehicle, options);
@@ -160,8 +155,8 @@ fn check_request(
 /// The per-cell grids of the working grid that classes and costs are
 /// made of (row-major).
 struct CellLayers {
-    /// Step height (SPEC §4.2 step 4).
-    step: Vec<f32>,
+    /// Step height (SPEC §4.2 step 4), when kept as a layer.
+    step: Option<Vec<f32>>,
     /// Depth below the local plane, and the deepest allowed (negative
     /// steps, optional).
     negative: Option<(Vec<f32>, f64)>,
@@ -200,127 +195,91 @@ fn resample(
     Ok(grid)
 }
 
-/// What step 4 leaves: step heights, the optional negative steps, and
-/// which cells have no height.
-struct StepGrid {
-    step: Vec<f32>,
-    negative: Option<(Vec<f32>, f64)>,
-    unknown_height: Vec<bool>,
-}
-
-/// SPEC §4.2 step 4: step heights between neighbours (or against the
-/// local plane), the depth below the plane when negative steps are asked
-/// for, and the cells without a height.
-fn step_grid(
+/// SPEC §4.2 steps 2–4 and the union of step 5 for the step and slope
+/// grids (and the roughness when asked for): one pass over the heights.
+fn surface_and_classes(
     grid: &WorkGrid,
     vehicle: &Vehicle,
     options: &CostmapOptions,
     params: &ResolvedParams,
     progress: &dyn Progress,
-) -> Result<StepGrid, CostmapError> {
-    let (w, h) = (grid.width, grid.height);
-    let ticker = Ticker::new(progress, Stage::Steps, h);
-    let step = step_heights(&grid.z, w, h, params.step_mode, &ticker)?;
-    let negative = match &options.negative_steps {
-        Some(n) => {
-            let ticker = Ticker::new(progress, Stage::Layers, h);
-            let r = negative_radius(vehicle, n.radius_m);
-            Some((
-                depth_below_plane(&grid.z, w, h, &grid.row_size_m, r, &ticker)?,
-                n.max_depth_m.unwrap_or(vehicle.max_step_m),
-            ))
-        }
-        None => None,
-    };
-    let mut unknown_height = crate::buffer::filled(w * h, false);
-    unknown_height
-        .par_chunks_mut(CHUNK)
-        .zip(grid.z.par_chunks(CHUNK))
-        .for_each(|(u, z)| u.iter_mut().zip(z).for_each(|(u, z)| *u = z.is_nan()));
-    Ok(StepGrid {
-        step,
-        negative,
-        unknown_height,
-    })
-}
-
-/// SPEC §4.2 step 2: Zcomp (and the roughness when asked for) from PCA
-/// normals of the lightly smoothed heights, band by band.
-fn surface_normals(
-    grid: &WorkGrid,
-    options: &CostmapOptions,
-    params: &ResolvedParams,
-    progress: &dyn Progress,
-) -> Result<(Vec<f32>, Option<Vec<f32>>), CostmapError> {
+) -> Result<Surface, CostmapError> {
     let [sx, sy] = grid.centre_size_m();
+    // Stage::Steps is reported as begun; the pass ticks as the normals.
+    Ticker::new(progress, Stage::Steps, 1).check()?;
     let ticker = Ticker::new(progress, Stage::Normals, grid.height);
     let smoother = Smoother::new(
         params.smoothing_sigma_m / sx,
         params.smoothing_sigma_m / sy,
         3.0,
     );
-    normals(
+    let normals = NormalsJob::new(
         &grid.z,
         grid.width,
         grid.height,
         &grid.row_size_m,
         params.pca_radius_m,
         smoother.as_ref(),
-        options.roughness.is_some(),
-        &ticker,
-    )
+    );
+    let limits = Limits {
+        max_step_m: vehicle.max_step_m,
+        cos_max: vehicle.max_slope_deg.to_radians().cos(),
+        max_roughness_m: options.roughness.as_ref().map(|o| o.max_m),
+    };
+    let keep_step = options.layers.contains(&Layer::Step);
+    surface(&normals, params.step_mode, limits, keep_step, &ticker)
 }
 
-/// SPEC §4.2 steps 3–5 (first part): each cell's class from the slope
-/// grid, the step grid and the optional obstacle layers, united.
-fn classify(
-    layers: &CellLayers,
-    unknown_height: &[bool],
+/// The depth below the local plane and the deepest allowed, when negative
+/// steps are asked for.
+fn negative_steps(
+    grid: &WorkGrid,
     vehicle: &Vehicle,
     options: &CostmapOptions,
-) -> Vec<u8> {
-    let CellLayers {
-        step,
-        negative,
-        zcomp,
-        roughness,
-        landcover_cost,
-    } = layers;
-    let cos_max = vehicle.max_slope_deg.to_radians().cos();
-    let mut class = crate::buffer::filled(step.len(), Class::Unknown as u8);
-    let plain = negative.is_none() && roughness.is_none() && landcover_cost.is_none();
-    if plain {
-        // No optional layer: a loop without per-cell option checks. (A
-        // NaN step or Zcomp fails both tests and stays unknown.)
-        let max_step = vehicle.max_step_m;
+    progress: &dyn Progress,
+) -> Result<Option<(Vec<f32>, f64)>, CostmapError> {
+    let Some(n) = &options.negative_steps else {
+        return Ok(None);
+    };
+    let (w, h) = (grid.width, grid.height);
+    let ticker = Ticker::new(progress, Stage::Layers, h);
+    let r = negative_radius(vehicle, n.radius_m);
+    Ok(Some((
+        depth_below_plane(&grid.z, w, h, &grid.row_size_m, r, &ticker)?,
+        n.max_depth_m.unwrap_or(vehicle.max_step_m),
+    )))
+}
+
+/// SPEC §4.2 step 5 (first part), the optional obstacle layers: ditches
+/// deeper than allowed are steps, lethal land cover an "other" obstacle
+/// where the cell would be traversable (precedence step > slope > other;
+/// unknown cells stay unknown).
+fn add_layer_obstacles(class: &mut [u8], layers: &CellLayers) {
+    let (unknown, trav) = (Class::Unknown as u8, Class::Traversable as u8);
+    if let Some((depth, max)) = &layers.negative {
         class
             .par_chunks_mut(CHUNK)
-            .zip(step.par_chunks(CHUNK).zip(zcomp.par_chunks(CHUNK)))
-            .for_each(|(ks, (ss, zs))| {
-                for ((k, &s), &zc) in ks.iter_mut().zip(ss).zip(zs) {
-                    *k = class_of(s, zc, max_step, cos_max, false, false) as u8;
+            .zip(depth.par_chunks(CHUNK))
+            .for_each(|(ks, ds)| {
+                for (k, &d) in ks.iter_mut().zip(ds) {
+                    if *k != unknown && f64::from(d) > *max {
+                        *k = Class::Step as u8;
+                    }
                 }
             });
-    } else {
-        class.par_iter_mut().enumerate().for_each(|(i, k)| {
-            if unknown_height[i] {
-                return;
-            }
-            let ditch = negative
-                .as_ref()
-                .is_some_and(|(d, max)| f64::from(d[i]) > *max);
-            let rough = match (roughness, &options.roughness) {
-                (Some(r), Some(o)) => f64::from(r[i]) > o.max_m,
-                _ => false,
-            };
-            let lethal = landcover_cost
-                .as_ref()
-                .is_some_and(|l| l[i] == f32::INFINITY);
-            let max_step = vehicle.max_step_m;
-            *k = class_of(step[i], zcomp[i], max_step, cos_max, ditch, rough || lethal) as u8;
-        });
     }
-    class
+    if let Some(l) = &layers.landcover_cost {
+        class
+            .par_chunks_mut(CHUNK)
+            .zip(l.par_chunks(CHUNK))
+            .for_each(|(ks, ls)| {
+                for (k, &c) in ks.iter_mut().zip(ls) {
+                    if *k == trav && c == f32::INFINITY {
+                        *k = Class::Other as u8;
+                    }
+                }
+            });
+    }
 }
 
 /// SPEC §4.2 step 5 (second part): traversable pockets enclosed by
@@ -337,24 +296,31 @@ fn fill_pockets(
     ticker.check()
 }
 
-/// SPEC §4.2 step 6: inflation from obstacles and from cells without a
-/// height (unknown ground is no safer than an obstacle), not from the
-/// border ring, which is unknown only because it cannot be judged.
+/// The cells inflation grows from: obstacles and cells without a height
+/// (unknown ground is no safer than an obstacle), not the border ring,
+/// which is unknown only because it cannot be judged.
+fn obstacles(class: &[u8], z: &[f64]) -> Vec<bool> {
+    let mut obstacle = crate::buffer::filled(class.len(), false);
+    obstacle
+        .par_chunks_mut(CHUNK)
+        .zip(class.par_chunks(CHUNK).zip(z.par_chunks(CHUNK)))
+        .for_each(|(os, (ks, zs))| {
+            for ((o, &k), &v) in os.iter_mut().zip(ks).zip(zs) {
+                *o = v.is_nan() || Class::from_code(k).is_some_and(Class::is_obstacle);
+            }
+        });
+    obstacle
+}
+
+/// SPEC §4.2 step 6: inflation from the `obstacle` cells.
 fn inflate(
-    class: &[u8],
-    unknown_height: Vec<bool>,
+    obstacle: Vec<bool>,
     [w, h]: [usize; 2],
     cell: [f64; 2],
     params: &ResolvedParams,
     progress: &dyn Progress,
 ) -> Result<Vec<f32>, CostmapError> {
     let ticker = Ticker::new(progress, Stage::Inflate, 1);
-    let obstacle: Vec<bool> = class
-        .par_iter()
-        .zip(&unknown_height)
-        .map(|(&k, &hole)| hole || Class::from_code(k).is_some_and(Class::is_obstacle))
-        .collect();
-    drop(unknown_height);
     let inflated = inflation(
         &obstacle,
         w,
@@ -473,7 +439,7 @@ fn layer_rasters(
                 .map(|&z| f64::from(z).min(1.0).acos().to_degrees() as f32)
                 .collect(),
             Layer::Zcomp => layers.zcomp.clone(),
-            Layer::Step => layers.step.clone(),
+            Layer::Step => layers.step.clone().unwrap_or_default(),
             Layer::Inflation => inflation_layer.clone().unwrap_or_default(),
             Layer::Roughness => layers.roughness.clone().unwrap_or_default(),
             Layer::NegativeStep => layers
@@ -494,25 +460,6 @@ fn layer_rasters(
         out.push((layer, data));
     }
     out
-}
-
-/// A cell's class from its step height and Zcomp (NaN: unknown), and
-/// whether a ditch or an "other" obstacle (roughness, lethal land cover)
-/// lies there. Precedence: step > slope > other.
-#[inline(always)]
-fn class_of(step: f32, zcomp: f32, max_step: f64, cos_max: f64, ditch: bool, other: bool) -> Class {
-    let (s, zc) = (f64::from(step), f64::from(zcomp));
-    if s.is_nan() || zc.is_nan() {
-        Class::Unknown
-    } else if s > max_step || ditch {
-        Class::Step
-    } else if zc <= cos_max {
-        Class::Slope
-    } else if other {
-        Class::Other
-    } else {
-        Class::Traversable
-    }
 }
 
 /// SPEC §4.2 steps 7–8 before the optional layers: w_infl·inflation +

@@ -50,74 +50,13 @@ pub fn step_heights(
     ticker: &Ticker,
 ) -> Result<Vec<f32>, CostmapError> {
     let mut out = crate::buffer::filled(width * height, f32::NAN);
-    let at = |c: isize, r: isize| -> f64 {
-        if c < 0 || r < 0 || c >= width as isize || r >= height as isize {
-            f64::NAN
-        } else {
-            z[r as usize * width + c as usize]
-        }
-    };
-    let w = width as isize;
-    let offsets: Vec<isize> = DIRECTIONS.iter().map(|&(dc, dr)| dr * w + dc).collect();
+    let unknown = rows_with_unknown(z, width, 0..height);
     out.par_chunks_mut(width.max(1)).enumerate().for_each_init(
-        || (Vec::new(), Vec::new()),
-        |(worst, probe), (r, row)| {
-            if !ticker.tick() || r == 0 || r + 1 >= height {
-                return;
-            }
-            // Rows and columns 2 cells in, where every cell the residual
-            // looks at exists: no bounds checks.
-            let inner_row = r >= 2 && r + 2 < height;
-            let ri = r as isize;
-            let last = width.saturating_sub(1);
-            let lines = inner_row && width >= 5;
-            if lines {
-                // Whole lines at once; the cells whose tests met an unknown
-                // height (a NaN probe) are done again one by one below.
-                clean_row(z, width, r, mode, worst, probe);
-                for ((o, &v), &p) in row[2..width - 2].iter_mut().zip(&*worst).zip(&*probe) {
-                    *o = if p.is_nan() { f32::NAN } else { v as f32 };
-                }
-            }
-            for (c, out) in row.iter_mut().enumerate().take(last).skip(1) {
-                if lines && c >= 2 && c + 2 < width && !probe[c - 2].is_nan() {
-                    continue;
-                }
-                let i = r * width + c;
-                let zc = z[i];
-                if zc.is_nan() {
-                    continue;
-                }
-                if inner_row && c >= 2 && c + 2 < width {
-                    let worst = inner_step(z, i, zc, &offsets, mode);
-                    if !worst.is_nan() {
-                        *out = worst as f32;
-                    }
-                    continue;
-                }
-                let ci = c as isize;
-                let mut worst = 0.0f64;
-                let mut known = true;
-                for (dc, dr) in DIRECTIONS {
-                    let zn = at(ci + dc, ri + dr);
-                    if zn.is_nan() {
-                        known = false;
-                        break;
-                    }
-                    let d0 = zn - zc;
-                    let s = match mode {
-                        StepMode::Neighbours => d0.abs(),
-                        StepMode::Residual => residual(
-                            d0,
-                            zc - at(ci - dc, ri - dr),
-                            at(ci + 2 * dc, ri + 2 * dr) - zn,
-                        ),
-                    };
-                    worst = worst.max(s);
-                }
-                if known {
-                    *out = worst as f32;
-                }
+        StepScratch::default,
+        |scratch, (r, row)| {
+            if ticker.tick() {
+                let clean = clean_rows(&unknown, 0, r);
+                step_row(z, width, height, r, mode, clean, row, scratch);
             }
         },
     );
@@ -127,24 +66,148 @@ pub fn step_heights(
     Ok(out)
 }
 
-/// Largest step of every cell 2 columns in of row `r` (into `worst`,
-/// from column 2): the same tests as [`inner_step`], one line direction
-/// at a time over whole rows. `probe` gets the sum of the heights each
-/// cell's tests read: NaN exactly where one of them is unknown, and there
-/// `worst` is meaningless.
+/// For each row of `rows`, whether it holds an unknown height.
+pub(super) fn rows_with_unknown(
+    z: &[f64],
+    width: usize,
+    rows: std::ops::Range<usize>,
+) -> Vec<bool> {
+    rows.map(|r| z[r * width..(r + 1) * width].iter().any(|v| v.is_nan()))
+        .collect()
+}
+
+/// Whether rows r − 2 … r + 2 are all known, given `unknown` for the rows
+/// from `first`; false where they are not all listed.
+pub(super) fn clean_rows(unknown: &[bool], first: usize, r: usize) -> bool {
+    r >= first + 2
+        && unknown
+            .get(r - first - 2..r - first + 3)
+            .is_some_and(|u| !u.contains(&true))
+}
+
+/// What [`step_row`] reuses from row to row.
+#[derive(Default)]
+pub(super) struct StepScratch {
+    worst: Vec<f64>,
+    probe: Vec<f64>,
+}
+
+/// Step heights of row `r` of the `width`×`height` heights `z` into `row`
+/// (all of it: NaN where a cell cannot be judged). `clean`: rows r − 2 …
+/// r + 2 hold no unknown height, so the whole-line passes need not look
+/// for one.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn step_row(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    r: usize,
+    mode: StepMode,
+    clean: bool,
+    row: &mut [f32],
+    scratch: &mut StepScratch,
+) {
+    row.fill(f32::NAN);
+    if r == 0 || r + 1 >= height {
+        return;
+    }
+    let at = |c: isize, r: isize| -> f64 {
+        if c < 0 || r < 0 || c >= width as isize || r >= height as isize {
+            f64::NAN
+        } else {
+            z[r as usize * width + c as usize]
+        }
+    };
+    let w = width as isize;
+    let mut offsets = [0isize; 8];
+    for (o, &(dc, dr)) in offsets.iter_mut().zip(&DIRECTIONS) {
+        *o = dr * w + dc;
+    }
+    // Rows and columns 2 cells in, where every cell the residual looks at
+    // exists: no bounds checks.
+    let inner_row = r >= 2 && r + 2 < height;
+    let ri = r as isize;
+    let last = width.saturating_sub(1);
+    let lines = inner_row && width >= 5;
+    let clean = clean && lines;
+    if lines {
+        // Whole lines at once; unless the rows are clean, the cells whose
+        // tests met an unknown height (a NaN probe) are done again one by
+        // one below.
+        clean_row(z, width, r, mode, !clean, scratch);
+        let out = row[2..width - 2].iter_mut().zip(&scratch.worst);
+        if clean {
+            out.for_each(|(o, &v)| *o = v as f32);
+        } else {
+            for ((o, &v), &p) in out.zip(&scratch.probe) {
+                *o = if p.is_nan() { f32::NAN } else { v as f32 };
+            }
+        }
+    }
+    for (c, out) in row.iter_mut().enumerate().take(last).skip(1) {
+        if lines && c >= 2 && c + 2 < width && (clean || !scratch.probe[c - 2].is_nan()) {
+            continue;
+        }
+        let i = r * width + c;
+        let zc = z[i];
+        if zc.is_nan() {
+            continue;
+        }
+        if inner_row && c >= 2 && c + 2 < width {
+            let worst = inner_step(z, i, zc, &offsets, mode);
+            if !worst.is_nan() {
+                *out = worst as f32;
+            }
+            continue;
+        }
+        let ci = c as isize;
+        let mut worst = 0.0f64;
+        let mut known = true;
+        for (dc, dr) in DIRECTIONS {
+            let zn = at(ci + dc, ri + dr);
+            if zn.is_nan() {
+                known = false;
+                break;
+            }
+            let d0 = zn - zc;
+            let s = match mode {
+                StepMode::Neighbours => d0.abs(),
+                StepMode::Residual => residual(
+                    d0,
+                    zc - at(ci - dc, ri - dr),
+                    at(ci + 2 * dc, ri + 2 * dr) - zn,
+                ),
+            };
+            worst = worst.max(s);
+        }
+        if known {
+            *out = worst as f32;
+        }
+    }
+}
+
+/// Largest step of every cell 2 columns in of row `r` (into
+/// `scratch.worst`, from column 2): the same tests as [`inner_step`], one
+/// line direction at a time over whole rows. With `check`,
+/// `scratch.probe` gets the sum of the heights each cell's tests read: NaN
+/// exactly where one of them is unknown, and there `worst` is
+/// meaningless.
 fn clean_row(
     z: &[f64],
     width: usize,
     r: usize,
     mode: StepMode,
-    worst: &mut Vec<f64>,
-    probe: &mut Vec<f64>,
+    check: bool,
+    scratch: &mut StepScratch,
 ) {
     let n = width - 4;
+    let StepScratch { worst, probe } = scratch;
     worst.clear();
     worst.resize(n, 0.0);
     probe.clear();
-    probe.resize(n, 0.0);
+    if check {
+        probe.resize(n, 0.0);
+    }
     clean_row_lines(z, width, r, mode, worst, probe);
 }
 
@@ -174,6 +237,7 @@ fn clean_row_lines(
             &z[start..start + n]
         };
         let (m2, m1, c0, p1, p2) = (line(-2), line(-1), line(0), line(1), line(2));
+        // (Empty when the rows are known to be clean.)
         for (((((p, &a), &b), &c), &d), &e) in
             probe.iter_mut().zip(m2).zip(m1).zip(c0).zip(p1).zip(p2)
         {
