@@ -81,6 +81,10 @@ export interface UavFiles {
   kml: string;
   /** The sortie's planned photos (footprints) as GeoJSON (absent from older surveys and planes). */
   photos?: string;
+  /** DJI WPML mission (KMZ), when DJI can fly the sortie. */
+  dji_kmz?: string;
+  /** Litchi mission(s): one file, or numbered parts past 99 waypoints. */
+  litchi?: string[];
 }
 export interface Sortie {
   number: number;

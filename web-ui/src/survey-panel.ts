@@ -4,6 +4,7 @@
 
 import { api, request, type CameraPreset, type LonLat, type Survey } from './api';
 import { CorridorFields } from './corridor-fields';
+import { djiLinks } from './dji-links';
 import { PATTERN_DEFAULTS, readPatternFields, showPatternFields } from './pattern-fields';
 import { AIRCRAFT_DEFAULTS, readAircraftFields, showAircraftFields } from './aircraft-fields';
 import { byId, formatLonLat, h, numberValue, parseLonLat, setValue, swatch } from './dom';
@@ -536,6 +537,7 @@ export class SurveyPanel {
           link(so.files.fence, 'fence', `${u.id} fence mission${tag}`),
           ...(so.files.rally ? [link(so.files.rally, 'rally', `${u.id} rally points${tag}`)] : []),
           ...(so.files.photos ? [link(so.files.photos, 'photos', `${u.id} photo footprints GeoJSON${tag}`)] : []),
+          ...djiLinks(so.files, u.id, tag).map((d) => link(d.href, d.text, d.label)),
         );
       }),
     );

@@ -5,9 +5,12 @@ pub mod geoid;
 pub mod geojson;
 pub mod ground_route;
 pub mod kml;
+pub mod litchi;
 pub mod mission;
 pub mod qgc_plan;
 pub mod waypoints;
+pub mod wpml;
+pub mod wpml_route;
 
 pub use kml::write_kml;
 pub use mission::{AltitudeFrame, FencePolygon, GeoPoint, Mission, MissionItem};

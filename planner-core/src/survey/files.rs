@@ -14,7 +14,15 @@ use crate::export;
 pub struct PlanFile {
     pub name: String,
     pub content_type: &'static str,
-    pub content: String,
+    /// Bytes: text files are UTF-8, a DJI mission (`.kmz`) is a zip.
+    pub content: Vec<u8>,
+}
+
+impl PlanFile {
+    /// The content as text (empty for a binary file such as a `.kmz`).
+    pub fn text(&self) -> &str {
+        std::str::from_utf8(&self.content).unwrap_or_default()
+    }
 }
 
 impl SurveyPlan {
@@ -22,7 +30,8 @@ impl SurveyPlan {
     /// `<stem>.plan`, `<stem>.route.geojson` and `<stem>.kml` (the stem is
     /// the UAV id, or `<id>.sortie<k>` for a UAV flying several sorties);
     /// per UAV `<id>.fence.waypoints`; `<id>.photos.geojson` per UAV whose
-    /// photos were planned; the rally files; then `cells.geojson`.
+    /// photos were planned; the rally files; the DJI files of each
+    /// multirotor sortie (`.kmz`, `.litchi.csv`); then `cells.geojson`.
     pub fn file_names(&self) -> Vec<String> {
         let mut out: Vec<String> = Vec::new();
         for u in &self.uavs {
@@ -37,6 +46,7 @@ impl SurveyPlan {
         }
         out.extend(self.photo_file_names());
         out.extend(self.rally_file_names());
+        out.extend(self.dji_file_names());
         out.push(CELLS_FILE.to_string());
         out
     }
@@ -70,7 +80,7 @@ impl SurveyPlan {
             Some(PlanFile {
                 name: name.to_string(),
                 content_type: content_type_of(name),
-                content,
+                content: content.into_bytes(),
             })
         };
         if name == CELLS_FILE {
@@ -81,6 +91,9 @@ impl SurveyPlan {
         }
         if let Some(photos) = self.photos_file(name) {
             return Some(photos);
+        }
+        if let Some(dji) = self.dji_file(name) {
+            return Some(dji);
         }
         // The fence is the UAV's; it is also served under each sortie's stem.
         let fence = format!(".{FENCE_FILE_SUFFIX}");
@@ -194,6 +207,10 @@ pub fn content_type_of(name: &str) -> &'static str {
         "application/json"
     } else if name.ends_with(".kml") {
         "application/vnd.google-earth.kml+xml"
+    } else if name.ends_with(".kmz") {
+        "application/vnd.google-earth.kmz"
+    } else if name.ends_with(".csv") {
+        "text/csv; charset=utf-8"
     } else {
         "text/plain; charset=utf-8"
     }
@@ -261,6 +278,8 @@ mod tests {
                 "a-1.kml",
                 "a-1.fence.waypoints",
                 "a-1.photos.geojson",
+                "a-1.kmz",
+                "a-1.litchi.csv",
                 "cells.geojson"
             ]
         );
@@ -281,7 +300,7 @@ mod tests {
         assert!(
             plan.file("a-1.waypoints")
                 .unwrap()
-                .content
+                .text()
                 .starts_with("QGC WPL 110\n")
         );
     }

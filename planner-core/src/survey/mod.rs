@@ -17,6 +17,7 @@ mod aircraft;
 mod capture;
 mod cells;
 mod corridor;
+mod dji_files;
 mod files;
 mod flock_plan;
 mod homes;
@@ -177,7 +178,7 @@ pub fn plan_survey_over(
             transit_clearance_m: flight.rules.transit_clearance_m,
         }),
     };
-    Ok(SurveyPlan {
+    let mut plan = SurveyPlan {
         utm_epsg: proj.epsg(),
         altitude_frame: params.altitude_frame,
         stats: SurveyStats::new(figures, &uavs),
@@ -186,8 +187,13 @@ pub fn plan_survey_over(
         fences,
         rally_points,
         warnings,
+        dji_aircraft: params.dji_aircraft,
         max_photo_features: limits.max_photo_features,
-    })
+    };
+    // Multirotor sorties DJI cannot fly (too fast, say) get no DJI files.
+    let dji = plan.dji_warnings();
+    plan.warnings.extend(dji);
+    Ok(plan)
 }
 
 /// The cells as planned with the overlaps their photos achieve, and the
@@ -306,7 +312,7 @@ mod tests {
             }
             // The slope makes the 3D length longer than the 2D one.
             assert!(uav.stats.length_3d_m > uav.stats.length_m);
-            let wpl = plan.file("a.waypoints").unwrap().content;
+            let wpl = plan.file("a.waypoints").unwrap().text().to_string();
             let want = match frame {
                 "relative" => "\t3\t16\t",
                 "amsl" => "\t0\t16\t",
@@ -317,7 +323,7 @@ mod tests {
             // both ends, plus the EGM96 undulation above the ellipsoid.
             amsl.push(home_amsl);
             let route: Value =
-                serde_json::from_str(&plan.file("a.route.geojson").unwrap().content).unwrap();
+                serde_json::from_slice(&plan.file("a.route.geojson").unwrap().content).unwrap();
             let f = &route["features"][0];
             let got: Vec<f64> =
                 serde_json::from_value(f["properties"]["heights_amsl_m"].clone()).unwrap();

@@ -46,7 +46,7 @@ impl SurveyPlan {
         Some(PlanFile {
             name: name.to_string(),
             content_type: "application/geo+json",
-            content,
+            content: content.into_bytes(),
         })
     }
 

@@ -119,14 +119,12 @@ impl SurveyPlan {
     /// `altitude_m` above the ground at the point. So a UAV sent to a rally
     /// point never has to descend on the way.
     pub fn rally_for(&self, uav: &UavPlan) -> Vec<GeoPoint> {
-        let mut highest = self.stats.altitude_m;
-        let mut home_amsl = None;
-        for s in &uav.sorties {
-            if let Some(t) = &s.terrain {
-                highest = highest.max(t.max_altitude_m - t.home_amsl_m);
-                home_amsl = Some(t.home_amsl_m);
-            }
-        }
+        let highest = self.return_height_m(uav);
+        let home_amsl = uav
+            .sorties
+            .iter()
+            .rev()
+            .find_map(|s| s.terrain.as_ref().map(|t| t.home_amsl_m));
         self.rally_points
             .iter()
             .map(|r| {
@@ -141,6 +139,18 @@ impl SurveyPlan {
                 }
             })
             .collect()
+    }
+
+    /// The highest altitude `uav`'s sorties fly above its home, m (at
+    /// least the survey's `altitude_m`): where it flies to a rally point,
+    /// and the return-home height of its DJI missions.
+    pub fn return_height_m(&self, uav: &UavPlan) -> f64 {
+        uav.sorties
+            .iter()
+            .filter_map(|s| s.terrain.as_ref())
+            .fold(self.stats.altitude_m, |h, t| {
+                h.max(t.max_altitude_m - t.home_amsl_m)
+            })
     }
 
     /// Names of the rally files: `<uav id>.rally.waypoints` per UAV, when
@@ -169,7 +179,7 @@ impl SurveyPlan {
         Some(PlanFile {
             name: name.to_string(),
             content_type: "text/plain; charset=utf-8",
-            content: write_rally(&self.rally_for(uav)),
+            content: write_rally(&self.rally_for(uav)).into_bytes(),
         })
     }
 }
@@ -230,15 +240,15 @@ mod tests {
         );
         assert!(p.file_names().contains(&"a.rally.waypoints".to_string()));
         let file = p.file("a.rally.waypoints").unwrap();
-        assert_eq!(file.content.lines().count(), 3);
+        assert_eq!(file.text().lines().count(), 3);
         assert!(
-            file.content
+            file.text()
                 .lines()
                 .nth(1)
                 .unwrap()
                 .starts_with("0\t0\t3\t5100\t")
         );
-        let plan_doc: Value = serde_json::from_str(&p.file("a.plan").unwrap().content).unwrap();
+        let plan_doc: Value = serde_json::from_slice(&p.file("a.plan").unwrap().content).unwrap();
         assert_eq!(
             plan_doc["rallyPoints"]["points"][0],
             json!([52.0015, 5.0105, 70.0])

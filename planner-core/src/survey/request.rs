@@ -203,6 +203,12 @@ pub struct SurveyParams {
     pub camera_pitch_deg: Option<f64>,
     /// How the camera is triggered along the lanes; default by distance.
     pub trigger: super::capture::Trigger,
+    /// The DJI aircraft and camera of the WPML missions (`.kmz`): `m3e`
+    /// (default), `m3t`, `m3ta`, `m30`, `m30t`, `m3d`, `m3td`, `m4e`, `m4t`,
+    /// `m4d`, `m4td`, or `m300_`/`m350_` with `h20`, `h20t`, `h20n`, `h30`,
+    /// `h30t`. Terrain following (`altitude_frame` `terrain`) needs a Mavic 3
+    /// enterprise (`m3e`, `m3t`, `m3ta`).
+    pub dji_aircraft: crate::export::wpml::DjiAircraft,
 }
 
 impl Default for SurveyParams {
@@ -234,6 +240,7 @@ impl Default for SurveyParams {
             pattern: crate::coverage::Pattern::Grid,
             camera_pitch_deg: None,
             trigger: super::capture::Trigger::default(),
+            dji_aircraft: crate::export::wpml::DjiAircraft::default(),
         }
     }
 }
@@ -304,6 +311,7 @@ impl SurveyParams {
         }
         self.check_corridor(&mut issues, &p);
         self.check_patterns(&mut issues, &p);
+        self.check_dji(&mut issues, &p);
         if issues.is_empty() {
             Ok(())
         } else {

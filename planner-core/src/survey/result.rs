@@ -247,6 +247,9 @@ pub struct SurveyPlan {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rally_points: Vec<RallyPoint>,
     pub warnings: Vec<String>,
+    /// The DJI aircraft its WPML missions (`.kmz`) are for.
+    #[serde(default, skip_serializing_if = "super::dji_files::is_default_dji")]
+    pub dji_aircraft: crate::export::wpml::DjiAircraft,
     /// Most Features a `photos.geojson` of the plan holds (every k-th
     /// photo beyond): the planner's [`crate::geo::Limits`], set again by
     /// whoever renders a stored plan; not part of `plan.json`.

@@ -151,6 +151,14 @@ pub struct UavFiles {
     /// without `?sortie=` the UAV's photos of every sortie.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     photos: Option<String>,
+    /// DJI WPML mission (KMZ) for the survey's `dji_aircraft`, when DJI
+    /// can fly the sortie (a multirotor's, at 1-15 m/s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    dji_kmz: Option<String>,
+    /// Litchi mission(s) (CSV): one file, or one per 99 waypoints, each
+    /// starting where the one before ended.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    litchi: Vec<String>,
 }
 
 /// One flight of a UAV, from take-off to landing at its start.
@@ -293,6 +301,7 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                         String::new()
                     };
                     let f = |name: &str| format!("{base}/uavs/{}/{name}{query}", u.id);
+                    let dji = plan.dji_suffixes(u, s);
                     let mut route = s.route_feature(Map::new());
                     SortieResponse {
                         number: k + 1,
@@ -311,6 +320,12 @@ fn response(row: &SurveyRow, plan: SurveyPlan) -> SurveyResponse {
                                 .then(|| format!("{base}/uavs/{}/rally.waypoints", u.id)),
                             kml: f("route.kml"),
                             photos: s.photos.is_some().then(|| f("photos.geojson")),
+                            dji_kmz: dji.iter().any(|x| x == "kmz").then(|| f("mission.kmz")),
+                            litchi: dji
+                                .iter()
+                                .filter(|x| x.ends_with(".csv"))
+                                .map(|x| f(&format!("mission.{x}")))
+                                .collect(),
                         },
                     }
                 })
@@ -621,7 +636,10 @@ pub struct SortieQuery {
 /// A file of one UAV: `mission.waypoints` (QGC WPL 110), `mission.plan`
 /// (QGroundControl), `route.geojson`, `route.kml`, `fence.waypoints` or
 /// `rally.waypoints` (a survey with rally points), `photos.geojson` (the
-/// planned photos' footprints; every sortie's without `?sortie=`).
+/// planned photos' footprints; every sortie's without `?sortie=`),
+/// `mission.kmz` (DJI WPML, for `dji_aircraft`) or `mission.litchi.csv`
+/// (Litchi; past 99 waypoints `mission.part1.litchi.csv`, `part2`, …), the
+/// DJI files of a multirotor sortie DJI can fly.
 /// A UAV whose battery needs several sorties has one mission per sortie,
 /// chosen with `?sortie=k`.
 #[utoipa::path(
@@ -631,7 +649,7 @@ pub struct SortieQuery {
     params(
         ("id" = String, Path, description = "Survey id"),
         ("uav" = String, Path, description = "UAV id"),
-        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints, rally.waypoints, photos.geojson"),
+        ("file" = String, Path, description = "One of mission.waypoints, mission.plan, route.geojson, route.kml, fence.waypoints, rally.waypoints, photos.geojson, mission.kmz, mission.litchi.csv, mission.part<k>.litchi.csv"),
         SortieQuery,
     ),
     responses(
@@ -640,6 +658,8 @@ pub struct SortieQuery {
             (Object = "application/json"),
             (Object = "application/geo+json"),
             (String = "application/vnd.google-earth.kml+xml"),
+            (Vec<u8> = "application/vnd.google-earth.kmz"),
+            (String = "text/csv"),
         )),
         (status = 400, description = "Malformed sortie number", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such survey, UAV, sortie or file", body = Problem, content_type = "application/problem+json"),
@@ -676,10 +696,18 @@ pub async fn uav_file(
         "rally.waypoints" => ("rally.waypoints", "rally.waypoints"),
         "route.kml" => ("kml", "kml"),
         "photos.geojson" => ("photos.geojson", "photos.geojson"),
+        "mission.kmz" => ("kmz", "kmz"),
+        "mission.litchi.csv" => ("litchi.csv", "litchi.csv"),
+        // A Litchi mission past 99 waypoints: `part<k>.litchi.csv`.
+        other if litchi_part(other).is_some() => {
+            let suffix = litchi_part(other).unwrap_or_default();
+            (suffix, suffix)
+        }
         other => {
             return Err(ApiError::NotFound(format!(
                 "unknown file {other:?}: one of mission.waypoints, mission.plan, route.geojson, route.kml, \
-                 fence.waypoints, rally.waypoints, photos.geojson"
+                 fence.waypoints, rally.waypoints, photos.geojson, mission.kmz, mission.litchi.csv, \
+                 mission.part<k>.litchi.csv"
             )));
         }
     };
@@ -700,6 +728,12 @@ pub async fn uav_file(
             _ if file == "rally.waypoints" => {
                 format!("survey {id} has no rally points (rally_points), or no UAV {uav:?}")
             }
+            _ if file.ends_with(".kmz") || file.ends_with(".litchi.csv") => format!(
+                "survey {id} has no {file} of UAV {uav:?} (or no such UAV or sortie): DJI and Litchi \
+                 missions are made for multirotor sorties DJI can fly (the survey's warnings say why \
+                 one has none), and a Litchi mission past 99 waypoints is split into \
+                 mission.part1.litchi.csv, mission.part2.litchi.csv, …"
+            ),
             _ if file == "photos.geojson" => format!(
                 "survey {id} has no planned photos of UAV {uav:?} (or no such UAV or sortie): \
                  surveys planned before photos were kept them in no plan"
@@ -715,6 +749,15 @@ pub async fn uav_file(
         },
     )
     .await
+}
+
+/// `part<k>.litchi.csv` of a `mission.part<k>.litchi.csv` (k a whole
+/// number from 1), the file suffix of a Litchi mission's part k.
+fn litchi_part(file: &str) -> Option<&str> {
+    let suffix = file.strip_prefix("mission.")?;
+    let k = suffix.strip_prefix("part")?.strip_suffix(".litchi.csv")?;
+    (!k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) && !k.starts_with('0'))
+        .then_some(suffix)
 }
 
 /// The decomposition cells as GeoJSON.

@@ -147,7 +147,7 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
             })
             .collect(),
     };
-    let write = |name: &str, content: &str| {
+    let write = |name: &str, content: &[u8]| {
         let path = args.out.join(name);
         std::fs::write(&path, content)
             .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
@@ -157,7 +157,7 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
             let mut text =
                 serde_json::to_string(&doc).map_err(|e| Failure::other(e.to_string()))?;
             text.push('\n');
-            write("plan.json", &text)
+            write("plan.json", text.as_bytes())
         });
         let written = plan.each_file(|f| write(&f.name, &f.content));
         let plan_json = plan_json
