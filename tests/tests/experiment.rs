@@ -1,11 +1,12 @@
 //! `terraplan experiment flock` end to end: the thesis' §5.6 experiment
 //! (12 cells, flocks of 3–8 UAVs, 10 starting formations, 60 trials) with
 //! the `competition` and `balanced` policies, checked from the CSV files it
-//! writes against the targets.
+//! writes against the targets, and its routing instances
+//! (`--instances`) against the plans they came from.
 
 use std::collections::HashMap;
 
-use terraplan_e2e::{terraplan, text};
+use terraplan_e2e::{terraplan, text, validator};
 
 /// One row of trials.csv.
 struct Row {
@@ -59,7 +60,15 @@ fn read_trials(csv: &str) -> Vec<Row> {
 #[test]
 fn flock_experiment_meets_the_balancing_targets() {
     let dir = tempfile::tempdir().unwrap();
-    let out = terraplan(&["experiment", "flock", "--out", dir.path().to_str().unwrap()]);
+    let instances = dir.path().join("instances");
+    let out = terraplan(&[
+        "experiment",
+        "flock",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--instances",
+        instances.to_str().unwrap(),
+    ]);
     let stdout = text(&out.stdout);
     assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
     // The printed tables: one per flock size and the standard deviations.
@@ -121,4 +130,58 @@ fn flock_experiment_meets_the_balancing_targets() {
     }
     let flocks = std::fs::read_to_string(dir.path().join("flocks.csv")).unwrap();
     assert_eq!(flocks.lines().count(), 1 + 6 * 2);
+
+    check_instances(&instances, &by_trial);
+}
+
+/// The instances, one per trial: the validator recomputes each plan's
+/// makespan from the travel matrix and the job durations alone (within
+/// 1e-6 s of the plan's), and a tampered instance fails it.
+fn check_instances(
+    dir: &std::path::Path,
+    by_trial: &HashMap<(usize, usize), HashMap<String, &Row>>,
+) {
+    let out = validator("check_flock_instance.py", &[dir]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", text(&out.stderr));
+    let lines: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 60, "one instance per trial");
+    for l in &lines {
+        let name = l["name"].as_str().unwrap();
+        // n3-e01-grid: 3 UAVs, formation 1.
+        let n: usize = name[1..2].parse().unwrap();
+        let e: usize = name[4..6].parse().unwrap();
+        assert_eq!(l["uavs"].as_u64(), Some(n as u64), "{name}");
+        assert_eq!(l["jobs"].as_u64(), Some(12), "{name}: the 12 cells");
+        // The balanced plan's makespan as trials.csv prints it (3 decimals).
+        let csv = by_trial[&(n, e)]["balanced"].makespan_s;
+        let recomputed = l["makespan_s"].as_f64().unwrap();
+        assert!(
+            (recomputed - csv).abs() <= 5e-4,
+            "{name}: {recomputed} vs {csv}"
+        );
+    }
+
+    let path = dir.join("n5-e03-wide-linear.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    // A second more on every transit: each UAV's time grows by at least 2 s
+    // (out and home), so the recomputed makespan no longer matches.
+    for row in doc["travel_s"].as_array_mut().unwrap() {
+        for t in row.as_array_mut().unwrap() {
+            *t = serde_json::json!(t.as_f64().unwrap() + 1.0);
+        }
+    }
+    let tampered = tempfile::tempdir().unwrap();
+    std::fs::write(tampered.path().join("t.json"), doc.to_string()).unwrap();
+    let out = validator("check_flock_instance.py", &[tampered.path()]);
+    assert!(!out.status.success(), "a reordered route passed");
+    assert!(
+        text(&out.stderr).contains("recomputed makespan"),
+        "{}",
+        text(&out.stderr)
+    );
 }

@@ -1,6 +1,7 @@
 //! The `balanced` policy (beyond the thesis): start from the competition's
-//! routes and shorten the makespan, the longest mission time, by local
-//! search until no move helps.
+//! routes, or from the least makespan itself where a flock is small enough
+//! to solve exactly ([`super::exact`]), and shorten the makespan, the
+//! longest mission time, by local search until no move helps.
 //!
 //! Moves always involve the critical UAV (the one flying longest):
 //! - *reorder / reverse* inside its route: 2-opt segment reversal (a single
@@ -16,6 +17,7 @@
 //! distances (a lower bound of every transit) and only searched round the
 //! no-fly zones when that bound could win. No UAV is left without work.
 
+use super::exact::exact_routes;
 use super::problem::{Flock, Routes, Stop, Visit};
 use super::transit::TransitError;
 
@@ -89,10 +91,17 @@ fn after(u: usize, route: &[Visit], k: usize) -> Stop {
     }
 }
 
-/// Improves `start` (normally the competition's routes) for the makespan.
+/// Improves `start` (normally the competition's routes) for the makespan;
+/// a flock small enough starts from its optimum instead (see
+/// [`exact_routes`]), the search then only evening out the other UAVs.
 pub fn balanced(flock: &mut Flock, start: Routes) -> Result<Routes, TransitError> {
     let m = flock.uavs.len();
     let mut routes = start;
+    if let Some(optimum) = exact_routes(flock)?
+        && Score::of(&flock.times(&optimum)?).beats(&Score::of(&flock.times(&routes)?))
+    {
+        routes = optimum;
+    }
     for (u, route) in routes.iter_mut().enumerate() {
         improve_route(flock, u, route)?;
     }

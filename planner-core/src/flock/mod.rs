@@ -8,7 +8,9 @@
 pub mod balanced;
 pub mod bound;
 pub mod competition;
+pub mod exact;
 pub mod hungarian;
+pub mod instance;
 pub mod min_reach;
 pub mod problem;
 pub mod split;

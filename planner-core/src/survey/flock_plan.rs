@@ -195,6 +195,7 @@ fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
     // The tour optimiser knows no battery: with one, the local search
     // orders the work.
     let single_tour = input.uavs.len() == 1 && input.policy == Policy::Balanced && !any_battery;
+    let solving = crate::flock::instance::Solving::start();
     // Before any policy prices legs, so that the bound is the same for all.
     // Only the single-UAV tour optimiser enters cells at their other corners.
     let lower_bound_s =
@@ -215,6 +216,8 @@ fn share(input: &FlockInput) -> Result<FlockOutcome, PlanError> {
     if single_tour {
         reorder_by_tour(input, &mut flock, &mut parts, 0, &mut routes[0])?;
     }
+    // The flock problem as solved, for `terraplan experiment flock --instances`.
+    solving.done(&mut flock, &routes, lower_bound_s);
 
     // The balanced search prices a job too long for one battery as ideal
     // round trips, while the cut halves it between lanes: on the sorties

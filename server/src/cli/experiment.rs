@@ -11,6 +11,10 @@
 //! spread and mean UAV length (3D, metres, home to home), and per flock the
 //! standard deviations over the formations; plus the makespan (seconds),
 //! the balanced policy's reduction of it and the gap to the lower bound.
+//! With `--instances` each trial's flock problem is also written as a
+//! routing instance (see [`instances`]).
+
+mod instances;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -20,6 +24,7 @@ use clap::Subcommand;
 use geo::Contains;
 use geo_types::{Coord, Point, Polygon};
 use planner_core::flock::Policy;
+use planner_core::flock::instance::{Instance, recording};
 use planner_core::geo::{Limits, UtmProjection, parse_polygons};
 use planner_core::survey::{SurveyRequest, plan_survey_over};
 use planner_core::terrain::{Dem, DemLimits, read_dem};
@@ -40,22 +45,32 @@ pub(super) enum ExperimentCommand {
         /// Also write trials.csv, uavs.csv and flocks.csv here.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// Also write each trial's flock problem as a routing instance
+        /// (JSON: nodes, travel times, job durations and the balanced
+        /// policy's routes) here, one file per trial.
+        #[arg(long, value_name = "DIR")]
+        instances: Option<PathBuf>,
     },
 }
 
 pub(super) fn experiment(command: &ExperimentCommand) -> Result<(), Failure> {
     match command {
-        ExperimentCommand::Flock { out } => flock(out.as_deref()),
+        ExperimentCommand::Flock { out, instances } => flock(out.as_deref(), instances.as_deref()),
     }
 }
 
-fn flock(out: Option<&Path>) -> Result<(), Failure> {
-    let trials = run_trials().map_err(Failure::other)?;
+fn flock(out: Option<&Path>, instances: Option<&Path>) -> Result<(), Failure> {
+    let trials = run_trials(instances.is_some()).map_err(Failure::other)?;
     print!("{}", report(&trials));
+    let mut written = Vec::new();
     if let Some(dir) = out {
-        for path in write_csv(&trials, dir).map_err(Failure::other)? {
-            println!("wrote {}", path.display());
-        }
+        written.extend(write_csv(&trials, dir).map_err(Failure::other)?);
+    }
+    if let Some(dir) = instances {
+        written.extend(instances::write_instances(&trials, dir).map_err(Failure::other)?);
+    }
+    for path in written {
+        println!("wrote {}", path.display());
     }
     Ok(())
 }
@@ -94,6 +109,8 @@ pub struct Trial {
     pub makespan_s: f64,
     pub lower_bound_s: f64,
     pub coverage_ratio: f64,
+    /// The flock problem as solved, when recorded.
+    pub instance: Option<Instance>,
 }
 
 impl Trial {
@@ -211,8 +228,9 @@ fn formation(f: usize, n: usize, nfz: &[Polygon<f64>]) -> Vec<Coord<f64>> {
 }
 
 /// Runs all trials: `(uavs, formation, policy)` for 3–8 UAVs, every
-/// formation, competition and balanced; on two threads.
-pub fn run_trials() -> Result<Vec<Trial>, String> {
+/// formation, competition and balanced; on two threads. With `record`,
+/// each trial keeps its flock problem as an [`Instance`].
+pub fn run_trials(record: bool) -> Result<Vec<Trial>, String> {
     let dem = read_dem(DTM, Some("opengeos_dtm.tif"), None, &DemLimits::default())
         .map_err(|e| format!("embedded DTM: {e}"))?;
     let proj = UtmProjection::new(ZONE, true).map_err(|e| e.to_string())?;
@@ -251,7 +269,7 @@ pub fn run_trials() -> Result<Vec<Trial>, String> {
                     let Some(&(n, f, policy)) = jobs.get(k) else {
                         break;
                     };
-                    let r = trial(&dem, &proj, &nfz_utm, n, f, policy);
+                    let r = trial(&dem, &proj, &nfz_utm, (n, f, policy), record);
                     if let Ok(mut v) = results.lock() {
                         v.push((k, r));
                     }
@@ -268,9 +286,8 @@ fn trial(
     dem: &Dem,
     proj: &UtmProjection,
     nfz: &[Polygon<f64>],
-    n: usize,
-    f: usize,
-    policy: Policy,
+    (n, f, policy): (usize, usize, Policy),
+    record: bool,
 ) -> Result<Trial, String> {
     let uavs: Vec<Value> = formation(f, n, nfz)
         .into_iter()
@@ -293,8 +310,18 @@ fn trial(
         "assignment": policy,
     });
     let req = SurveyRequest::from_document(&doc).map_err(|e| e.to_string())?;
-    let plan = plan_survey_over(&req, &Limits::default(), Some(dem))
-        .map_err(|e| format!("{n} UAVs, {}: {e}", FORMATIONS[f]))?;
+    let plan_it = || plan_survey_over(&req, &Limits::default(), Some(dem));
+    let (plan, instance) = if record {
+        let (plan, instance) = recording(plan_it);
+        (plan, Some(instance))
+    } else {
+        (plan_it(), None)
+    };
+    let what = || format!("{n} UAVs, {}", FORMATIONS[f]);
+    let plan = plan.map_err(|e| format!("{}: {e}", what()))?;
+    let instance = instance
+        .transpose()
+        .map_err(|e| format!("{}: flock instance: {e}", what()))?;
     Ok(Trial {
         uavs: n,
         experiment: f + 1,
@@ -305,6 +332,7 @@ fn trial(
         makespan_s: plan.stats.makespan_s,
         lower_bound_s: plan.stats.makespan_lower_bound_s,
         coverage_ratio: plan.stats.coverage_ratio,
+        instance,
     })
 }
 
