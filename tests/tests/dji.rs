@@ -222,6 +222,25 @@ fn heights_over_a_dem_in_each_frame() {
     );
 }
 
+/// Rally points: the `.plan`'s fence returns to the first (`breachReturn`,
+/// as QGroundControl stores it), and the DJI mission returns home at their
+/// altitude (WPML has no rally points).
+#[test]
+fn rally_altitude_is_the_return_height() {
+    let dir = tempfile::tempdir().unwrap();
+    let params = json!({"altitude_m": 55, "rally_points": [[6.0615, 51.5105]],
+                        "uavs": [{"id": "u1", "start": [6.0620, 51.5110]}]});
+    let (_, out) = plan_example(dir.path(), "rally", &params);
+    let plan: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("u1.plan")).unwrap()).unwrap();
+    let rally = &plan["rallyPoints"]["points"][0];
+    assert_eq!(rally, &json!([51.5105, 6.0615, 55.0]));
+    assert_eq!(&plan["geoFence"]["breachReturn"], rally);
+    let wpml = check_wpml(&out);
+    assert_eq!(wpml["files"][0]["rth_height_m"], 55.0);
+    assert_eq!(wpml["files"][0]["finish_action"], "goHome");
+}
+
 /// The service serves both as downloads of the UAV, with their media types,
 /// and links them from the survey; a plane's sortie has none.
 #[test]
@@ -292,6 +311,18 @@ fn service_downloads() {
         created["uavs"][0]["stats"]["photos"].as_u64()
     );
     check_litchi(&out);
+
+    // Documented: the KMZ as binary, the CSV as text.
+    let doc = get(&server.url("/api/v1/openapi.json")).json();
+    let content = &doc["paths"]["/api/v1/surveys/{id}/uavs/{uav}/{file}"]["get"]["responses"]["200"]
+        ["content"];
+    let kmz_schema = &content["application/vnd.google-earth.kmz"]["schema"]["$ref"];
+    assert_eq!(kmz_schema, "#/components/schemas/BinaryFile", "{content}");
+    assert_eq!(
+        doc["components"]["schemas"]["BinaryFile"]["format"],
+        "binary"
+    );
+    assert_eq!(content["text/csv"]["schema"]["type"], "string", "{content}");
 
     // A fixed-wing survey: no DJI files, no links.
     body["aircraft"] = json!({"type": "fixed_wing"});

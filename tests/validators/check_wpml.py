@@ -222,6 +222,8 @@ def check_kmz(path, plan, sortie, geoid, transform):
         need(folder, "autoFlightSpeed", fw)
         if n.endswith("waylines.wpml"):
             need(folder, "waylineId", fw)
+            summary["rth_height_m"] = num(mc.get("globalRTHHeight"), fw)
+            summary["finish_action"] = mc.get("finishAction")
             summary.update(check_waylines(folder, fw, pts, mc.get("drone"), geoid, transform, sortie))
         else:
             check_template(folder, fw, len(pts))

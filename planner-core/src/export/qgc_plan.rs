@@ -1,6 +1,7 @@
 //! QGroundControl `.plan` files (fileType "Plan", version 1, mission
 //! version 2) with the no-fly zones as exclusion fences, the survey area as
-//! an inclusion fence, and rally points.
+//! an inclusion fence, rally points, and the first rally point as the
+//! fence's breach return point.
 
 use serde::ser::{Serialize, SerializeMap, Serializer};
 
@@ -19,7 +20,11 @@ const VEHICLE_MULTIROTOR: u8 = 2;
 const FENCE_ACTION: u8 = 0;
 
 /// The mission, fences and rally points (altitude above home) as a
-/// QGroundControl plan document, indented, with a final newline.
+/// QGroundControl plan document, indented, with a final newline. The first
+/// rally point is also the fence's `breachReturn` (QGroundControl sends it
+/// to ArduPilot as MAV_CMD_NAV_FENCE_RETURN_POINT): a point inside the
+/// inclusion fence and clear of the no-fly zones; without rally points the
+/// key is left out and the autopilot returns home.
 ///
 /// Serialised straight from the mission (no `serde_json::Value` in
 /// between): a plan among thousands of no-fly zones is tens of MB. Keys are
@@ -36,6 +41,7 @@ pub fn write_plan(mission: &Mission, fences: &[FencePolygon], rally: &[GeoPoint]
     let document = PlanDocument {
         file_type: "Plan",
         geo_fence: GeoFence {
+            breach_return: rally.first().map(|p| [p.lat, p.lon, p.alt]),
             circles: [],
             polygons: FencePolygons(fences),
             version: 2,
@@ -82,6 +88,8 @@ struct PlanDocument<'a> {
 
 #[derive(serde::Serialize)]
 struct GeoFence<'a> {
+    #[serde(rename = "breachReturn", skip_serializing_if = "Option::is_none")]
+    breach_return: Option<[f64; 3]>,
     circles: [u8; 0],
     polygons: FencePolygons<'a>,
     version: u8,
@@ -246,6 +254,9 @@ mod tests {
         assert_eq!(poly["version"], 1);
         assert_eq!(poly["fenceAction"], 0);
         assert_eq!(plan["rallyPoints"], json!({"points": [], "version": 2}));
+        // No rally point, no breach return point: QGroundControl reads the
+        // key as optional.
+        assert!(plan["geoFence"].get("breachReturn").is_none());
         // Take-off and waypoint yaw: null (NaN, keep the heading); RTL: 0.
         assert_eq!(items[0]["params"][3], Value::Null);
         assert_eq!(items[1]["params"][3], Value::Null);
@@ -308,5 +319,7 @@ mod tests {
             plan["rallyPoints"],
             json!({"points": [[2.02, 1.01, 45.5]], "version": 2})
         );
+        // The fence's breach return point: [lat, lon, alt], as QGC saves it.
+        assert_eq!(plan["geoFence"]["breachReturn"], json!([2.02, 1.01, 45.5]));
     }
 }

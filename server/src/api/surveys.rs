@@ -658,7 +658,7 @@ pub struct SortieQuery {
             (Object = "application/json"),
             (Object = "application/geo+json"),
             (String = "application/vnd.google-earth.kml+xml"),
-            (Vec<u8> = "application/vnd.google-earth.kmz"),
+            (crate::api::dems::BinaryFile = "application/vnd.google-earth.kmz"),
             (String = "text/csv"),
         )),
         (status = 400, description = "Malformed sortie number", body = Problem, content_type = "application/problem+json"),
