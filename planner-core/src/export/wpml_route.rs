@@ -3,6 +3,9 @@
 //! every so many metres or seconds, as DJI's WPML and Litchi's CSV both
 //! describe a waypoint mission.
 
+use geo::{Bearing, Distance, Haversine};
+use geo_types::Point;
+
 use super::mission::{GeoPoint, Mission, MissionItem};
 
 /// Slowest and fastest DJI waypoint missions fly, m/s (WPML's
@@ -238,27 +241,16 @@ impl DjiRoute {
     }
 }
 
-/// Mean Earth radius, m (IUGG), for the short distances between waypoints.
-const EARTH_RADIUS_M: f64 = 6_371_008.8;
-
-/// Great-circle distance between two points, m (haversine; within 0.5 %
-/// of the ellipsoidal distance, which is what DJI's duration estimate
-/// needs).
+/// Great-circle distance between two points, m (haversine, mean Earth
+/// radius; within 0.5 % of the ellipsoidal distance, which is what DJI's
+/// duration estimate needs).
 pub fn ground_distance_m(a: &GeoPoint, b: &GeoPoint) -> f64 {
-    let (la, lb) = (a.lat.to_radians(), b.lat.to_radians());
-    let dlat = lb - la;
-    let dlon = (b.lon - a.lon).to_radians();
-    let h = (dlat / 2.0).sin().powi(2) + la.cos() * lb.cos() * (dlon / 2.0).sin().powi(2);
-    2.0 * EARTH_RADIUS_M * h.sqrt().min(1.0).asin()
+    Haversine.distance(Point::new(a.lon, a.lat), Point::new(b.lon, b.lat))
 }
 
 /// Initial bearing from `a` to `b`, degrees clockwise from north in [0, 360).
 pub fn bearing_deg(a: &GeoPoint, b: &GeoPoint) -> f64 {
-    let (la, lb) = (a.lat.to_radians(), b.lat.to_radians());
-    let dlon = (b.lon - a.lon).to_radians();
-    let y = dlon.sin() * lb.cos();
-    let x = la.cos() * lb.sin() - la.sin() * lb.cos() * dlon.cos();
-    y.atan2(x).to_degrees().rem_euclid(360.0)
+    Haversine.bearing(Point::new(a.lon, a.lat), Point::new(b.lon, b.lat))
 }
 
 /// A multirotor survey mission for the DJI writers' tests: take-off to
