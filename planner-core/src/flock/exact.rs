@@ -44,12 +44,31 @@ pub fn fits(m: usize, n: usize) -> bool {
 }
 
 /// Routes of the least makespan, or `None` when the flock is too large for
-/// [`fits`] or a UAV has a battery (sorties are not in the model).
+/// [`fits`], a UAV has a battery (sorties are not in the model) or some
+/// leg has no transit (the search may still find routes without it).
 pub fn exact_routes(flock: &mut Flock) -> Result<Option<Routes>, TransitError> {
     let (m, n) = (flock.uavs.len(), flock.jobs.len());
     if !fits(m, n) || (0..m).any(|u| flock.has_battery(u)) {
         return Ok(None);
     }
+    let per_uav = match programs(flock) {
+        Ok(p) => p,
+        Err(e @ TransitError::Cancelled(_)) => return Err(e),
+        Err(_) => return Ok(None),
+    };
+    let shares = share(&per_uav, n);
+    Ok(Some(
+        shares
+            .iter()
+            .enumerate()
+            .map(|(u, &set)| route_of(&per_uav[u], n, set))
+            .collect(),
+    ))
+}
+
+/// Every UAV's subset programs, every leg priced exactly.
+fn programs(flock: &mut Flock) -> Result<Vec<Subsets>, TransitError> {
+    let (m, n) = (flock.uavs.len(), flock.jobs.len());
     let k = 2 * n;
     // Oriented visit o = 2j + way enters at end `way` of job j (stop o
     // below) and leaves at its other end (stop o ^ 1).
@@ -67,18 +86,9 @@ pub fn exact_routes(flock: &mut Flock) -> Result<Option<Routes>, TransitError> {
             }
         }
     }
-    let mut per_uav = Vec::with_capacity(m);
-    for u in 0..m {
-        per_uav.push(subsets_of(flock, u, &ends, &between)?);
-    }
-    let shares = share(&per_uav, n);
-    Ok(Some(
-        shares
-            .iter()
-            .enumerate()
-            .map(|(u, &set)| route_of(&per_uav[u], n, set))
-            .collect(),
-    ))
+    (0..m)
+        .map(|u| subsets_of(flock, u, &ends, &between))
+        .collect()
 }
 
 /// UAV `u`'s best route through every subset of jobs (Held–Karp over
@@ -295,6 +305,30 @@ mod tests {
         };
         let mut flock = Flock::flat(vec![uav, uav], vec![job.clone(), job], 0.0, &map, 0.0);
         flock.batteries[0] = Some(900.0);
+        assert!(exact_routes(&mut flock).unwrap().is_none());
+    }
+
+    #[test]
+    fn a_job_no_transit_reaches_is_left_to_the_search() {
+        // A ring-shaped NFZ walls in the second job.
+        let ring = geo_types::Polygon::new(
+            rect(100.0, 0.0, 160.0, 60.0).exterior().clone(),
+            vec![rect(110.0, 10.0, 150.0, 50.0).exterior().clone()],
+        );
+        let map = ObstacleMap::new(&MultiPolygon(vec![ring]), 0.0);
+        let plans = [
+            lawnmower(0, &rect(0.0, 0.0, 40.0, 60.0), 2),
+            lawnmower(1, &rect(120.0, 20.0, 140.0, 40.0), 2),
+        ];
+        let jobs = plans
+            .iter()
+            .map(|p| FlockJob::from_plan(p, p.length_m()).unwrap())
+            .collect();
+        let uav = FlockUav {
+            home: coord! { x: -10.0, y: -10.0 },
+            speed_m_s: 5.0,
+        };
+        let mut flock = Flock::flat(vec![uav, uav], jobs, 0.0, &map, 0.0);
         assert!(exact_routes(&mut flock).unwrap().is_none());
     }
 }
