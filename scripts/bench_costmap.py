@@ -13,7 +13,7 @@ For each file, `--runs` times, interleaved: `terraplan costmap FILE --out
 DIR` and `gdaldem slope FILE OUT.tif` (`-s 111120` for a geographic DEM).
 Wall time by perf_counter around the child, peak RSS from os.wait4's
 ru_maxrss (which includes this script's own RSS at the fork, ~13 MiB:
-measured with `true` and reported as the launcher floor). Targets: terraplan's median time <= gdaldem's (ratio <= 1.0),
+measured with `true` and reported as the launcher floor). Targets: terraplan's median time <= half gdaldem's (ratio <= 0.5, issue 21),
 terraplan's peak RSS <= 5 x width x height x 4 bytes + 100 MiB. Prints a
 table and writes the figures to target/bench-costmap.json.
 """
@@ -35,6 +35,8 @@ import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MIB = 1024 * 1024
+# terraplan's whole pipeline in at most this share of gdaldem's slope time.
+TIME_RATIO_TARGET = 0.5
 
 
 def shared_data(rel):
@@ -151,7 +153,7 @@ def main():
                 "terraplan_peak_mib": round(tp_peak, 1),
                 "gdaldem_peak_mib": round(gd_peak, 1),
                 "memory_target_mib": round(target_mib, 1),
-                "time_target_met": ratio <= 1.0,
+                "time_target_met": ratio <= TIME_RATIO_TARGET,
                 "memory_target_met": tp_peak <= target_mib,
             })
 
@@ -167,7 +169,7 @@ def main():
     print("  ".join(h.ljust(widths[i]) for i, h in enumerate(header)))
     for row in rows:
         print("  ".join(c.ljust(widths[i]) for i, c in enumerate(row)))
-    print(f"(medians of {args.runs} runs, peak RSS = max over runs; time target: ratio <= 1.0, "
+    print(f"(medians of {args.runs} runs, peak RSS = max over runs; time target: ratio <= {TIME_RATIO_TARGET}, "
           "memory target: 5 x width x height x 4 bytes + 100 MiB;"
           f" peak RSS includes a launcher floor of {floor_mib:.0f} MiB, the RSS of `true`"
           " started the same way)")

@@ -25,6 +25,45 @@ pub(super) struct Surface {
     /// Step > slope > roughness ("other"); unknown where the step or the
     /// normal is.
     pub class: Vec<u8>,
+    /// The cells without a height.
+    pub holes: Holes,
+}
+
+/// A set of cells, one bit each, rows starting on a new word (so that
+/// bands of rows own their words).
+pub(super) struct Holes {
+    words_per_row: usize,
+    bits: Vec<u64>,
+}
+
+impl Holes {
+    fn new(width: usize, height: usize) -> Holes {
+        let words_per_row = width.div_ceil(64);
+        Holes {
+            words_per_row,
+            bits: vec![0; words_per_row * height],
+        }
+    }
+
+    /// Row `r`'s cells: true where in the set.
+    pub(super) fn row_into(&self, r: usize, out: &mut [bool]) {
+        let words = &self.bits[r * self.words_per_row..(r + 1) * self.words_per_row];
+        for (cells, &word) in out.chunks_mut(64).zip(words) {
+            for (k, o) in cells.iter_mut().enumerate() {
+                *o = word >> k & 1 == 1;
+            }
+        }
+    }
+}
+
+/// The unknown heights of `z_row` into `words`.
+fn mark_holes(z_row: &[f64], words: &mut [u64]) {
+    for (word, cells) in words.iter_mut().zip(z_row.chunks(64)) {
+        *word = cells
+            .iter()
+            .enumerate()
+            .fold(0, |w, (k, v)| w | u64::from(v.is_nan()) << k);
+    }
 }
 
 /// What a cell may be and still be traversable.
@@ -42,6 +81,7 @@ struct BandOut<'a> {
     r0: usize,
     zcomp: &'a mut [f32],
     class: &'a mut [u8],
+    holes: &'a mut [u64],
     rough: Option<&'a mut [f32]>,
     step: Option<&'a mut [f32]>,
 }
@@ -63,12 +103,14 @@ pub(super) fn surface(
         .map(|_| crate::buffer::filled(n, f32::NAN));
     let mut step = keep_step.then(|| crate::buffer::filled(n, f32::NAN));
     let mut class = crate::buffer::filled(n, Class::Unknown as u8);
+    let mut holes = Holes::new(width, height);
     if n == 0 {
         return Ok(Surface {
             zcomp,
             roughness,
             step,
             class,
+            holes,
         });
     }
     let band = BAND_ROWS * width;
@@ -81,14 +123,19 @@ pub(super) fn surface(
     }
     let outs: Vec<BandOut<'_>> = zcomp
         .chunks_mut(band)
-        .zip(class.chunks_mut(band))
+        .zip(
+            class
+                .chunks_mut(band)
+                .zip(holes.bits.chunks_mut(BAND_ROWS * holes.words_per_row)),
+        )
         .zip(optional(roughness.as_mut(), band, bands))
         .zip(optional(step.as_mut(), band, bands))
         .enumerate()
-        .map(|(b, (((zcomp, class), rough), step))| BandOut {
+        .map(|(b, (((zcomp, (class, holes)), rough), step))| BandOut {
             r0: b * BAND_ROWS,
             zcomp,
             class,
+            holes,
             rough,
             step,
         })
@@ -114,6 +161,7 @@ pub(super) fn surface(
         roughness,
         step,
         class,
+        holes,
     })
 }
 
@@ -140,10 +188,16 @@ fn band_job(
         r0,
         zcomp,
         class,
+        holes,
         mut rough,
         step,
     } = out;
     let rows = zcomp.len() / width;
+    let words = holes.len() / rows;
+    for (k, w) in holes.chunks_mut(words).enumerate() {
+        let r = r0 + k;
+        mark_holes(&z[r * width..(r + 1) * width], w);
+    }
     // The step tests read two rows either side.
     let first = r0.saturating_sub(2);
     let unknown = rows_with_unknown(z, width, first..(r0 + rows + 2).min(height));

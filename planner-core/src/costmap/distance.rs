@@ -107,7 +107,7 @@ fn map_with_table(
     table: &Falloff,
 ) -> Vec<f32> {
     // Zeroed, so that only cells near an obstacle are written.
-    let mut out = vec![0.0f32; width * height];
+    let mut out = crate::buffer::filled(width * height, 0.0f32);
     // Row distances saturate at `reach`: no obstacle near enough.
     let reach = table.rows.len();
     if reach == 0 {

@@ -426,7 +426,11 @@ impl FullWindow {
 /// `settled` (NaN where not settled) for cells 1 … width − 2 of the rows
 /// `up`, `mid`, `down`. Compiled also for AVX2 and picked at run time;
 /// without `mul_add` the results are the same bits on every target.
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx512bw+avx512dq+avx2+fma",
+    "x86_64+avx2+fma",
+    "x86_64+avx"
+))]
 fn settle_row_3x3(
     [up, mid, down]: [&[f64]; 3],
     [sx, sy]: [f64; 2],

@@ -6,7 +6,7 @@ use std::io::{Seek, Write};
 
 use rayon::prelude::*;
 
-use super::bands::{Limits, Surface, surface};
+use super::bands::{Holes, Limits, Surface, surface};
 use super::grid::{WorkGrid, work_grid};
 use super::inflate::inflation;
 use super::landcover::landcover_costs;
@@ -82,6 +82,8 @@ fn run(
     let surface = surface_and_classes(&grid, vehicle, options, &params, progress)?;
     let negative = negative_steps(&grid, vehicle, options, progress)?;
     let transform = grid.transform;
+    // Later grids take the heights' place.
+    drop(grid);
     let landcover_cost = match (&options.landcover, landcover) {
         (Some(table), Some(raster)) => {
             Ticker::new(progress, Stage::Layers, 1).check()?;
@@ -99,8 +101,7 @@ fn run(
     let mut class = surface.class;
     add_layer_obstacles(&mut class, &layers);
     fill_pockets(&mut class, [w, h], cell, &params, progress)?;
-    let obstacle = obstacles(&class, &grid.z);
-    drop(grid);
+    let obstacle = obstacles(&class, &surface.holes, w);
     let inflated = inflate(obstacle, [w, h], cell, &params, progress)?;
     let (cost, inflation_layer) = costs(inflated, &class, &layers, vehicle, options, progress)?;
 
@@ -297,16 +298,18 @@ fn fill_pockets(
 }
 
 /// The cells inflation grows from: obstacles and cells without a height
-/// (unknown ground is no safer than an obstacle), not the border ring,
-/// which is unknown only because it cannot be judged.
-fn obstacles(class: &[u8], z: &[f64]) -> Vec<bool> {
+/// (`holes`: unknown ground is no safer than an obstacle), not the border
+/// ring, which is unknown only because it cannot be judged.
+fn obstacles(class: &[u8], holes: &Holes, width: usize) -> Vec<bool> {
     let mut obstacle = crate::buffer::filled(class.len(), false);
     obstacle
-        .par_chunks_mut(CHUNK)
-        .zip(class.par_chunks(CHUNK).zip(z.par_chunks(CHUNK)))
-        .for_each(|(os, (ks, zs))| {
-            for ((o, &k), &v) in os.iter_mut().zip(ks).zip(zs) {
-                *o = v.is_nan() || Class::from_code(k).is_some_and(Class::is_obstacle);
+        .par_chunks_mut(width.max(1))
+        .zip(class.par_chunks(width.max(1)))
+        .enumerate()
+        .for_each(|(r, (os, ks))| {
+            holes.row_into(r, os);
+            for (o, &k) in os.iter_mut().zip(ks) {
+                *o |= Class::from_code(k).is_some_and(Class::is_obstacle);
             }
         });
     obstacle
@@ -475,7 +478,11 @@ fn traversing_cost(zcomp: f32, inflation: f32, weights: [f64; 4]) -> f64 {
 /// Costs without optional layers, in place of the inflation in `cost`
 /// (NaN off the traversable cells), compiled also for AVX2 and picked at
 /// run time.
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx512bw+avx512dq+avx2+fma",
+    "x86_64+avx2+fma",
+    "x86_64+avx"
+))]
 fn plain_costs(cost: &mut [f32], class: &[u8], zcomp: &[f32], weights: [f64; 4]) {
     for ((c, &k), &zc) in cost.iter_mut().zip(class).zip(zcomp) {
         let v = traversing_cost(zc, *c, weights) as f32;

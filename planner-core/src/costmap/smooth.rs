@@ -46,7 +46,11 @@ fn pass_line(src: &[f64], k: &[f64], out: &mut [f64], cells: std::ops::Range<usi
 /// out[i] = Σ_j weights[j]·lines[j][i], added in j order (so the same bits
 /// as each cell's own dot product), a whole line per weight so it
 /// vectorises; compiled also for AVX2 and picked at run time.
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx512bw+avx512dq+avx2+fma",
+    "x86_64+avx2+fma",
+    "x86_64+avx"
+))]
 fn weighted_lines(out: &mut [f64], lines: &[&[f64]], weights: &[f64]) {
     out.fill(0.0);
     let n = out.len();
@@ -184,6 +188,9 @@ impl Smoother {
                 // the kernel meets a NaN (done again below).
                 let lines: Vec<&[f64]> = (top..=bottom).map(at).collect();
                 weighted_lines(line, &lines, &k.kn);
+                if !any_nan(line) {
+                    continue;
+                }
             }
             let centre_row = at(row as isize);
             for (col, o) in line.iter_mut().enumerate() {
@@ -212,6 +219,12 @@ impl Smoother {
     }
 }
 
+/// Whether `v` holds a NaN: a branch-free scan that vectorises, to skip
+/// the cell-by-cell redo of lines without one (most).
+fn any_nan(v: &[f64]) -> bool {
+    v.iter().fold(false, |a, x| a | x.is_nan())
+}
+
 /// One row smoothed along x into `out`: the edges with renormalised
 /// weights, the cells whose kernel lies inside the row as one weighted
 /// sum; the sum is NaN where the kernel meets a NaN, and those cells are
@@ -224,6 +237,9 @@ fn smooth_line(row: &[f64], k: &Kernel, out: &mut [f64]) {
         pass_line(row, &k.k, out, width - r..width);
         let lines: Vec<&[f64]> = (0..k.k.len()).map(|j| &row[j..]).collect();
         weighted_lines(&mut out[r..width - r], &lines, &k.kn);
+        if !any_nan(&out[r..width - r]) {
+            return;
+        }
         for c in r..width - r {
             if out[c].is_nan() {
                 pass_line(row, &k.k, out, c..c + 1);

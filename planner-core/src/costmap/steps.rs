@@ -72,8 +72,13 @@ pub(super) fn rows_with_unknown(
     width: usize,
     rows: std::ops::Range<usize>,
 ) -> Vec<bool> {
-    rows.map(|r| z[r * width..(r + 1) * width].iter().any(|v| v.is_nan()))
-        .collect()
+    // A fold, not `any`: branch-free, so it vectorises.
+    rows.map(|r| {
+        z[r * width..(r + 1) * width]
+            .iter()
+            .fold(false, |a, v| a | v.is_nan())
+    })
+    .collect()
 }
 
 /// Whether rows r − 2 … r + 2 are all known, given `unknown` for the rows
@@ -144,10 +149,15 @@ pub(super) fn step_row(
             }
         }
     }
-    for (c, out) in row.iter_mut().enumerate().take(last).skip(1) {
-        if lines && c >= 2 && c + 2 < width && (clean || !scratch.probe[c - 2].is_nan()) {
+    // Clean rows leave only the columns one in from the edges.
+    let mut edges = [1, width.saturating_sub(2)].into_iter();
+    let mut all = 1..last;
+    let cells: &mut dyn Iterator<Item = usize> = if clean { &mut edges } else { &mut all };
+    for c in cells {
+        if lines && c >= 2 && c + 2 < width && !scratch.probe[c - 2].is_nan() {
             continue;
         }
+        let out = &mut row[c];
         let i = r * width + c;
         let zc = z[i];
         if zc.is_nan() {
@@ -214,7 +224,11 @@ fn clean_row(
 /// The loops of [`clean_row`], compiled also for AVX2 and picked at run
 /// time (the same bits on every target). Plain comparisons stand in for
 /// the NaN-aware `max`/`min`: cells that read a NaN are redone anyway.
-#[multiversion::multiversion(targets("x86_64+avx2+fma", "x86_64+avx"))]
+#[multiversion::multiversion(targets(
+    "x86_64+avx512f+avx512vl+avx512bw+avx512dq+avx2+fma",
+    "x86_64+avx2+fma",
+    "x86_64+avx"
+))]
 fn clean_row_lines(
     z: &[f64],
     width: usize,
