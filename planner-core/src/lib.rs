@@ -14,6 +14,7 @@ pub mod decompose;
 pub mod export;
 pub mod flock;
 pub mod geo;
+pub mod import;
 pub mod num;
 pub mod overlay;
 pub mod route;

@@ -22,8 +22,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::{
-    cameras, costmaps, dems, health, members, password, projects, routes, session, surveys, tokens,
-    users, vehicles,
+    cameras, costmaps, dems, health, imports, members, password, projects, routes, session, surveys,
+    tokens, users, vehicles,
 };
 use crate::error::ApiError;
 use crate::guard::{self, AllowedHosts};
@@ -40,6 +40,7 @@ use crate::state::AppState;
     tags(
         (name = "surveys", description = "Photo-survey planning: decomposition, lawnmower paths, missions"),
         (name = "dems", description = "Digital elevation models: upload (GeoTIFF, ESRI ASCII grid, SRTM .hgt), metadata, hillshade preview, heights at points"),
+        (name = "imports", description = "GIS file imports (zipped Shapefile, KML, KMZ, GPX, GeoJSON in any named CRS) as WGS84 GeoJSON for ROIs, no-fly zones and corridors"),
         (name = "costmaps", description = "Traversability costmaps of a DEM for a ground vehicle: background jobs with progress events, GeoTIFF, preview and per-layer files"),
         (name = "routes", description = "UGV routes across a finished costmap: the cheapest safe path (A* or D* Lite), incremental replanning around blocked areas, GeoJSON, CSV (UTM) and ArduPilot Rover missions"),
         (name = "accounts", description = "Signing in (session cookie and CSRF token, or an API token), a user's own API tokens, and users (admins)"),
@@ -62,6 +63,7 @@ pub fn router(
         .merge(health::routes())
         .merge(surveys::routes())
         .merge(dems::routes(max_dem_bytes))
+        .merge(imports::routes(max_dem_bytes))
         .merge(costmaps::routes())
         .merge(vehicles::routes())
         .merge(cameras::routes())

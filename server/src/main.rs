@@ -12,6 +12,7 @@ mod conn_state;
 mod db;
 mod error;
 mod guard;
+mod imports;
 mod jobs;
 mod linger;
 mod memory;

@@ -7,6 +7,7 @@ pub mod costmaps;
 pub mod dems;
 pub mod document;
 pub mod health;
+pub mod imports;
 mod immutable;
 pub mod json_body;
 pub mod members;

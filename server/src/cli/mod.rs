@@ -16,6 +16,7 @@ mod common;
 mod costmap;
 mod dem_info;
 mod experiment;
+mod import;
 mod route;
 mod serve;
 mod survey;
@@ -41,6 +42,10 @@ enum Command {
     /// Read a DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) and print its
     /// metadata as JSON: size, resolution, CRS, bounds, height range.
     DemInfo(dem_info::DemInfoArgs),
+    /// Read a GIS file (zipped Shapefile, .shp, KML, KMZ, GPX, GeoJSON in
+    /// any named CRS) and print its polygons and lines as WGS84 GeoJSON:
+    /// `{"features": FeatureCollection, "messages": [what was skipped]}`.
+    Import(import::ImportArgs),
     /// Build the traversability costmap of a DEM for a ground vehicle and
     /// write costmap.tif (page 1 cost, page 2 class), preview.png,
     /// legend.svg, stats.json and layers/<name>.tif.
@@ -71,6 +76,7 @@ pub fn run() -> ExitCode {
         Command::Serve(config) => serve::serve(config),
         Command::Survey(args) => survey::survey(&args),
         Command::DemInfo(args) => dem_info::dem_info(&args),
+        Command::Import(args) => import::import(&args),
         Command::Costmap(args) => costmap::costmap(&args),
         Command::Route(args) => route::route(&args),
         Command::Experiment(command) => experiment::experiment(&command),

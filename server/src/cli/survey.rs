@@ -1,7 +1,7 @@
 //! `terraplan survey`: a photo survey planned from files, written as the
 //! service serves it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::{Issue, Limits};
@@ -13,17 +13,20 @@ use planner_core::terrain::DemLimits;
 use serde_json::{Value, json};
 
 use super::common::{Failure, list_issues, read_dem_file, read_json};
+use crate::imports::Role;
 
 #[derive(clap::Args)]
 pub(super) struct SurveyArgs {
-    /// Region of interest: a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection (WGS84).
+    /// Region of interest: a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection (WGS84,
+    /// or the CRS its `crs` member names), a zipped Shapefile (.zip), .shp, .kml, .kmz or .gpx.
     #[arg(long, value_name = "FILE", required_unless_present = "corridor")]
     roi: Option<PathBuf>,
     /// A corridor instead of an area: its centre line, a GeoJSON LineString
-    /// (WGS84); the width is the params' `corridor_width_m`.
+    /// (WGS84), or one line in a .zip/.shp/.kml/.kmz/.gpx (a GPX track or
+    /// route); the width is the params' `corridor_width_m`.
     #[arg(long, value_name = "LINE.geojson", conflicts_with = "roi")]
     corridor: Option<PathBuf>,
-    /// No-fly zones (GeoJSON); may be given several times.
+    /// No-fly zones (GeoJSON, .zip/.shp Shapefile, .kml, .kmz); may be given several times.
     #[arg(long = "no-fly", value_name = "FILE")]
     no_fly: Vec<PathBuf>,
     /// Survey parameters as JSON (same fields as the API request).
@@ -71,14 +74,17 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         }
     }
     match (&args.roi, &args.corridor) {
-        (Some(roi), _) => obj.insert("roi".into(), read_json(roi, "ROI")?),
-        (None, Some(line)) => obj.insert("corridor".into(), read_json(line, "corridor")?),
+        (Some(roi), _) => obj.insert("roi".into(), read_geometry(roi, "ROI", Role::Area)?),
+        (None, Some(line)) => obj.insert(
+            "corridor".into(),
+            read_geometry(line, "corridor", Role::Line)?,
+        ),
         (None, None) => return Err(Failure::input("give --roi FILE or --corridor LINE.geojson")),
     };
     let zones = args
         .no_fly
         .iter()
-        .map(|p| read_json(p, "no-fly"))
+        .map(|p| read_geometry(p, "no-fly", Role::Area))
         .collect::<Result<Vec<_>, _>>()?;
     obj.insert("no_fly_zones".into(), Value::Array(zones));
     if obj.contains_key("dem_id") {
@@ -186,6 +192,24 @@ pub(super) fn survey(args: &SurveyArgs) -> Result<(), Failure> {
         eprintln!("warning: {w}");
     }
     Ok(())
+}
+
+/// The GeoJSON in the file at `path`: a WGS84 GeoJSON file as it is; a
+/// Shapefile, KML, KMZ, GPX or GeoJSON naming another CRS imported in WGS84
+/// (with a warning for each feature skipped).
+fn read_geometry(path: &Path, what: &str, role: Role) -> Result<Value, Failure> {
+    if !crate::imports::is_gis_file(path) {
+        let doc = read_json(path, what)?;
+        if planner_core::import::named_crs(&doc).is_none() {
+            return Ok(doc);
+        }
+    }
+    let (doc, messages) = crate::imports::read_geometry_file(path, role)
+        .map_err(|m| Failure::input(format!("{what} file {}: {m}", path.display())))?;
+    for m in messages {
+        eprintln!("warning: {}: {m}", path.display());
+    }
+    Ok(doc)
 }
 
 fn plan_failure(e: PlanError, describe: &dyn Fn(&[Issue]) -> String) -> Failure {
