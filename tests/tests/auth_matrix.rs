@@ -77,6 +77,8 @@ fn cases() -> Vec<Case> {
         c("GET", "/api/v1/tokens", 0, OK, OK, OK),
         c("GET", "/api/v1/session", 0, OK, OK, OK),
         c("GET", "/api/v1/users", 0, S403, S403, OK),
+        // Imports read a file and store nothing: any signed-in user.
+        c("POST", "/api/v1/imports", 0, OK, OK, OK),
         // Reads of the shared project's resources.
         c("GET", "/api/v1/surveys/{id}", 0, S404, OK, OK),
         c(
@@ -414,6 +416,20 @@ impl Fixture {
             }
             ("POST", "/api/v1/costmaps") => {
                 json_body(json!({"dem_id": self.dem, "project_id": self.project}))
+            }
+            ("POST", "/api/v1/imports") => {
+                let kml = "<kml><Placemark><LineString><coordinates>6.06,51.51 6.07,51.52\
+                           </coordinates></LineString></Placemark></kml>";
+                let (_, body) = terraplan_e2e::multipart_body(&[terraplan_e2e::Part {
+                    name: "file",
+                    file_name: Some("line.kml"),
+                    content_type: None,
+                    data: kml.as_bytes(),
+                }]);
+                (
+                    "multipart/form-data; boundary=terraplan-e2e-7d1f0c9a4b2e",
+                    body,
+                )
             }
             ("POST", "/api/v1/costmaps/{id}/routes") => json_body(self.route_body.clone()),
             ("POST", "/api/v1/routes/{id}/replan") => {
