@@ -22,8 +22,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::{
-    cameras, costmaps, dems, health, imports, members, password, projects, routes, session, surveys,
-    tokens, users, vehicles,
+    cameras, costmaps, dems, health, imports, members, password, projects, routes, session,
+    surveys, tokens, users, vehicles,
 };
 use crate::error::ApiError;
 use crate::guard::{self, AllowedHosts};

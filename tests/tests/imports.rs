@@ -140,6 +140,17 @@ fn rd_new_files_written_by_gdal_match_their_source() {
     import(&rd, &out);
     check(&out, &src, "polygon");
 
+    // A GeoPackage in EPSG:28992.
+    let gpkg = d.join("field.gpkg");
+    ogr2ogr(&["-t_srs", "EPSG:28992", "-f", "GPKG", &s(&gpkg), &s(&src)]);
+    let out = d.join("gpkg.json");
+    let doc = import(&gpkg, &out);
+    assert_eq!(
+        doc["features"]["features"][0]["properties"]["Name"],
+        "test parcel"
+    );
+    check(&out, &src, "polygon");
+
     // KML, and the same as KMZ.
     let kml = d.join("field.kml");
     ogr2ogr(&["-f", "KML", &s(&kml), &s(&src)]);
@@ -385,6 +396,26 @@ fn the_service_imports_what_the_cli_does() {
             .contains("Point(s) skipped"),
         "{doc}"
     );
+
+    // A GeoPackage written by GDAL in EPSG:28992, whole and cut short.
+    let gpkg = d.join("field.gpkg");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    ogr2ogr(&[
+        "-t_srs",
+        "EPSG:28992",
+        "-f",
+        "GPKG",
+        &s(&gpkg),
+        &s(&field()),
+    ]);
+    let gpkg_bytes = std::fs::read(&gpkg).unwrap();
+    let r = upload(&server, "field.gpkg", &gpkg_bytes);
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert_eq!(r.json(), import(&gpkg, &d.join("gpkg.json")));
+    for cut in [0, 100, gpkg_bytes.len() / 2] {
+        let r = upload(&server, "field.gpkg", &gpkg_bytes[..cut]);
+        assert_invalid_at(&r, &format!("gpkg cut at {cut}"), "/file", "not a");
+    }
 
     for cut in [0, 10, bytes.len() / 3, bytes.len() - 1] {
         let r = upload(&server, "rmnp.zip", &bytes[..cut]);

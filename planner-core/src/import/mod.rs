@@ -3,12 +3,14 @@
 //! a message for every feature skipped. Knows nothing of HTTP or SQL.
 
 mod geojson_crs;
+mod gpkg_blob;
 mod gpx_file;
 mod kml;
 mod reproject;
 mod shapefile_zip;
 
 pub use geojson_crs::named_crs;
+pub use gpkg_blob::read_gpkg_geometry;
 pub use reproject::ToWgs84;
 pub use shapefile_zip::read_shapefile_parts;
 
@@ -57,8 +59,8 @@ pub enum ImportError {
     Crs(String),
     /// The name's extension is none of the formats read.
     #[error(
-        "unsupported file type {0:?}: give a zipped Shapefile (.zip), .shp, .kml, .kmz, .gpx or \
-         .geojson"
+        "unsupported file type {0:?}: give a zipped Shapefile (.zip), .shp, .gpkg, .kml, .kmz, \
+         .gpx or .geojson"
     )]
     UnsupportedFormat(String),
 }
@@ -80,12 +82,7 @@ pub struct Imported {
 impl Imported {
     /// Keep `geometry` if it is polygonal or linear and every ring and line
     /// is usable; otherwise record why feature `label` was skipped.
-    pub(crate) fn push(
-        &mut self,
-        label: &str,
-        geometry: Geometry<f64>,
-        properties: Map<String, Value>,
-    ) {
+    pub fn push(&mut self, label: &str, geometry: Geometry<f64>, properties: Map<String, Value>) {
         match usable(geometry) {
             Ok(geometry) => self.features.push(Feature {
                 geometry,

@@ -1,4 +1,4 @@
-//! `POST /api/v1/imports`: a GIS file (zipped Shapefile, KML, KMZ, GPX,
+//! `POST /api/v1/imports`: a GIS file (zipped Shapefile, GeoPackage, KML, KMZ, GPX,
 //! GeoJSON in any named CRS) read into WGS84 GeoJSON for an ROI, no-fly
 //! zones or corridor lines, with a message per feature skipped. Nothing is
 //! stored.
@@ -28,7 +28,7 @@ pub fn routes(max_upload_bytes: usize) -> OpenApiRouter<AppState> {
 #[allow(dead_code)] // documents the form for the OpenAPI schema
 pub struct ImportUpload {
     /// The GIS file; the part's filename must end in `.zip` (a zipped
-    /// Shapefile: `.shp`, `.dbf`, `.prj`), `.kml`, `.kmz`, `.gpx`,
+    /// Shapefile: `.shp`, `.dbf`, `.prj`), `.gpkg`, `.kml`, `.kmz`, `.gpx`,
     /// `.geojson` or `.json`, which chooses the reader.
     #[schema(value_type = String, format = Binary, content_media_type = "application/octet-stream")]
     file: Vec<u8>,
@@ -103,10 +103,31 @@ async fn read_file_part(mut form: Multipart, limit: usize) -> Result<(String, Ve
     found.ok_or_else(|| file_fault("the form has no part named \"file\" holding the GIS file"))
 }
 
+/// A GeoPackage upload read from a spool file (SQLite reads files), which
+/// is removed afterwards.
+async fn read_gpkg_upload(
+    state: &AppState,
+    bytes: Vec<u8>,
+) -> Result<Result<planner_core::import::Imported, ImportError>, ApiError> {
+    let dir = state.dems.spool_dir.clone();
+    let path = dir.join(format!("{}.gpkg", uuid::Uuid::new_v4()));
+    let at = path.clone();
+    tokio::task::spawn_blocking(move || {
+        std::fs::create_dir_all(&dir)?;
+        std::fs::write(&at, bytes)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))?
+    .map_err(|e| ApiError::Internal(format!("cannot spool the upload: {e}")))?;
+    let result = crate::imports::gpkg::read_gpkg(&path).await;
+    let _ = tokio::fs::remove_file(&path).await;
+    Ok(result)
+}
+
 /// Import a GIS file: its polygons and lines in WGS84 GeoJSON, to use as a
 /// survey's `roi`, `no_fly_zones` or `corridor`. Formats (by the part's
 /// filename): a zipped ESRI Shapefile (`.shp`, `.dbf`, `.prj` in any CRS),
-/// KML, KMZ, GPX (tracks and routes as lines) and GeoJSON whose legacy
+/// GeoPackage (`.gpkg`: every feature table), KML, KMZ, GPX (tracks and routes as lines) and GeoJSON whose legacy
 /// `crs` member names another CRS; all reprojected with PROJ. Points and
 /// unusable features are skipped and listed in `messages`.
 #[utoipa::path(
@@ -142,10 +163,14 @@ pub async fn import_file(
     })?;
     let limit = state.dems.max_upload_bytes;
     let (file_name, bytes) = read_file_part(form, limit).await?;
-    let imported = state
-        .run_planner(Work::Dem, move |_| import_bytes(&file_name, &bytes))
-        .await?
-        .map_err(|e: ImportError| file_fault(&e.to_string()))?;
+    let imported = if crate::imports::is_gpkg(&file_name) {
+        read_gpkg_upload(&state, bytes).await?
+    } else {
+        state
+            .run_planner(Work::Dem, move |_| import_bytes(&file_name, &bytes))
+            .await?
+    }
+    .map_err(|e: ImportError| file_fault(&e.to_string()))?;
     let reply = crate::imports::reply(&imported);
     Ok(Json(ImportResponse {
         features: reply["features"].clone(),

@@ -18,15 +18,17 @@ use crate::imports::Role;
 #[derive(clap::Args)]
 pub(super) struct SurveyArgs {
     /// Region of interest: a GeoJSON Polygon, MultiPolygon, Feature or FeatureCollection (WGS84,
-    /// or the CRS its `crs` member names), a zipped Shapefile (.zip), .shp, .kml, .kmz or .gpx.
+    /// or the CRS its `crs` member names), a zipped Shapefile (.zip), .shp, .gpkg, .kml, .kmz or
+    /// .gpx.
     #[arg(long, value_name = "FILE", required_unless_present = "corridor")]
     roi: Option<PathBuf>,
     /// A corridor instead of an area: its centre line, a GeoJSON LineString
-    /// (WGS84), or one line in a .zip/.shp/.kml/.kmz/.gpx (a GPX track or
+    /// (WGS84), or one line in a .zip/.shp/.gpkg/.kml/.kmz/.gpx (a GPX track or
     /// route); the width is the params' `corridor_width_m`.
     #[arg(long, value_name = "LINE.geojson", conflicts_with = "roi")]
     corridor: Option<PathBuf>,
-    /// No-fly zones (GeoJSON, .zip/.shp Shapefile, .kml, .kmz); may be given several times.
+    /// No-fly zones (GeoJSON, .zip/.shp Shapefile, .gpkg, .kml, .kmz); may be
+    /// given several times.
     #[arg(long = "no-fly", value_name = "FILE")]
     no_fly: Vec<PathBuf>,
     /// Survey parameters as JSON (same fields as the API request).

@@ -3,7 +3,9 @@
 
 use std::path::Path;
 
-use planner_core::import::{Format, Imported, import_bytes, import_path};
+use planner_core::import::{Format, ImportError, Imported, import_bytes, import_path};
+
+pub mod gpkg;
 use serde_json::Value;
 
 /// What a file is read for: which geometries it must hold.
@@ -19,7 +21,8 @@ pub enum Role {
 /// KMZ or GPX) rather than as GeoJSON.
 pub fn is_gis_file(path: &Path) -> bool {
     let name = path.to_string_lossy();
-    name.to_ascii_lowercase().ends_with(".shp")
+    is_gpkg(&name)
+        || name.to_ascii_lowercase().ends_with(".shp")
         || !matches!(Format::from_name(&name), Some(Format::GeoJson) | None)
 }
 
@@ -28,12 +31,26 @@ pub fn is_gis_file(path: &Path) -> bool {
 /// FeatureCollection, and messages about the features skipped.
 pub fn read_geometry_file(path: &Path, role: Role) -> Result<(Value, Vec<String>), String> {
     let imported = if is_gis_file(path) {
-        import_path(path)
+        import_file(path)
     } else {
         let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
         import_bytes("file.geojson", &bytes)
     };
     select(imported.map_err(|e| e.to_string())?, role)
+}
+
+/// Whether `name` is a GeoPackage's (`.gpkg`).
+pub fn is_gpkg(name: &str) -> bool {
+    name.to_ascii_lowercase().ends_with(".gpkg")
+}
+
+/// The file at `path`: a GeoPackage, or any file `import_path` reads.
+pub fn import_file(path: &Path) -> Result<Imported, ImportError> {
+    if is_gpkg(&path.to_string_lossy()) {
+        gpkg::read_gpkg_blocking(path)
+    } else {
+        import_path(path)
+    }
 }
 
 /// The reply to an import: `{"features": FeatureCollection (WGS84),
@@ -99,5 +116,6 @@ mod tests {
         assert!(!is_gis_file(Path::new("a/roi.geojson")));
         assert!(!is_gis_file(Path::new("roi.txt")));
         assert!(is_gis_file(Path::new("roi.SHP")) && is_gis_file(Path::new("r.kmz")));
+        assert!(is_gis_file(Path::new("r.GPKG")));
     }
 }
