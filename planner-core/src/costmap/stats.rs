@@ -68,50 +68,6 @@ pub struct CostmapStats {
     pub histogram: CostHistogram,
 }
 
-/// One chunk's class counts, and min / max / sum / bins of its
-/// traversable costs. The counts are a pass per class (compares the
-/// compiler vectorises); the costs go four lanes at a time, each lane with
-/// its own min, max, sum and histogram, so that no cell waits on the
-/// previous one's (the sums of f32 costs are exact in f64 at these sizes,
-/// whatever their order).
-fn tally(costs: &[f32], classes: &[u8], lo: f64, bins_per_cost: f64) -> Tally {
-    let mut t = empty_tally();
-    for code in 0..5u8 {
-        t.0[usize::from(code)] = classes.iter().filter(|&&k| k == code).count() as u64;
-    }
-    // Codes above 5 are counted as 5, as `k.min(5)` would.
-    t.0[5] = classes.len() as u64 - t.0[..5].iter().sum::<u64>();
-    let mut lanes = [empty_tally(); 4];
-    let add = |l: &mut Tally, c: f32, k: u8| {
-        if k == Class::Traversable as u8 && c.is_finite() {
-            let c = f64::from(c);
-            l.2 = l.2.min(c);
-            l.3 = l.3.max(c);
-            l.4 += c;
-            l.5 += 1;
-            // Truncation is floor here: below 0 is bin 0 anyway.
-            let b = (c - lo) * bins_per_cost;
-            let bin = if b > 0.0 { b as usize } else { 0 };
-            l.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
-        }
-    };
-    let quads = costs.chunks_exact(4).zip(classes.chunks_exact(4));
-    for (cs, ks) in quads {
-        for ((l, &c), &k) in lanes.iter_mut().zip(cs).zip(ks) {
-            add(l, c, k);
-        }
-    }
-    let done = costs.len() / 4 * 4;
-    for (&c, &k) in costs[done..].iter().zip(&classes[done..]) {
-        add(&mut lanes[0], c, k);
-    }
-    for l in &lanes {
-        t.1.iter_mut().zip(&l.1).for_each(|(x, y)| *x += y);
-        (t.2, t.3, t.4, t.5) = (t.2.min(l.2), t.3.max(l.3), t.4 + l.4, t.5 + l.5);
-    }
-    t
-}
-
 /// Statistics of `cost` / `class` (same length). `cell_area_m2`: area of
 /// one cell; `cost_range`: the range the weights allow.
 pub fn costmap_stats(
@@ -130,7 +86,24 @@ pub fn costmap_stats(
     let (counts, bins, min, max, sum, n) = cost
         .par_chunks(CHUNK)
         .zip(class.par_chunks(CHUNK))
-        .map(|(costs, classes)| tally(costs, classes, lo, bins_per_cost))
+        .map(|(costs, classes)| {
+            let mut t = empty_tally();
+            for (&c, &k) in costs.iter().zip(classes) {
+                t.0[usize::from(k.min(5))] += 1;
+                if k == Class::Traversable as u8 && c.is_finite() {
+                    let c = f64::from(c);
+                    t.2 = t.2.min(c);
+                    t.3 = t.3.max(c);
+                    t.4 += c;
+                    t.5 += 1;
+                    // Truncation is floor here: below 0 is bin 0 anyway.
+                    let b = (c - lo) * bins_per_cost;
+                    let bin = if b > 0.0 { b as usize } else { 0 };
+                    t.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
+                }
+            }
+            t
+        })
         .reduce(empty_tally, |mut a, b| {
             a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
             a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
