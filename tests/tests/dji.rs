@@ -136,7 +136,9 @@ fn long_missions_split_for_litchi() {
         .iter()
         .filter(|n| n.ends_with(".litchi.csv"))
         .collect();
-    assert_eq!(parts.len(), 3, "{parts:?}");
+    // 3 m lanes over the example field: a few hundred waypoints, so
+    // several files (how many depends on the plan: checked below).
+    assert!(parts.len() >= 2, "{parts:?}");
     assert_eq!(parts[0], "u1.part1.litchi.csv");
     assert!(!out.join("u1.litchi.csv").exists());
     let litchi = check_litchi(&out);
@@ -144,7 +146,10 @@ fn long_missions_split_for_litchi() {
     assert_eq!(m["files"].as_u64(), Some(parts.len() as u64));
     let wpml = check_wpml(&out);
     assert_eq!(m["waypoints"], wpml["files"][0]["waypoints"]);
-    assert!(m["waypoints"].as_u64().unwrap() > 99, "{m}");
+    let waypoints = m["waypoints"].as_u64().unwrap();
+    assert!(waypoints > 99, "{m}");
+    // Each part starts where the one before ended: 98 legs a file.
+    assert_eq!(parts.len() as u64, (waypoints - 1).div_ceil(98), "{m}");
     assert_eq!(wpml["files"][0]["photos"].as_u64(), Some(photos_of(&plan)));
 }
 

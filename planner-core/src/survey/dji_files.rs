@@ -126,6 +126,39 @@ impl SurveyPlan {
         })
     }
 
+    /// Every Litchi file of every multirotor sortie, each sortie's parts
+    /// from one conversion of its mission (a long survey has hundreds of
+    /// parts: converting it again for each made the files cost more than
+    /// the plan).
+    pub(super) fn litchi_files(&self) -> Vec<Vec<PlanFile>> {
+        self.dji_sorties()
+            .filter_map(|(_, s)| {
+                let litchi = LitchiMission::of(&s.mission).ok()?;
+                let n = litchi.parts();
+                let files = (0..n)
+                    .filter_map(|k| {
+                        let name = if n == 1 {
+                            format!("{}.{LITCHI_SUFFIX}", s.file_stem)
+                        } else {
+                            format!("{}.part{}.{LITCHI_SUFFIX}", s.file_stem, k + 1)
+                        };
+                        Some(PlanFile {
+                            content_type: super::files::content_type_of(&name),
+                            content: litchi.csv(k).ok()?.into_bytes(),
+                            name,
+                        })
+                    })
+                    .collect();
+                Some(files)
+            })
+            .collect()
+    }
+
+    /// Whether `name` is a Litchi file's (of [`SurveyPlan::litchi_files`]).
+    pub(super) fn is_litchi_file(name: &str) -> bool {
+        name.ends_with(&format!(".{LITCHI_SUFFIX}"))
+    }
+
     /// Why a multirotor sortie gets no DJI WPML or Litchi mission.
     pub(super) fn dji_warnings(&self) -> Vec<String> {
         let mut out = Vec::new();

@@ -67,9 +67,18 @@ impl SurveyPlan {
         &self,
         take: impl Fn(PlanFile) -> Result<(), E> + Sync,
     ) -> Result<(), E> {
-        self.file_names()
+        let names: Vec<String> = self
+            .file_names()
+            .into_iter()
+            .filter(|n| !SurveyPlan::is_litchi_file(n))
+            .collect();
+        names
             .par_iter()
             .filter_map(|n| self.file(n))
+            .try_for_each(&take)?;
+        self.litchi_files()
+            .into_par_iter()
+            .flatten()
             .try_for_each(&take)
     }
 
@@ -296,6 +305,7 @@ mod tests {
             );
         }
         assert!(plan.file("a-1.exe").is_none());
+        assert!(!plan.file_names().iter().any(|n| n.contains(".part")));
         assert!(plan.file("b.waypoints").is_none());
         assert!(
             plan.file("a-1.waypoints")
@@ -303,5 +313,39 @@ mod tests {
                 .text()
                 .starts_with("QGC WPL 110\n")
         );
+    }
+
+    /// A long mission's Litchi parts, rendered together by `each_file`,
+    /// are the files `file` renders one by one.
+    #[test]
+    fn each_file_renders_every_file_once() {
+        let doc = json!({
+            "roi": {"type": "Polygon", "coordinates": [[[5.0, 52.0], [5.01, 52.0], [5.01, 52.006], [5.0, 52.006]]]},
+            "slice_angle_deg": 0,
+            "line_spacing_m": 6,
+            "uavs": [{"id": "a", "start": [4.999, 51.999]}],
+        });
+        let plan = plan_survey(
+            &SurveyRequest::from_document(&doc).unwrap(),
+            &Limits::default(),
+        )
+        .unwrap();
+        let names = plan.file_names();
+        assert!(
+            names.contains(&"a.part2.litchi.csv".to_string()),
+            "{names:?}"
+        );
+        let made = std::sync::Mutex::new(Vec::new());
+        plan.each_file(|f| {
+            made.lock().unwrap().push(f);
+            Ok::<(), ()>(())
+        })
+        .unwrap();
+        let mut made = made.into_inner().unwrap();
+        made.sort_by(|a, b| a.name.cmp(&b.name));
+        let mut all = plan.files();
+        all.sort_by(|a, b| a.name.cmp(&b.name));
+        assert_eq!(made.len(), names.len());
+        assert!(made == all, "each_file and files differ");
     }
 }
