@@ -72,14 +72,23 @@ impl SurveyPlan {
             .into_iter()
             .filter(|n| !SurveyPlan::is_litchi_file(n))
             .collect();
-        names
-            .par_iter()
-            .filter_map(|n| self.file(n))
-            .try_for_each(&take)?;
-        self.litchi_files()
-            .into_par_iter()
-            .flatten()
-            .try_for_each(&take)
+        // Side by side: the Litchi parts need no other file, and one long
+        // file (a big `.kmz`) would otherwise leave a core idle.
+        let (files, litchi) = rayon::join(
+            || {
+                names
+                    .par_iter()
+                    .filter_map(|n| self.file(n))
+                    .try_for_each(&take)
+            },
+            || {
+                self.litchi_files()
+                    .into_par_iter()
+                    .flatten()
+                    .try_for_each(&take)
+            },
+        );
+        files.and(litchi)
     }
 
     /// One file of the plan by name (see [`SurveyPlan::file_names`]),
