@@ -4,10 +4,11 @@
 //! stored.
 
 use axum::Json;
-use axum::extract::multipart::MultipartError;
 use axum::extract::{DefaultBodyLimit, Multipart, State};
 use axum::http::StatusCode;
 use planner_core::geo::Issue;
+
+use super::dems::{multipart_error, too_large};
 use planner_core::import::{ImportError, import_bytes};
 use serde::Serialize;
 use utoipa::ToSchema;
@@ -46,21 +47,6 @@ pub struct ImportResponse {
     messages: Vec<String>,
 }
 
-fn too_large(limit: usize) -> ApiError {
-    ApiError::PayloadTooLarge(format!(
-        "the file is too large: the limit is {limit} bytes ({} MiB, --max-dem-mb)",
-        limit / (1024 * 1024)
-    ))
-}
-
-fn multipart_error(e: MultipartError, limit: usize) -> ApiError {
-    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-        too_large(limit)
-    } else {
-        ApiError::BadRequest(format!("malformed multipart body: {}", e.body_text()))
-    }
-}
-
 fn file_fault(message: &str) -> ApiError {
     ApiError::Validation(vec![Issue::new("/file", message)])
 }
@@ -71,7 +57,7 @@ async fn read_file_part(mut form: Multipart, limit: usize) -> Result<(String, Ve
     while let Some(mut field) = form
         .next_field()
         .await
-        .map_err(|e| multipart_error(e, limit))?
+        .map_err(|e| multipart_error(e, "file", limit))?
     {
         let name = field.name().unwrap_or("").to_string();
         if name != "file" {
@@ -92,9 +78,13 @@ async fn read_file_part(mut form: Multipart, limit: usize) -> Result<(String, Ve
             ));
         };
         let mut bytes = Vec::new();
-        while let Some(chunk) = field.chunk().await.map_err(|e| multipart_error(e, limit))? {
+        while let Some(chunk) = field
+            .chunk()
+            .await
+            .map_err(|e| multipart_error(e, "file", limit))?
+        {
             if bytes.len() + chunk.len() > limit {
-                return Err(too_large(limit));
+                return Err(too_large("file", limit));
             }
             bytes.extend_from_slice(&chunk);
         }

@@ -7,6 +7,8 @@ mod header;
 mod model;
 mod upload;
 
+pub(crate) use upload::{multipart_error, too_large};
+
 use axum::extract::DefaultBodyLimit;
 use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;

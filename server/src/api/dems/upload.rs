@@ -38,21 +38,26 @@ use crate::error::{ApiError, Problem};
 use crate::memory::{Reservation, dem_read_bytes, mib};
 use crate::state::{AppState, Work};
 
+/// What the upload limits' messages call a DEM upload.
+const DEM_FILE: &str = "DEM file";
+
 const FILE_NAME_MAX_CHARS: usize = 255;
 
 /// Media types taken as the raw DEM file.
 const RAW_TYPES: [&str; 3] = ["image/tiff", "application/octet-stream", "text/plain"];
 
-fn too_large(limit: usize) -> ApiError {
+/// 413 for an upload over `limit` bytes; `what` names it ("DEM file").
+pub(crate) fn too_large(what: &str, limit: usize) -> ApiError {
     ApiError::PayloadTooLarge(format!(
-        "the DEM file is too large: the limit is {limit} bytes ({} MiB, --max-dem-mb)",
+        "the {what} is too large: the limit is {limit} bytes ({} MiB, --max-dem-mb)",
         limit / (1024 * 1024)
     ))
 }
 
-fn multipart_error(e: MultipartError, limit: usize) -> ApiError {
+/// A multipart body's fault: 413 past `limit` (see [`too_large`]), else 400.
+pub(crate) fn multipart_error(e: MultipartError, what: &str, limit: usize) -> ApiError {
     if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-        too_large(limit)
+        too_large(what, limit)
     } else {
         ApiError::BadRequest(format!("malformed multipart body: {}", e.body_text()))
     }
@@ -107,7 +112,7 @@ impl SpoolWriter {
     async fn push(&mut self, bytes: &[u8]) -> Result<(), ApiError> {
         self.spool.len += bytes.len() as u64;
         if self.spool.len > self.limit as u64 {
-            return Err(too_large(self.limit));
+            return Err(too_large(DEM_FILE, self.limit));
         }
         self.buf.extend_from_slice(bytes);
         if self.buf.len() >= CHUNK_BYTES {
@@ -174,7 +179,7 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
     while let Some(mut field) = form
         .next_field()
         .await
-        .map_err(|e| multipart_error(e, limit))?
+        .map_err(|e| multipart_error(e, DEM_FILE, limit))?
     {
         let field_name = field.name().unwrap_or("").to_string();
         match field_name.as_str() {
@@ -188,15 +193,20 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
                 have_file = true;
                 upload.file_name = field.file_name().and_then(base_name);
                 let mut writer = SpoolWriter::create(&state.dems.spool_dir, limit).await?;
-                while let Some(bytes) =
-                    field.chunk().await.map_err(|e| multipart_error(e, limit))?
+                while let Some(bytes) = field
+                    .chunk()
+                    .await
+                    .map_err(|e| multipart_error(e, DEM_FILE, limit))?
                 {
                     writer.push(&bytes).await?;
                 }
                 upload.file = Some(writer.finish().await?);
             }
             "name" | "crs" => {
-                let text = field.text().await.map_err(|e| multipart_error(e, limit))?;
+                let text = field
+                    .text()
+                    .await
+                    .map_err(|e| multipart_error(e, DEM_FILE, limit))?;
                 let slot = if field_name == "name" {
                     &mut upload.name
                 } else {
