@@ -37,11 +37,21 @@ export function parseGeoJson(text: string): PolygonRings[] {
 /** Names the 2008 GeoJSON `crs` member may give for longitude/latitude on WGS84. */
 const WGS84_NAMES = /^(urn:ogc:def:crs:OGC:(1\.3:)?CRS84|urn:ogc:def:crs:EPSG:(\d*\.?\d*)?:4326|EPSG:4326|CRS84|WGS ?84)$/i;
 
-/** Refuses a GeoJSON file that says it is in another CRS (old GeoJSON allowed a `crs` member; projected files use it). */
-function checkGeoJsonCrs(doc: unknown): void {
+/**
+ * The CRS a GeoJSON document's legacy `crs` member names when it is not
+ * longitude/latitude on WGS84 (null: none named, or WGS84). Such a file
+ * needs reprojecting: the drop import sends it to the server (PROJ).
+ */
+export function foreignGeoJsonCrs(doc: unknown): string | null {
   const crs = (doc as { crs?: { properties?: { name?: unknown } } } | null)?.crs;
   const name = crs?.properties?.name;
-  if (typeof name === 'string' && !WGS84_NAMES.test(name.trim())) {
+  return typeof name === 'string' && !WGS84_NAMES.test(name.trim()) ? name : null;
+}
+
+/** Refuses a GeoJSON file that says it is in another CRS (old GeoJSON allowed a `crs` member; projected files use it). */
+function checkGeoJsonCrs(doc: unknown): void {
+  const name = foreignGeoJsonCrs(doc);
+  if (name !== null) {
     throw new ImportError(
       `The file's coordinates are in ${name}, not longitude/latitude (WGS84). Export it in EPSG:4326, e.g. ogr2ogr -t_srs EPSG:4326 out.geojson in.geojson.`,
     );
@@ -89,7 +99,8 @@ function polygonFromCoords(coords: unknown): PolygonRings {
   });
 }
 
-function toLonLat(p: unknown): LonLat {
+/** A GeoJSON position as [lon, lat]; throws an ImportError naming what is wrong. */
+export function toLonLat(p: unknown): LonLat {
   if (!Array.isArray(p) || p.length < 2 || !Number.isFinite(p[0]) || !Number.isFinite(p[1])) {
     throw new ImportError('A position is not [longitude, latitude].');
   }

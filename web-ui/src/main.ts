@@ -6,6 +6,8 @@ import { api } from './api';
 import type { Session } from './account-api';
 import { DemPanel } from './dem-panel';
 import { byId } from './dom';
+import { DropImport } from './drop-import';
+import { planExtent } from './drop-import-model';
 import { MapView } from './map';
 import { MembersDialog } from './members-dialog';
 import { ProjectSwitcher } from './projects';
@@ -72,6 +74,20 @@ const saved = new SavedPanel({
   },
 });
 
+// ---- GIS files dropped on the page or chosen: into the survey, as drawing them would ----
+new DropImport({
+  areas: () => map.getAreas(),
+  corridorLine: () => map.getCorridorLine(),
+  apply: (plan) => {
+    selectTab('survey');
+    if (plan.roi) map.setRoi(plan.roi);
+    if (plan.noFlyZones.length) map.addNoFlyZones(plan.noFlyZones);
+    if (plan.corridor) survey.lineDrawn(plan.corridor);
+    const extent = planExtent(plan);
+    if (extent) map.fitLonLat(extent);
+  },
+});
+
 // ---- accounts: session, project switcher, members ----
 /** The lists that depend on who is signed in and on the chosen project. */
 async function refreshLists(): Promise<void> {
@@ -133,6 +149,7 @@ map.map.once('rendercomplete', () => performance.mark('terraplan:map-rendered'))
 (window as unknown as { terraplan: unknown }).terraplan = {
   pixelFor: (lon: number, lat: number) => map.pixelFor(lon, lat),
   areas: () => map.getAreas(),
+  corridor: () => map.getCorridorLine(),
   fit: (extent: [number, number, number, number]) => map.fitLonLat(extent),
 };
 

@@ -473,6 +473,13 @@ export class MapView {
     if (line) this.flights.addFeature(new Feature({ geometry: new LineString(line.map(toMap)), kind: 'corridor-line', style: corridorLineStyle }));
   }
 
+  /** The corridor's centre line shown (null: none), in lon/lat. */
+  getCorridorLine(): LonLat[] | null {
+    const f = this.flights.getFeatures().find((f) => f.get('kind') === 'corridor-line');
+    const g = f?.getGeometry();
+    return g instanceof LineString ? g.getCoordinates().map((c) => toLonLat(c) as LonLat) : null;
+  }
+
   addNoFlyZones(zones: PolygonRings[]): void {
     for (const z of zones) this.areas.addFeature(new Feature({ geometry: new Polygon(ringsToMap(z)), kind: 'nfz' }));
     this.emitAreas();
