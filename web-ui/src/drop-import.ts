@@ -52,6 +52,8 @@ export class DropImport {
   /** Where the focus was before the dialog opened (it goes back there). */
   private returnFocus: HTMLElement | null = null;
   private dragDepth = 0;
+  /** Ends the page-wide drag and drop listeners (stop()). */
+  private readonly listening = new AbortController();
 
   constructor(
     private readonly target: DropImportTarget,
@@ -83,24 +85,25 @@ export class DropImport {
     const carriesFiles = (e: DragEvent) => Array.from(e.dataTransfer?.types ?? []).includes('Files');
     // A drop on a file input (the DEM upload) stays that input's own.
     const onFileInput = (e: DragEvent) => e.target instanceof HTMLInputElement && e.target.type === 'file';
+    const options = { signal: this.listening.signal };
     doc.addEventListener('dragenter', (e) => {
       if (!carriesFiles(e) || onFileInput(e)) return;
       e.preventDefault();
       this.dragDepth++;
       this.setHighlight(true);
-    });
+    }, options);
     doc.addEventListener('dragover', (e) => {
       if (!carriesFiles(e) || onFileInput(e)) return;
       // Without this the browser would open the file in place of the page (and the work on it).
       e.preventDefault();
       if (e.dataTransfer) e.dataTransfer.dropEffect = this.accepting() ? 'copy' : 'none';
       this.setHighlight(true);
-    });
+    }, options);
     doc.addEventListener('dragleave', (e) => {
       if (!carriesFiles(e) || onFileInput(e)) return;
       this.dragDepth = Math.max(0, this.dragDepth - 1);
       if (this.dragDepth === 0) this.setHighlight(false);
-    });
+    }, options);
     doc.addEventListener('drop', (e) => {
       if (!carriesFiles(e) || onFileInput(e)) return;
       e.preventDefault();
@@ -108,7 +111,12 @@ export class DropImport {
       this.setHighlight(false);
       const files = Array.from(e.dataTransfer?.files ?? []);
       if (files.length && this.accepting()) void this.handleFiles(files);
-    });
+    }, options);
+  }
+
+  /** Stops listening for drops on the page (the tests make one import per page). */
+  stop(): void {
+    this.listening.abort();
   }
 
   /** Whether a drop is taken now: not while another dialog (signing in) is over the page, nor while files are being read. */
