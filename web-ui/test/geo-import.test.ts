@@ -2,7 +2,7 @@
 import { existsSync, readFileSync } from 'node:fs';
 import path from 'node:path';
 import { describe, expect, it } from 'vitest';
-import { closeRing, ImportError, parsePolygons, ringCrossesItself, utmArea } from '../src/geo-import';
+import { closeRing, foreignGeoJsonCrs, ImportError, parsePolygons, ringCrossesItself, toLonLat, utmArea } from '../src/geo-import';
 
 // The shared test data (../shared/data beside the repository); vitest runs in web-ui/.
 const FIELD = path.resolve(process.cwd(), '../../shared/data/polygons/fields2cover__test.json');
@@ -128,5 +128,30 @@ describe('ringCrossesItself', () => {
     // The last edge runs back across the first.
     expect(ringCrossesItself([[0, 0], [3, 0], [3, 2], [1, -1], [0, 0]])).toBe(true);
     expect(ringCrossesItself([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2], [0, 0]])).toBe(true);
+  });
+});
+
+describe('foreignGeoJsonCrs', () => {
+  const named = (name: unknown) => ({ type: 'FeatureCollection', features: [], crs: { type: 'name', properties: { name } } });
+
+  it('names a CRS other than WGS84 lon/lat (the file then goes to the server to be reprojected)', () => {
+    expect(foreignGeoJsonCrs(named('urn:ogc:def:crs:EPSG::28992'))).toBe('urn:ogc:def:crs:EPSG::28992');
+    expect(foreignGeoJsonCrs(named('EPSG:32618'))).toBe('EPSG:32618');
+  });
+
+  it('is null without a crs member and for the names of WGS84', () => {
+    expect(foreignGeoJsonCrs({ type: 'FeatureCollection', features: [] })).toBeNull();
+    expect(foreignGeoJsonCrs(null)).toBeNull();
+    for (const name of ['urn:ogc:def:crs:OGC:1.3:CRS84', 'urn:ogc:def:crs:EPSG::4326', 'EPSG:4326', ' CRS84 ']) expect(foreignGeoJsonCrs(named(name))).toBeNull();
+    expect(foreignGeoJsonCrs(named(42))).toBeNull();
+  });
+});
+
+describe('toLonLat', () => {
+  it('keeps lon/lat, drops heights, and refuses what is not a position in degrees', () => {
+    expect(toLonLat([-77.05, 38.81, 12])).toEqual([-77.05, 38.81]);
+    expect(() => toLonLat([1])).toThrow(ImportError);
+    expect(() => toLonLat(['1', 2])).toThrow(ImportError);
+    expect(() => toLonLat([155000, 463000])).toThrow(/projected coordinates/);
   });
 });
