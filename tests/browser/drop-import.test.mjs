@@ -48,7 +48,7 @@ function geojson(dir, name, geometry) {
  * Drops files on an element the way a browser does: dragenter, dragover and
  * drop events carrying a DataTransfer that holds the files' bytes.
  */
-async function dropFiles(page, files, selector = '#map') {
+async function dropFiles(page, files, { selector = '#map', shot = null } = {}) {
   const payload = files.map((f) => ({ name: path.basename(f), b64: readFileSync(f).toString('base64') }));
   const transfer = await page.evaluateHandle((items) => {
     const dt = new DataTransfer();
@@ -58,6 +58,7 @@ async function dropFiles(page, files, selector = '#map') {
   await page.dispatchEvent(selector, 'dragenter', { dataTransfer: transfer });
   await page.dispatchEvent(selector, 'dragover', { dataTransfer: transfer });
   const highlighted = await page.isVisible('#drop-zone');
+  if (shot) await screenshot(page, shot);
   await page.dispatchEvent(selector, 'drop', { dataTransfer: transfer });
   return highlighted;
 }
@@ -100,7 +101,8 @@ test('GIS files dropped on the page become the survey area, no-fly zones and cor
   const { page, context, problems, outside } = await openPage(env.browser, env.server.url);
 
   // 1. The KML dropped on the map: the largest polygon the area, the other a no-fly zone, the line the corridor; the point skipped.
-  assert.equal(await dropFiles(page, [kml]), true, 'the drop zone shows while dragging');
+  assert.equal(await dropFiles(page, [kml], { shot: 'drop-import-dragging' }), true, 'the drop zone shows while dragging');
+  assert.match(await page.textContent('#drop-zone-text'), /^Drop to import into the survey/);
   await dialogRead(page);
   await screenshot(page, 'drop-import-dialog');
   assert.equal(await page.isVisible('#drop-zone'), false);

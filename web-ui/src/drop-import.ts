@@ -36,6 +36,11 @@ export interface DropImportTarget {
   apply(plan: ImportPlan): void;
 }
 
+function isShown(id: string): boolean {
+  const el = document.getElementById(id);
+  return el !== null && !el.hidden;
+}
+
 /** Rows listed one by one; past this many the group choices decide for the rest. */
 const MAX_ROWS = 300;
 
@@ -132,7 +137,9 @@ export class DropImport {
       ? 'Drop to import into the survey: areas, no-fly zones or a corridor line from a zipped Shapefile, KML, KMZ, GPX, GeoPackage or GeoJSON file.'
       : this.busy
         ? 'Still reading the files dropped before: drop these once that is done.'
-        : 'Close the dialog first, then drop the files.';
+        : isShown('signin')
+          ? 'Sign in first, then drop the files again.'
+          : 'Close the dialog first, then drop the files.';
   }
 
   // ---- reading ----
