@@ -38,7 +38,7 @@ pub fn filled<T: Copy + Send + Sync>(n: usize, value: T) -> Vec<T> {
 /// Asks for huge pages over the whole 2 MiB pages inside `len` bytes from
 /// `start` (advice only: refused or unsupported, nothing changes).
 #[cfg(target_os = "linux")]
-fn advise_huge_pages(start: *mut u8, len: usize) {
+pub(crate) fn advise_huge_pages(start: *mut u8, len: usize) {
     const HUGE: usize = 2 << 20;
     let first = (start as usize).next_multiple_of(HUGE);
     let end = (start as usize + len) / HUGE * HUGE;
@@ -52,7 +52,7 @@ fn advise_huge_pages(start: *mut u8, len: usize) {
 }
 
 #[cfg(not(target_os = "linux"))]
-fn advise_huge_pages(_start: *mut u8, _len: usize) {}
+pub(crate) fn advise_huge_pages(_start: *mut u8, _len: usize) {}
 
 /// For a short-lived process that builds one large grid product (the
 /// CLI): large blocks freed by one stage are kept by the allocator for the

@@ -95,6 +95,15 @@ impl BucketQueue {
         }
     }
 
+    /// An entry `k` + 1 pops away in the current bucket, if it has that
+    /// many left (entries pushed into it meanwhile may come first): a hint
+    /// for prefetching.
+    #[inline(always)]
+    pub(crate) fn ahead(&self, k: usize) -> Option<u128> {
+        let left = self.sorted.len();
+        (left > k).then(|| self.sorted[left - 1 - k])
+    }
+
     /// The entry `pop` would return, left in the queue.
     #[inline]
     pub(crate) fn peek(&mut self) -> Option<u128> {

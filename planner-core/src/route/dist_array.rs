@@ -1,9 +1,8 @@
 //! A dense array of path costs that starts out at +∞ for free.
 
 /// Bit pattern of +∞; stored values are XOR-ed with it so that the zeroed
-/// allocation (calloc: untouched pages are never even mapped) reads as ∞
-/// everywhere. A search that stays local then costs memory only where it
-/// went, and no 8-byte-per-cell fill is needed before it starts.
+/// allocation reads as ∞ everywhere: the kernel's fresh zeroed pages
+/// (`pages`) need no 8-byte-per-cell fill before a search starts.
 const INFINITY_BITS: u64 = 0x7ff0_0000_0000_0000;
 
 /// f64 per cell: g (and rhs-derived) values must match an independent
@@ -15,7 +14,9 @@ pub(crate) struct DistArray {
 
 impl DistArray {
     pub(crate) fn new(len: usize) -> DistArray {
-        DistArray { bits: vec![0; len] }
+        DistArray {
+            bits: super::pages::fresh_zeroed(len),
+        }
     }
 
     #[inline]

@@ -53,6 +53,7 @@ use super::bucket_queue::BucketQueue;
 use super::dist_array::DistArray;
 use super::landmark::{Landmark, StartHeuristic};
 use super::neighbourhood::{ByteMarks, Neighbourhood, flood_budget, opposite};
+use super::pages::fresh_zeroed;
 use super::{
     CANCEL_CHECK_INTERVAL, Cell, CostGrid, End, Route, RouteError, RouteOptions, finite_range,
 };
@@ -187,7 +188,7 @@ impl DStarLite {
             last_start: start,
             km: 0.0,
             g: DistArray::new(n),
-            state: vec![0; n],
+            state: fresh_zeroed(n),
             queue,
             restarts: 0,
             landmark_restarts: 0,
@@ -505,7 +506,7 @@ impl DStarLite {
     fn restart(&mut self) {
         let n = self.grid.cell_count();
         self.g = DistArray::new(n);
-        self.state = vec![0; n];
+        self.state = fresh_zeroed(n);
         self.queue = open_list(&self.hood, &self.model, 1.0);
         self.km = 0.0;
         self.last_start = self.start;

@@ -43,6 +43,7 @@ mod landmark;
 pub mod map_route;
 mod neighbourhood;
 pub mod on_map;
+mod pages;
 pub mod smooth;
 #[cfg(test)]
 mod testing;
@@ -287,12 +288,20 @@ impl CostGrid {
 }
 
 pub(crate) fn finite_range(costs: &[f32]) -> Option<(f32, f32)> {
-    let (lo, hi) = costs
-        .iter()
-        .filter(|c| c.is_finite())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &c| {
+    use rayon::prelude::*;
+    let fold = |(lo, hi): (f32, f32), &c: &f32| {
+        if c.is_finite() {
             (lo.min(c), hi.max(c))
-        });
+        } else {
+            (lo, hi)
+        }
+    };
+    let empty = (f32::INFINITY, f32::NEG_INFINITY);
+    // In parallel: a search on a large map starts with this pass.
+    let (lo, hi) = costs
+        .par_chunks(1 << 16)
+        .map(|chunk| chunk.iter().fold(empty, fold))
+        .reduce(|| empty, |a, b| (a.0.min(b.0), a.1.max(b.1)));
     (lo <= hi).then_some((lo, hi))
 }
 

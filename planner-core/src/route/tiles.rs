@@ -11,6 +11,8 @@
 //! Tiles past the grid's right and bottom edges are padded with blocked
 //! cells, so a grid whose sides are multiples of 16 needs no padding.
 
+use rayon::prelude::*;
+
 use super::CostGrid;
 use super::neighbourhood::DIRECTIONS;
 
@@ -48,6 +50,11 @@ impl TileLayout {
     }
 }
 
+/// Number of cells of `grid` padded to whole tiles.
+pub(crate) fn padded_cells(grid: &CostGrid) -> usize {
+    grid.width().div_ceil(TILE) * TILE * grid.height().div_ceil(TILE) * TILE
+}
+
 pub(crate) struct Tiles {
     tiles_per_row: usize,
     /// ⌊2⁶⁴ / tiles_per_row⌋ + 1: exact division of tile numbers (< 2³²)
@@ -71,19 +78,48 @@ impl Tiles {
             padded_cols: tiles_per_row * TILE,
             costs: Vec::new(),
         };
-        let mut costs = vec![f32::NAN; padded_rows * tiles.padded_cols];
-        for (r, row) in grid.costs().chunks_exact(width).enumerate() {
-            for (c, &cost) in row.iter().enumerate() {
-                costs[tiles.index(r, c)] = cost;
-            }
-        }
+        // Fresh pages (calloc), on huge pages where granted, written band
+        // by band in parallel: a band of tiles is 16 whole grid rows.
+        let mut costs = vec![0.0f32; padded_cells(grid)];
+        crate::buffer::advise_huge_pages(costs.as_mut_ptr().cast(), costs.len() * 4);
+        let src = grid.costs();
+        costs
+            .par_chunks_mut(TILE * tiles.padded_cols)
+            .enumerate()
+            .for_each(|(band_index, band)| {
+                for (tile_col, tile) in band.chunks_exact_mut(TILE * TILE).enumerate() {
+                    let c0 = tile_col * TILE;
+                    for (tile_row, out) in tile.chunks_exact_mut(TILE).enumerate() {
+                        let r = band_index * TILE + tile_row;
+                        if r < height && c0 + TILE <= width {
+                            out.copy_from_slice(&src[r * width + c0..][..TILE]);
+                        } else {
+                            // Padding past the grid's edges: blocked.
+                            for (c, x) in (c0..).zip(out.iter_mut()) {
+                                *x = if r < height && c < width {
+                                    src[r * width + c]
+                                } else {
+                                    f32::NAN
+                                };
+                            }
+                        }
+                    }
+                }
+            });
         tiles.costs = costs;
         tiles
     }
 
     /// Number of (padded) cells.
+    #[cfg(test)]
     pub(crate) fn len(&self) -> usize {
         self.costs.len()
+    }
+
+    /// Where cell `t`'s cost is stored (for prefetching).
+    #[inline(always)]
+    pub(crate) fn cost_ptr(&self, t: usize) -> *const f32 {
+        &raw const self.costs[t]
     }
 
     #[inline]
