@@ -63,6 +63,12 @@ pub struct ServeConfig {
     /// Costmaps built at once; further jobs wait, queued.
     #[arg(long, env = "TERRAPLAN_COSTMAP_JOBS", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
     pub costmap_jobs: u64,
+    /// How long a costmap job's claim lasts unless renewed, seconds
+    /// (fractions allowed, at least 1): replicas sharing a PostgreSQL
+    /// database take over the job of one that died this long after its last
+    /// renewal. Renewed five times per lease.
+    #[arg(long, env = "TERRAPLAN_JOB_LEASE_S", default_value_t = crate::jobs::DEFAULT_LEASE.as_secs_f64(), value_parser = parse_job_lease)]
+    pub job_lease_s: f64,
     /// Longest a route search may take, seconds (fractions allowed); a
     /// search still running then is stopped and answered with a 503.
     #[arg(long, env = "TERRAPLAN_ROUTE_TIMEOUT_S", default_value_t = 120.0, value_parser = parse_planning_timeout)]
@@ -185,6 +191,19 @@ fn parse_read_timeout(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--job-lease-s`: seconds in [1, 3600].
+fn parse_job_lease(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if (crate::jobs::MIN_LEASE.as_secs_f64()..=3600.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s} is outside [1, 3600] seconds"))
+    }
+}
+
 fn default_threads() -> usize {
     std::thread::available_parallelism().map_or(2, |n| n.get())
 }
@@ -205,6 +224,11 @@ impl ServeConfig {
             max_pixels: self.max_dem_pixels,
             ..DemLimits::default()
         }
+    }
+
+    /// `--job-lease-s`.
+    pub fn job_lease(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.job_lease_s)
     }
 
     /// `--route-cache-mb` in bytes.

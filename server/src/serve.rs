@@ -230,7 +230,7 @@ fn lock_sqlite(config: &ServeConfig) -> Result<Option<std::fs::File>, String> {
 /// Ctrl-C or SIGTERM: stop accepting, let in-flight requests finish.
 /// The handlers are installed when this is called, not when the future
 /// is first polled.
-fn shutdown_signal() -> impl std::future::Future<Output = ()> {
+pub(crate) fn shutdown_signal() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
     let (interrupt, terminate) = {
         use tokio::signal::unix::{SignalKind, signal};

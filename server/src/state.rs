@@ -69,7 +69,7 @@ impl AppState {
             limits: config.limits(),
             planner,
             dems,
-            costmaps: Arc::new(CostmapJobs::new(jobs, loader)),
+            costmaps: Arc::new(CostmapJobs::new(jobs, loader, config.job_lease())),
             routes: Arc::new(RouteStore::from_config(config)),
             web: Arc::new(WebUi::new(&config.web_dir)),
             memory,

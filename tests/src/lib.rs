@@ -1,6 +1,8 @@
 //! Helpers for the end-to-end tests in `tests/`: locate the real
 //! `terraplan` binary, the shared test data and the validators' venv.
 
+pub mod replicas;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

@@ -21,6 +21,7 @@ mod route;
 mod serve;
 mod survey;
 mod user;
+mod worker;
 
 #[derive(Parser)]
 #[command(
@@ -37,6 +38,11 @@ struct Cli {
 enum Command {
     /// Run the HTTP service (REST API, OpenAPI document, API docs page).
     Serve(ServeConfig),
+    /// Run costmap jobs of a PostgreSQL database shared with `serve`
+    /// replicas, serving no HTTP (takes `serve`'s options; those of HTTP
+    /// are not used). SIGTERM: stop taking jobs, give back the running
+    /// ones, exit 0.
+    Worker(ServeConfig),
     /// Plan a photo survey of an area and write the mission files.
     Survey(survey::SurveyArgs),
     /// Read a DEM (GeoTIFF, ESRI ASCII grid, SRTM .hgt) and print its
@@ -74,6 +80,7 @@ pub fn run() -> ExitCode {
     };
     let result = match cli.command {
         Command::Serve(config) => serve::serve(config),
+        Command::Worker(config) => worker::worker(config),
         Command::Survey(args) => survey::survey(&args),
         Command::DemInfo(args) => dem_info::dem_info(&args),
         Command::Import(args) => import::import(&args),

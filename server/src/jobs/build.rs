@@ -9,16 +9,25 @@ use planner_core::costmap::{
 };
 use planner_core::terrain::Dem;
 
+use super::feed::{Feed, JobNote};
 use super::live::{JobHandle, Live};
 use super::record::{
-    COSTMAP_TIF, CostmapResult, LEGEND_SVG, PREVIEW_MAX_SIDE, PREVIEW_PNG, StoredRequest,
-    layer_file, stage_name,
+    COSTMAP_TIF, CostmapResult, JobStatus, LEGEND_SVG, PREVIEW_MAX_SIDE, PREVIEW_PNG,
+    StoredRequest, layer_file, stage_name,
 };
 use crate::clock::now_millis;
 use crate::db::{CostmapFileRow, CostmapRow, Db};
 use crate::error::ApiError;
 use crate::memory::{Reservation, costmap_build_bytes};
 use crate::state::dem_store::DemLoader;
+
+/// Longest time between two writes of a running job's progress to its
+/// row (a new stage is written at once): what `GET` on another server
+/// and an event stream without notes show.
+const PROGRESS_WRITE_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
+/// Longest time between two progress notes to the other processes (a
+/// new stage is noted at once).
+const PROGRESS_NOTE_EVERY: std::time::Duration = std::time::Duration::from_millis(200);
 
 /// How a run ended.
 pub(super) enum Outcome {
@@ -40,6 +49,8 @@ pub(super) struct Built {
 /// What a run needs of its runner.
 pub(super) struct Run<'a, S> {
     pub(super) dems: &'a DemLoader,
+    /// Where its progress is noted for the other processes.
+    pub(super) feed: &'a Arc<Feed>,
     /// This process' name as a job holder.
     pub(super) owner: &'a str,
     /// Resolves when the server begins to shut down.
@@ -118,7 +129,13 @@ pub(super) async fn build<S: Future<Output = ()>>(
     if handle.is_cancelled() {
         return Outcome::Cancelled;
     }
-    let monitor = record_stages(run.dems.db.clone(), &row.id, run.owner, handle);
+    let monitor = record_progress(
+        run.dems.db.clone(),
+        run.feed.clone(),
+        &row.id,
+        run.owner,
+        handle,
+    );
     let job = Job {
         dem,
         vehicle,
@@ -136,26 +153,54 @@ pub(super) async fn build<S: Future<Output = ()>>(
     outcome
 }
 
-/// Persist stage changes (not every report) while the build runs; a job
-/// deleted or taken over meanwhile is cancelled.
-fn record_stages(
+/// While the build runs: write its progress to the job's row (each new
+/// stage, and the progress at most every [`PROGRESS_WRITE_EVERY`]) and
+/// note it to the other processes (at most every
+/// [`PROGRESS_NOTE_EVERY`]); a job deleted or taken over meanwhile is
+/// cancelled.
+fn record_progress(
     db: Db,
+    feed: Arc<Feed>,
     id: &str,
     owner: &str,
     handle: &Arc<JobHandle>,
 ) -> tokio::task::JoinHandle<()> {
+    use tokio::time::Instant;
     let id = id.to_string();
     let owner = owner.to_string();
     let mut rx = handle.live.subscribe();
     let handle = handle.clone();
     tokio::spawn(async move {
-        let mut stored: Option<Stage> = None;
+        let mut stored: Option<(Option<Stage>, f64)> = None;
+        let mut written_at = Instant::now();
+        let mut noted: Option<(Option<Stage>, f64)> = None;
+        let mut noted_at = Instant::now();
         while rx.changed().await.is_ok() {
             let live = *rx.borrow_and_update();
-            if live.stage.is_none() || live.stage == stored {
+            if live.stage.is_none() {
                 continue;
             }
-            stored = live.stage;
+            let now = (live.stage, live.progress);
+            let new_stage = |last: Option<(Option<Stage>, f64)>| last.is_none_or(|l| l.0 != now.0);
+            if new_stage(noted) || (noted != Some(now) && noted_at.elapsed() >= PROGRESS_NOTE_EVERY)
+            {
+                noted = Some(now);
+                noted_at = Instant::now();
+                feed.publish(JobNote {
+                    id: id.clone(),
+                    status: JobStatus::Running,
+                    progress: live.progress,
+                    stage: live.stage,
+                })
+                .await;
+            }
+            if !new_stage(stored)
+                && (stored == Some(now) || written_at.elapsed() < PROGRESS_WRITE_EVERY)
+            {
+                continue;
+            }
+            stored = Some(now);
+            written_at = Instant::now();
             let stage = live.stage.map(stage_name);
             match db
                 .set_costmap_progress(&id, &owner, live.progress, stage.as_deref(), now_millis())
@@ -165,7 +210,7 @@ fn record_stages(
                 // Deleted, or taken over by another server: stop.
                 Ok(false) => handle.cancel(),
                 Err(e) => {
-                    tracing::warn!(costmap = %id, error = %e, "cannot record a costmap job's stage")
+                    tracing::warn!(costmap = %id, error = %e, "cannot record a costmap job's progress")
                 }
             }
         }

@@ -1,14 +1,18 @@
 //! Background jobs: the costmap job runner ([`runner`]), one run of a job
-//! ([`build`]), its live state ([`live`]) and what it stores ([`record`]).
+//! ([`build`]), its live state ([`live`]), what it stores ([`record`])
+//! and the notes about jobs between the processes on one database
+//! ([`feed`]).
 
 mod build;
+mod feed;
 mod live;
 pub mod record;
 mod runner;
 
+pub use feed::JobNote;
 pub use live::Live;
 pub use record::{
-    COSTMAP_TIF, CostmapResult, JobStatus, LEASE_MS, LEGEND_SVG, PREVIEW_MAX_SIDE, PREVIEW_PNG,
-    StoredRequest, layer_file, parse_stage, stage_name,
+    COSTMAP_TIF, CostmapResult, DEFAULT_LEASE, JobStatus, LEGEND_SVG, PREVIEW_MAX_SIDE,
+    PREVIEW_PNG, StoredRequest, layer_file, parse_stage, stage_name,
 };
-pub use runner::CostmapJobs;
+pub use runner::{CostmapJobs, MIN_LEASE};

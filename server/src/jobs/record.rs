@@ -7,8 +7,9 @@ use planner_core::terrain::Crs;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-/// How long a claim on a job lasts unless renewed, ms.
-pub const LEASE_MS: i64 = 15_000;
+/// How long a claim on a job lasts unless renewed, by default
+/// (`--job-lease-s`).
+pub const DEFAULT_LEASE: std::time::Duration = std::time::Duration::from_secs(15);
 /// Runs a job may start; one interrupted more often (its server killed
 /// each time) is failed rather than run again.
 pub const MAX_ATTEMPTS: i64 = 3;

@@ -8,31 +8,40 @@
 //! SQLite (one server per database) every unfinished job is taken over at
 //! once. A run writes its stage to the database when it changes; live
 //! progress lives in memory, one [`watch`] channel per job, for `GET` and
-//! the event stream. A result is stored with its files in one transaction
+//! the event stream; its holder also notes the progress to every process
+//! sharing the database ([`super::feed`]), and writes it to the job's row
+//! at least every second. A result is stored with its files in one transaction
 //! (never half-written); a failure stores its reason. A run left without
 //! an outcome by a storage error (the job could not be started, or its
 //! result or failure could not be recorded) lets the job go, queued with
 //! no owner, to be taken over and run again; only the jobs a process
 //! actually has in hand have their leases renewed, so a job it let go of
-//! any other way is taken over once its lease runs out. On shutdown the
-//! runs are cancelled and their jobs given back, queued, for the next
-//! server.
+//! any other way is taken over once its lease runs out. On PostgreSQL a
+//! process takes over orphaned jobs only while it has a free slot, so
+//! that idle replicas get them first. On shutdown the process stops
+//! taking jobs, the runs are cancelled and their jobs given back, queued
+//! with no holder, and the other processes are told, so that one of them
+//! takes each over at once.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use tokio::sync::{Semaphore, watch};
+use tokio::sync::{Semaphore, broadcast, watch};
 
 use super::build::{Outcome, Run, build};
+use super::feed::{Feed, JobNote};
 use super::live::{JobHandle, Live};
-use super::record::{JobStatus, LEASE_MS, MAX_ATTEMPTS};
+use super::record::{JobStatus, MAX_ATTEMPTS};
 use crate::clock::now_millis;
 use crate::db::Db;
 use crate::state::dem_store::DemLoader;
 
-/// How often leases are renewed and orphaned jobs looked for.
-const MAINTENANCE_EVERY: Duration = Duration::from_secs(3);
+/// Leases are renewed (and orphaned jobs looked for) this many times
+/// per lease, so a late round or two does not lose a job still running.
+const RENEWALS_PER_LEASE: u32 = 5;
+/// The shortest lease; see `--job-lease-s`.
+pub const MIN_LEASE: Duration = Duration::from_secs(1);
 /// How long shutdown waits for the runs to stop.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
 
@@ -40,6 +49,10 @@ const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
 pub struct CostmapJobs {
     /// This process' name as a job holder.
     instance: String,
+    /// How long a claim lasts unless renewed, ms.
+    lease_ms: i64,
+    /// Builds at once.
+    max_jobs: usize,
     slots: Arc<Semaphore>,
     jobs: Mutex<HashMap<String, Arc<JobHandle>>>,
     shutdown: watch::Sender<bool>,
@@ -47,6 +60,8 @@ pub struct CostmapJobs {
     active: watch::Sender<usize>,
     /// The database of the jobs and the DEMs they are built from.
     dems: DemLoader,
+    /// Notes to and from the other processes on the database.
+    feed: Arc<Feed>,
 }
 
 /// Counts a job task as alive while it exists.
@@ -60,16 +75,38 @@ impl Drop for ActiveGuard<'_> {
 
 impl CostmapJobs {
     /// A runner of at most `max_jobs` (≥ 1) builds at once, of the jobs
-    /// stored in `dems.db`.
-    pub fn new(max_jobs: usize, dems: DemLoader) -> CostmapJobs {
+    /// stored in `dems.db`, holding each under a lease of `lease` (at
+    /// least [`MIN_LEASE`]).
+    pub fn new(max_jobs: usize, dems: DemLoader, lease: Duration) -> CostmapJobs {
+        let max_jobs = max_jobs.max(1);
+        let lease = lease.max(MIN_LEASE);
         CostmapJobs {
             instance: uuid::Uuid::new_v4().to_string(),
-            slots: Arc::new(Semaphore::new(max_jobs.max(1))),
+            lease_ms: i64::try_from(lease.as_millis()).unwrap_or(i64::MAX / 2),
+            max_jobs,
+            slots: Arc::new(Semaphore::new(max_jobs)),
             jobs: Mutex::new(HashMap::new()),
             shutdown: watch::Sender::new(false),
             active: watch::Sender::new(0),
+            feed: Arc::new(Feed::new(dems.db.clone())),
             dems,
         }
+    }
+
+    /// How long a claim on a job lasts unless renewed, ms.
+    pub fn lease_ms(&self) -> i64 {
+        self.lease_ms
+    }
+
+    /// How often leases are renewed and orphaned jobs looked for.
+    fn maintenance_every(&self) -> Duration {
+        Duration::from_millis(self.lease_ms.unsigned_abs()) / RENEWALS_PER_LEASE
+    }
+
+    /// The notes of every job from now on, from every process on the
+    /// database (see [`super::feed`]).
+    pub fn notes(&self) -> broadcast::Receiver<JobNote> {
+        self.feed.subscribe()
     }
 
     fn db(&self) -> &Db {
@@ -136,14 +173,43 @@ impl CostmapJobs {
         {
             tracing::warn!("costmap runs still busy at shutdown: their jobs are given back");
         }
+        let held = self.held();
         match self
             .db()
             .release_costmaps(&self.instance, None, now_millis())
             .await
         {
             Ok(0) => {}
-            Ok(n) => tracing::info!(jobs = n, "costmap jobs given back for the next start"),
+            Ok(n) => {
+                tracing::info!(jobs = n, "costmap jobs given back for another server");
+                for id in held {
+                    self.note_queued(&id).await;
+                }
+            }
             Err(e) => tracing::warn!(error = %e, "cannot give back the costmap jobs"),
+        }
+    }
+
+    /// Tell every process that job `id` is queued with no holder, for one
+    /// with a free slot to take over now.
+    async fn note_queued(&self, id: &str) {
+        self.feed
+            .publish(JobNote {
+                id: id.to_string(),
+                status: JobStatus::Queued,
+                progress: 0.0,
+                stage: None,
+            })
+            .await;
+    }
+
+    /// True while this process may take over another job: on SQLite
+    /// always (the jobs are all its own); on PostgreSQL while it holds
+    /// fewer than it can build at once, leaving the rest to idle replicas.
+    fn has_room(&self) -> bool {
+        match self.db() {
+            Db::Sqlite(_) => true,
+            Db::Postgres(_) => self.lock().len() < self.max_jobs,
         }
     }
 
@@ -191,7 +257,7 @@ impl CostmapJobs {
         };
         let mut adopted = 0;
         for id in ids {
-            if self.is_shutting_down() {
+            if self.is_shutting_down() || !self.has_room() {
                 break;
             }
             // Still in hand here (its lease lapsed while the database was
@@ -202,7 +268,13 @@ impl CostmapJobs {
             let now = now_millis();
             match self
                 .db()
-                .adopt_costmap(&id, &self.instance, expired_before, now, now + LEASE_MS)
+                .adopt_costmap(
+                    &id,
+                    &self.instance,
+                    expired_before,
+                    now,
+                    now + self.lease_ms,
+                )
                 .await
             {
                 Ok(true) => {
@@ -248,26 +320,43 @@ impl CostmapJobs {
         }
         if let Err(e) = self
             .db()
-            .renew_costmap_leases(&self.instance, &held, now_millis() + LEASE_MS)
+            .renew_costmap_leases(&self.instance, &held, now_millis() + self.lease_ms)
             .await
         {
             tracing::warn!(error = %e, "cannot renew the costmap job leases");
         }
     }
 
-    /// Renew this process' leases and take over orphaned jobs, every few
-    /// seconds until shutdown.
+    /// Until shutdown: listen for the other processes' notes, renew this
+    /// process' leases and take over orphaned jobs, a few times per lease
+    /// and whenever a job is given back.
     pub fn start_maintenance(self: &Arc<Self>) {
+        self.feed.start_listening(self.shutdown_signal());
         let jobs = self.clone();
         let stop = self.shutdown_signal();
+        let mut notes = self.notes();
         tokio::spawn(async move {
             let work = async {
-                let mut tick = tokio::time::interval(MAINTENANCE_EVERY);
+                let mut tick = tokio::time::interval(jobs.maintenance_every());
                 tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
                 loop {
-                    tick.tick().await;
-                    jobs.renew_leases().await;
-                    jobs.adopt_orphans(now_millis()).await;
+                    tokio::select! {
+                        _ = tick.tick() => {
+                            jobs.renew_leases().await;
+                            jobs.adopt_orphans(now_millis()).await;
+                        }
+                        note = notes.recv() => match note {
+                            // Given back by its holder (or missed notes,
+                            // one of which may have been): take it now.
+                            Ok(JobNote { status: JobStatus::Queued, .. })
+                            | Err(broadcast::error::RecvError::Lagged(_)) => {
+                                jobs.adopt_orphans(now_millis()).await;
+                            }
+                            Ok(_) => {}
+                            // The feed lives as long as `jobs`.
+                            Err(broadcast::error::RecvError::Closed) => break,
+                        },
+                    }
                 }
             };
             tokio::select! {
@@ -316,7 +405,7 @@ impl CostmapJobs {
         let now = now_millis();
         let row = match self
             .db()
-            .claim_costmap(id, &owner, now, now + LEASE_MS)
+            .claim_costmap(id, &owner, now, now + self.lease_ms)
             .await
         {
             Ok(Some(row)) => row,
@@ -334,6 +423,14 @@ impl CostmapJobs {
             progress: 0.0,
             stage: None,
         });
+        self.feed
+            .publish(JobNote {
+                id: id.to_string(),
+                status: JobStatus::Running,
+                progress: 0.0,
+                stage: None,
+            })
+            .await;
         tracing::info!(costmap = %id, dem = %row.dem_id, attempt = row.attempts, "costmap job started");
         let started = std::time::Instant::now();
         let outcome = if row.attempts > MAX_ATTEMPTS {
@@ -345,6 +442,7 @@ impl CostmapJobs {
         } else {
             let run = Run {
                 dems: &self.dems,
+                feed: &self.feed,
                 owner: &owner,
                 shutdown: self.shutdown_signal(),
             };
@@ -358,11 +456,22 @@ impl CostmapJobs {
                     .finish_costmap(id, &owner, &built.result, &built.files, now)
                     .await
                 {
-                    Ok(true) => tracing::info!(
-                        costmap = %id,
-                        seconds = started.elapsed().as_secs_f64(),
-                        "costmap job done"
-                    ),
+                    Ok(true) => {
+                        tracing::info!(
+                            costmap = %id,
+                            attempt = row.attempts,
+                            seconds = started.elapsed().as_secs_f64(),
+                            "costmap job done"
+                        );
+                        self.feed
+                            .publish(JobNote {
+                                id: id.to_string(),
+                                status: JobStatus::Done,
+                                progress: 1.0,
+                                stage: None,
+                            })
+                            .await;
+                    }
                     Ok(false) => {
                         tracing::info!(costmap = %id, "costmap finished after it was deleted or taken over: discarded")
                     }
@@ -388,18 +497,33 @@ impl CostmapJobs {
     }
 
     async fn fail(&self, id: &str, message: &str) {
-        if let Err(e) = self
+        match self
             .db()
             .fail_costmap(id, &self.instance, message, now_millis())
             .await
         {
-            tracing::error!(costmap = %id, error = %e, "cannot record a costmap job's failure");
-            self.release_after_error(
-                id,
-                &format!("{message} (and the failure could not be recorded: {e})"),
-            )
-            .await;
+            Ok(true) => self.note_failed(id).await,
+            Ok(false) => {}
+            Err(e) => {
+                tracing::error!(costmap = %id, error = %e, "cannot record a costmap job's failure");
+                self.release_after_error(
+                    id,
+                    &format!("{message} (and the failure could not be recorded: {e})"),
+                )
+                .await;
+            }
         }
+    }
+
+    async fn note_failed(&self, id: &str) {
+        self.feed
+            .publish(JobNote {
+                id: id.to_string(),
+                status: JobStatus::Failed,
+                progress: 0.0,
+                stage: None,
+            })
+            .await;
     }
 
     /// After a storage error left a run without a recorded outcome: let the
@@ -417,10 +541,12 @@ impl CostmapJobs {
             .await
         {
             Ok(Some(status)) if status == JobStatus::Failed.as_str() => {
-                tracing::warn!(costmap = %id, "costmap job failed: {give_up}")
+                tracing::warn!(costmap = %id, "costmap job failed: {give_up}");
+                self.note_failed(id).await;
             }
             Ok(Some(_)) => {
-                tracing::info!(costmap = %id, "costmap job let go after a storage error: it is run again")
+                tracing::info!(costmap = %id, "costmap job let go after a storage error: it is run again");
+                self.note_queued(id).await;
             }
             Ok(None) => {}
             Err(e) => tracing::warn!(
@@ -431,14 +557,22 @@ impl CostmapJobs {
         }
     }
 
-    /// Give a job back, queued, for whichever server runs next (at shutdown).
+    /// Give a job back, queued with no holder, for another server to take
+    /// over at once (at shutdown).
     async fn give_back(&self, id: &str) {
-        if let Err(e) = self
+        match self
             .db()
             .release_costmaps(&self.instance, Some(id), now_millis())
             .await
         {
-            tracing::warn!(costmap = %id, error = %e, "cannot give back a costmap job");
+            Ok(0) => {}
+            Ok(_) => {
+                tracing::info!(costmap = %id, "costmap job given back for another server");
+                self.note_queued(id).await;
+            }
+            Err(e) => {
+                tracing::warn!(costmap = %id, error = %e, "cannot give back a costmap job")
+            }
         }
     }
 }
@@ -458,7 +592,7 @@ mod tests {
     use planner_core::terrain::DemLimits;
 
     use crate::db::{CostmapRow, DemMetaRow};
-    use crate::jobs::record::{COSTMAP_TIF, StoredRequest};
+    use crate::jobs::record::{COSTMAP_TIF, DEFAULT_LEASE, StoredRequest};
     use crate::memory::MemoryBudget;
     use crate::state::{DemStore, Planners};
 
@@ -492,7 +626,7 @@ mod tests {
                 memory: Arc::new(MemoryBudget::new(1024)),
                 planner: Arc::new(Planners::default()),
             };
-            let jobs = Arc::new(CostmapJobs::new(1, dems));
+            let jobs = Arc::new(CostmapJobs::new(1, dems, DEFAULT_LEASE));
             TestServer { db, jobs, dir }
         }
 
@@ -567,7 +701,7 @@ mod tests {
                 project_id: None,
             };
             self.db
-                .insert_costmap(&row, self.jobs().instance(), now + LEASE_MS)
+                .insert_costmap(&row, self.jobs().instance(), now + self.jobs().lease_ms())
                 .await
                 .unwrap();
             row.id
@@ -713,7 +847,10 @@ mod tests {
         assert_eq!(owner.as_deref(), Some(t.jobs().instance()));
         assert_eq!(stray_lease, lease, "a job not in hand is not renewed");
         let (_, queued_lease) = t.holder(&queued).await;
-        assert!(queued_lease > lease + LEASE_MS / 2, "{queued_lease}");
+        assert!(
+            queued_lease > lease + t.jobs().lease_ms() / 2,
+            "{queued_lease}"
+        );
 
         // Once its lease has run out the stray job is taken over and run;
         // the queued one is still in hand, so it is not taken over twice.

@@ -1,5 +1,10 @@
 //! `GET /api/v1/costmaps/{id}/events`: a job's progress as Server-Sent
-//! Events.
+//! Events, on whichever server runs it: a job this process runs is
+//! followed live in memory; one another process runs (a replica on the
+//! same PostgreSQL database) through the notes its holder sends
+//! ([`crate::jobs::JobNote`]), with a look at the job table every second
+//! for what notes cannot tell (the error of a failure, a holder that
+//! died, a note lost while reconnecting).
 
 use std::convert::Infallible;
 use std::time::Duration;
@@ -7,16 +12,16 @@ use std::time::Duration;
 use axum::extract::{Path, State};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
-use tokio::sync::mpsc;
+use tokio::sync::{broadcast, mpsc};
 
 use super::handlers::visible_costmap;
 use super::model::{JobEvent, JobState, job_state};
 use crate::auth::{Caller, Role};
 use crate::error::{ApiError, Problem};
-use crate::jobs::JobStatus;
+use crate::jobs::{JobNote, JobStatus};
 use crate::state::AppState;
 
-/// How often an event stream looks at a job another server runs.
+/// How often an event stream reads the row of a job another server runs.
 const EVENTS_POLL: Duration = Duration::from_secs(1);
 /// Least time between two progress events.
 const EVENTS_MIN_GAP: Duration = Duration::from_millis(100);
@@ -28,6 +33,26 @@ fn event_of(state: &JobState, error: Option<String>) -> JobEvent {
         stage: state.stage,
         error,
     }
+}
+
+fn event_of_note(note: &JobNote) -> JobEvent {
+    JobEvent {
+        status: note.status,
+        progress: note.progress,
+        stage: note.stage,
+        error: None,
+    }
+}
+
+/// True when `read` (from the table) is older news than `last` (sent from
+/// a note): the same run's progress, behind. The row is written less often
+/// than notes are sent.
+fn is_behind(read: &JobEvent, last: Option<&JobEvent>) -> bool {
+    last.is_some_and(|l| {
+        read.status == JobStatus::Running
+            && l.status == JobStatus::Running
+            && read.progress < l.progress
+    })
 }
 
 fn sse_event(data: &JobEvent) -> Event {
@@ -46,6 +71,8 @@ fn sse_event(data: &JobEvent) -> Event {
 /// goes, or the server shuts down.
 async fn follow(state: AppState, id: String, tx: mpsc::Sender<Event>) {
     let jobs = state.costmaps.clone();
+    // Subscribed before the first read, so no note after it is missed.
+    let mut notes = jobs.notes();
     let mut last: Option<JobEvent> = None;
     // Send `ev` unless it repeats the last one; false once the client is gone.
     let send = |ev: JobEvent, last: &mut Option<JobEvent>| {
@@ -98,15 +125,41 @@ async fn follow(state: AppState, id: String, tx: mpsc::Sender<Event>) {
             return;
         };
         let finished = state_now.status.is_finished();
-        if !send(event_of(&state_now, row.error.clone()), &mut last).await || finished {
+        let read = event_of(&state_now, row.error.clone());
+        if !finished && is_behind(&read, last.as_ref()) {
+            // Keep the newer progress the notes told.
+        } else if !send(read, &mut last).await || finished {
             return;
         }
         // Queued or running on another server, or between two states
-        // here: look again shortly.
-        tokio::select! {
-            () = tokio::time::sleep(EVENTS_POLL) => {},
-            () = jobs.shutdown_signal() => return,
-            () = tx.closed() => return,
+        // here: follow its notes until the next read of the row.
+        let poll = tokio::time::sleep(EVENTS_POLL);
+        tokio::pin!(poll);
+        loop {
+            tokio::select! {
+                () = &mut poll => break,
+                note = notes.recv() => match note {
+                    Ok(note) if note.id == id => {
+                        // An outcome is read from the row (a failure's
+                        // error is there); so is a job now run here.
+                        if note.status.is_finished() || jobs.live(&id).is_some() {
+                            break;
+                        }
+                        if !send(event_of_note(&note), &mut last).await {
+                            return;
+                        }
+                    }
+                    Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => {}
+                    // The notes outlive the server's jobs; should they end,
+                    // the row alone is followed.
+                    Err(broadcast::error::RecvError::Closed) => {
+                        (&mut poll).await;
+                        break;
+                    }
+                },
+                () = jobs.shutdown_signal() => return,
+                () = tx.closed() => return,
+            }
         }
     }
 }

@@ -19,7 +19,7 @@ use crate::auth::{Caller, Role, new_resource_project};
 use crate::clock::now_millis;
 use crate::db::CostmapRow;
 use crate::error::{ApiError, Problem, deleted};
-use crate::jobs::{JobStatus, LEASE_MS, StoredRequest};
+use crate::jobs::{JobStatus, StoredRequest};
 use crate::memory::costmap_build_bytes;
 use crate::quota::costmap_file_bytes;
 use crate::state::AppState;
@@ -148,7 +148,7 @@ pub async fn create_costmap(
     let jobs = &state.costmaps;
     state
         .db
-        .insert_costmap(&row, jobs.instance(), now + LEASE_MS)
+        .insert_costmap(&row, jobs.instance(), now + jobs.lease_ms())
         .await?;
     jobs.enqueue(&row.id);
     let body = response(&row, None)?;
