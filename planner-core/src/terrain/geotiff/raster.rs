@@ -66,6 +66,25 @@ impl BandData<'_> {
         }
     }
 
+    /// The whole band as the file's little-endian samples, without a copy:
+    /// on a little-endian machine a band's memory is those bytes already.
+    /// `None` elsewhere (then [`BandData::encode`] converts strip by strip).
+    pub(super) fn le_bytes(&self) -> Option<&[u8]> {
+        if cfg!(target_endian = "big") {
+            return None;
+        }
+        Some(match self {
+            // SAFETY: an f32 is 4 initialised bytes without padding, any
+            // byte is a valid u8, and u8's alignment (1) divides f32's; the
+            // slice covers exactly the band's memory, borrowed as long as
+            // the band.
+            BandData::F32(v) => unsafe {
+                std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(*v))
+            },
+            BandData::U8(v) => v,
+        })
+    }
+
     /// Cells `range` as little-endian samples in `buf` (replacing its
     /// contents).
     pub(super) fn encode(&self, range: Range<usize>, buf: &mut Vec<u8>) -> io::Result<()> {

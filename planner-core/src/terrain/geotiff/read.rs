@@ -5,6 +5,7 @@
 use std::io::Cursor;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
+use rayon::prelude::*;
 use tiff::TiffError;
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 
@@ -62,7 +63,32 @@ fn read_raster(
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
     let h = parse_header(bytes, limits, page, band)?;
-    let crs = resolve_crs(h.crs_code.clone(), crs)?;
+    // PROJ's answer about the CRS takes milliseconds of one thread: asked
+    // while the pixels are decoded; its error still comes first.
+    let (crs, pixels) = rayon::join(
+        || resolve_crs(h.crs_code.clone(), crs),
+        || read_pixels(bytes, &h, page),
+    );
+    let crs = crs?;
+    let (width, height, values) = pixels?;
+    Ok(Dem {
+        width,
+        height,
+        values,
+        nodata: h.nodata,
+        transform: h.transform,
+        crs,
+        format: DemFormat::GeoTiff,
+    })
+}
+
+/// The page's cells (width, height, row-major values), nodata `NaN`,
+/// scaled to metres.
+fn read_pixels(
+    bytes: &[u8],
+    h: &Header,
+    page: usize,
+) -> Result<(usize, usize, Vec<f64>), TerrainError> {
     let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
     let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
     let n = width
@@ -72,7 +98,7 @@ fn read_raster(
     let mut values = crate::buffer::filled(n, 0.0f64);
 
     let decoded = catch_unwind(AssertUnwindSafe(|| {
-        decode(bytes, &h, page, matcher, width, &mut values)
+        decode(bytes, h, page, matcher, width, &mut values)
     }));
     match decoded {
         Ok(r) => r?,
@@ -87,15 +113,7 @@ fn read_raster(
             *v *= h.vertical_scale;
         }
     }
-    Ok(Dem {
-        width,
-        height,
-        values,
-        nodata: h.nodata,
-        transform: h.transform,
-        crs,
-        format: DemFormat::GeoTiff,
-    })
+    Ok((width, height, values))
 }
 
 /// Decode every chunk into `out` (row-major, `width` wide).
@@ -126,24 +144,7 @@ fn decode(
         }
         _ => bytes,
     };
-    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_error)?;
-    // Before the limits below, which are sized for the image data: the
-    // decoder reads the page's tags (GDAL_METADATA, ...) when it seeks, as
-    // it read the first page's in `new`.
-    if page > 0 {
-        dec.seek_to_image(page).map_err(tiff_error)?;
-    }
-    let mut limits = Limits::default();
-    // The largest decoded chunk: a whole strip or tile (cut at the bottom).
-    let chunk_bytes = h
-        .grid
-        .cw
-        .saturating_mul(h.decoded_rows)
-        .saturating_mul(h.chunk_samples as u64)
-        .saturating_mul(h.sample.bytes());
-    limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
-    limits.intermediate_buffer_size = bytes.len().max(1);
-    dec = dec.with_limits(limits);
+    let mut dec = open_decoder(bytes, h, page)?;
     let inconsistent = || {
         invalid(format!(
             "the TIFF's image directory {} is inconsistent",
@@ -165,21 +166,87 @@ fn decode(
         }
     }
 
+    // Each row of chunks (a strip, or a row of tiles) fills its own rows
+    // of the output, so the rows of chunks are decoded in parallel, each
+    // thread with a decoder of its own; the first fault in file order is
+    // reported, whatever order they were met in.
+    let rows_per_chunk = usize::try_from(h.grid.ch).map_err(|_| invalid("the TIFF is too high"))?;
+    let band_rows = rows_per_chunk
+        .checked_mul(width)
+        .ok_or_else(|| invalid("the TIFF's chunks are too large"))?;
+    let first_decoder = std::sync::Mutex::new(Some(dec));
+    let faults: Vec<Result<(), TerrainError>> = out
+        .par_chunks_mut(band_rows.max(1))
+        .enumerate()
+        .with_min_len(CHUNK_ROWS_PER_TASK)
+        .map_init(
+            || {
+                let reused = first_decoder.lock().ok().and_then(|mut d| d.take());
+                reused.or_else(|| open_decoder(bytes, h, page).ok())
+            },
+            |dec, (cy, rows)| match dec {
+                Some(dec) => decode_chunk_row(dec, h, nd, width, cy as u64, rows),
+                None => Err(inconsistent()),
+            },
+        )
+        .collect();
+    faults.into_iter().collect()
+}
+
+/// Chunk rows a parallel task decodes at least (a strip of one row is
+/// only a few kilobytes).
+const CHUNK_ROWS_PER_TASK: usize = 16;
+
+/// A decoder of `bytes` at page `page`, limited to the sizes `h` declares.
+fn open_decoder<'a>(
+    bytes: &'a [u8],
+    h: &Header,
+    page: usize,
+) -> Result<Decoder<Cursor<&'a [u8]>>, TerrainError> {
+    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(tiff_error)?;
+    // Before the limits below, which are sized for the image data: the
+    // decoder reads the page's tags (GDAL_METADATA, ...) when it seeks, as
+    // it read the first page's in `new`.
+    if page > 0 {
+        dec.seek_to_image(page).map_err(tiff_error)?;
+    }
+    let mut limits = Limits::default();
+    // The largest decoded chunk: a whole strip or tile (cut at the bottom).
+    let chunk_bytes = h
+        .grid
+        .cw
+        .saturating_mul(h.decoded_rows)
+        .saturating_mul(h.chunk_samples as u64)
+        .saturating_mul(h.sample.bytes());
+    limits.decoding_buffer_size = usize::try_from(chunk_bytes).unwrap_or(usize::MAX).max(1);
+    limits.intermediate_buffer_size = bytes.len().max(1);
+    Ok(dec.with_limits(limits))
+}
+
+/// Decode the chunks of chunk row `cy` (one strip, or a row of tiles) into
+/// `rows`, the output rows they cover (`width` wide).
+fn decode_chunk_row(
+    dec: &mut Decoder<Cursor<&[u8]>>,
+    h: &Header,
+    nd: NoDataMatch,
+    width: usize,
+    cy: u64,
+    rows: &mut [f64],
+) -> Result<(), TerrainError> {
     let n = h.grid.count();
-    for i in 0..n {
-        let (cx, cy) = (i % h.grid.across, i / h.grid.across);
+    let ch = rows.len() / width.max(1);
+    for cx in 0..h.grid.across {
+        let i = cy * h.grid.across + cx;
         let x0 = cx * h.grid.cw;
-        let y0 = cy * h.grid.ch;
         let cw = h.grid.cw.min(h.width - x0);
-        let ch = h.grid.ch.min(h.height - y0);
-        let (x0, y0, cw, ch) = (x0 as usize, y0 as usize, cw as usize, ch as usize);
+        let (x0, cw) = (x0 as usize, cw as usize);
         let chunk = h.first_chunk + i;
         let idx = usize::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
         if h.byte_counts.get(idx) == Some(&0) && h.offsets.get(idx) == Some(&0) {
             // Sparse chunk: GDAL reads nodata (or 0).
             for r in 0..ch {
-                let start = (y0 + r) * width + x0;
-                if let Some(row) = out.get_mut(start..start + cw) {
+                let start = r * width + x0;
+                if let Some(row) = rows.get_mut(start..start + cw) {
                     row.fill(nd.fill());
                 }
             }
@@ -196,11 +263,11 @@ fn decode(
             res,
             h.white_is_zero,
             nd,
-            out,
+            rows,
             width,
             (src_width, h.chunk_samples, h.sample_index),
             x0,
-            y0,
+            0,
             cw,
             ch,
         )

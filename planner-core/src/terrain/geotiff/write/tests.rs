@@ -67,6 +67,7 @@ fn small_strips() -> Options {
     Options {
         strip_target_bytes: 100,
         force_bigtiff: false,
+        strip_by_strip: false,
     }
 }
 
@@ -255,6 +256,7 @@ fn two_float_bands_decode_with_the_tiff_crate() {
     let opts = Options {
         strip_target_bytes: 3 * w * 4,
         force_bigtiff: false,
+        strip_by_strip: false,
     };
     let bytes = write(w, h, &t, &utm33(), &[page], opts).unwrap();
     let (got, byte) = decode_page(&bytes, 0);
@@ -332,6 +334,36 @@ fn costmap_pages<'a>(bands: &'a [[Band<'a>; 1]; 2]) -> [Page<'a>; 2] {
             nodata: Some(0.0),
         },
     ]
+}
+
+#[test]
+fn bands_written_whole_equal_bands_encoded_strip_by_strip() {
+    // Two float bands on one page (their planes back to back) and a byte
+    // page, in strips of a few rows and a last short strip, classic and
+    // BigTIFF: the bytes whichever way the bands go out.
+    let (w, h) = (19, 11);
+    let cost = cost_band(w, h);
+    let other: Vec<f32> = cost.iter().map(|v| -2.5 * v).collect();
+    let class: Vec<u8> = (0..w * h).map(|i| (i * 5 % 7) as u8).collect();
+    let t = north_up(500_000.0, 5_000_000.0, 1.0, 1.0);
+    let floats = [
+        Band::new("cost", "cost", BandData::F32(&cost)),
+        Band::new("other", "m", BandData::F32(&other)),
+    ];
+    let bytes = [Band::new("class", "", BandData::U8(&class))];
+    let pages = [page(&floats, Some(f64::NAN)), page(&bytes, Some(0.0))];
+    for force_bigtiff in [false, true] {
+        let opts = |strip_by_strip| Options {
+            strip_target_bytes: 3 * w * 4,
+            force_bigtiff,
+            strip_by_strip,
+        };
+        let whole = write(w, h, &t, &utm33(), &pages, opts(false)).unwrap();
+        let strips = write(w, h, &t, &utm33(), &pages, opts(true)).unwrap();
+        assert!(whole == strips, "bigtiff {force_bigtiff}");
+        let (got, _) = decode_page(&whole, 0);
+        assert!(got[1].iter().zip(&other).all(|(&a, &b)| same(a, b)));
+    }
 }
 
 #[test]
@@ -456,6 +488,7 @@ fn bigtiff_is_readable() {
     let opts = Options {
         strip_target_bytes: 2 * w * 4,
         force_bigtiff: true,
+        strip_by_strip: false,
     };
     let one = Page {
         bands: &[Band::new("cost", "cost", BandData::F32(&cost))],
