@@ -246,7 +246,7 @@ impl Search<'_> {
         let h = heuristic.at(hood, start.0, start.1);
         open.push(entry(h, h, start_index));
         let mut expanded = 0u64;
-        while let Some(top) = open.pop() {
+        while let Some(top) = open.pop_live(|e| words[e as u32 as usize] & CLOSED == 0) {
             // The search waits on memory: the labels and costs of a cell
             // popped a few steps from now are fetched while it works.
             if let Some(next) = open.ahead(PREFETCH_AHEAD) {

@@ -606,8 +606,13 @@ impl DStarLite {
         // Expansions left once the start is settled.
         let mut extra: Option<u64> = None;
         loop {
-            // Drop entries of cells no longer queued.
-            while let Some(top) = self.queue.peek() {
+            // Drop entries of cells no longer queued (those of a bucket
+            // reached from the ring before it is sorted).
+            let state = &self.state;
+            while let Some(top) = self
+                .queue
+                .peek_live(|e| state[e as u32 as usize] & QUEUED != 0)
+            {
                 if self.state[top as u32 as usize] & QUEUED == 0 {
                     self.queue.pop();
                 } else {
