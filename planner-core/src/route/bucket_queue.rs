@@ -238,7 +238,7 @@ mod tests {
     #[test]
     fn pop_live_keeps_the_order_of_live_entries_and_may_drop_the_rest() {
         let mut rng = Rng::new(32);
-        let live = |e: u128| e % 3 != 0;
+        let live = |e: u128| !e.is_multiple_of(3);
         let mut queue = BucketQueue::new(0.25, 16);
         let mut reference = BinaryHeap::new();
         let mut floor = 0.0f64;
