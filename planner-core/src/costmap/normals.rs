@@ -102,8 +102,8 @@ pub(super) struct NormalsJob<'a> {
 }
 
 /// What [`NormalsJob::band`] reuses from band to band: the smoothed rows
-/// and the smoother's scratch.
-pub(super) type NormalsScratch = (Vec<f64>, Vec<f64>);
+/// the smoother's scratch and the row pass's λs.
+pub(super) type NormalsScratch = (Vec<f64>, Vec<f64>, Vec<f64>);
 
 impl<'a> NormalsJob<'a> {
     pub(super) fn new(
@@ -156,7 +156,7 @@ impl<'a> NormalsJob<'a> {
         r0: usize,
         zc_band: &mut [f32],
         mut rough_band: Option<&mut [f32]>,
-        (smoothed, scratch): &mut NormalsScratch,
+        (smoothed, scratch, settled): &mut NormalsScratch,
         ticker: &Ticker,
     ) {
         let (z, width, height) = (self.z, self.width, self.height);
@@ -188,6 +188,7 @@ impl<'a> NormalsJob<'a> {
                 self.radius_m,
                 zc_row,
                 rough_row,
+                settled,
             );
         }
     }
@@ -205,6 +206,7 @@ fn normal_row(
     radius_m: f64,
     zc_row: &mut [f32],
     mut rough_row: Option<&mut [f32]>,
+    settled: &mut Vec<f64>,
 ) {
     let hood = neighbourhood(radius_m, sx, sy);
     let full = FullWindow::new(&hood, width);
@@ -214,7 +216,7 @@ fn normal_row(
     let batched = inner_rows && width >= 3 && full.three_by_three.is_some();
     let mut redo = Vec::new();
     if batched {
-        full.row_3x3(z, r, zc_row, rough_row.as_deref_mut(), &mut redo);
+        full.row_3x3(z, r, zc_row, rough_row.as_deref_mut(), settled, &mut redo);
         redo.push(0);
         redo.push(width - 1);
     }
@@ -308,6 +310,7 @@ impl FullWindow {
         r: usize,
         zc_out: &mut [f32],
         rough_out: Option<&mut [f32]>,
+        settled: &mut Vec<f64>,
         redo: &mut Vec<usize>,
     ) {
         let w = self.width;
@@ -316,17 +319,18 @@ impl FullWindow {
         let mid = &z[r * w..(r + 1) * w];
         let down = &z[(r + 1) * w..(r + 2) * w];
         let m = w - 2;
-        // λ per cell, NaN where the row pass could not settle it.
-        let mut settled = vec![0.0f64; m];
+        // λ per cell, NaN where the row pass could not settle it (every
+        // one written: reused from row to row without clearing).
+        settled.resize(m, 0.0);
         settle_row_3x3(
             [up, mid, down],
             [sx, sy],
             [self.a, self.b, self.n],
             &mut zc_out[1..m + 1],
-            &mut settled,
+            settled,
         );
         if let Some(rough) = rough_out {
-            for (o, &l) in rough[1..m + 1].iter_mut().zip(&settled) {
+            for (o, &l) in rough[1..m + 1].iter_mut().zip(settled.iter()) {
                 *o = if l > 0.0 {
                     l.sqrt() as f32
                 } else if l == 0.0 {

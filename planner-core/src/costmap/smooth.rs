@@ -161,8 +161,8 @@ impl Smoother {
         let ry = self.reach_rows();
         let lo = rows.start.saturating_sub(ry);
         let hi = (rows.end + ry).min(height);
-        // Rows lo..hi smoothed along x into `scratch`.
-        scratch.clear();
+        // Rows lo..hi smoothed along x into `scratch` (every cell written:
+        // reused from call to call without clearing).
         scratch.resize((hi - lo) * width, 0.0);
         for (j, line) in scratch.chunks_mut(width).enumerate() {
             let row = &z[(lo + j) * width..(lo + j + 1) * width];
