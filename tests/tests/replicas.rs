@@ -389,3 +389,40 @@ fn replicas_survive_each_other() {
     assert!(discarded.is_empty(), "{discarded:?}");
     assert_eq!(table_row(&db, &map_id), ("done".into(), 1, true));
 }
+
+/// `terraplan worker` without PostgreSQL, or with a lease out of range:
+/// exit status 2 and a message naming the fault.
+#[test]
+fn worker_faults() {
+    let dir = std::env::temp_dir().join(format!("terraplan-worker-faults-{}", std::process::id()));
+    let run = |args: &[&str]| {
+        std::process::Command::new(terraplan_e2e::terraplan_bin())
+            .arg("worker")
+            .arg("--data-dir")
+            .arg(&dir)
+            .args(args)
+            .env_remove("DATABASE_URL")
+            .output()
+            .expect("run terraplan worker")
+    };
+    let out = run(&[]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let err = terraplan_e2e::text(&out.stderr);
+    assert!(
+        err.contains("PostgreSQL") && err.contains("DATABASE_URL"),
+        "{err}"
+    );
+    let out = run(&[
+        "--database-url",
+        "postgres://127.0.0.1:1/x",
+        "--job-lease-s",
+        "0.5",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let err = terraplan_e2e::text(&out.stderr);
+    assert!(
+        err.contains("--job-lease-s") && err.contains("[1, 3600]"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -180,9 +180,9 @@ impl CostmapJobs {
             .await
         {
             Ok(0) => {}
-            Ok(n) => {
-                tracing::info!(jobs = n, "costmap jobs given back for another server");
+            Ok(_) => {
                 for id in held {
+                    tracing::info!(costmap = %id, "costmap job given back for another server");
                     self.note_queued(&id).await;
                 }
             }

@@ -195,3 +195,29 @@ pub async fn costmap_events(
     });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ev(status: JobStatus, progress: f64) -> JobEvent {
+        JobEvent {
+            status,
+            progress,
+            stage: None,
+            error: None,
+        }
+    }
+
+    #[test]
+    fn a_row_behind_the_notes_is_not_sent() {
+        let noted = ev(JobStatus::Running, 0.5);
+        assert!(is_behind(&ev(JobStatus::Running, 0.3), Some(&noted)));
+        assert!(!is_behind(&ev(JobStatus::Running, 0.5), Some(&noted)));
+        assert!(!is_behind(&ev(JobStatus::Running, 0.7), Some(&noted)));
+        // A change of status is news: taken over, queued again, finished.
+        assert!(!is_behind(&ev(JobStatus::Queued, 0.0), Some(&noted)));
+        assert!(!is_behind(&ev(JobStatus::Done, 1.0), Some(&noted)));
+        assert!(!is_behind(&ev(JobStatus::Running, 0.3), None));
+    }
+}
