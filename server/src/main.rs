@@ -20,6 +20,7 @@ mod quota;
 mod rate_limit;
 mod serve;
 mod state;
+mod vehicle_link;
 mod web_ui;
 
 fn main() -> std::process::ExitCode {

@@ -1,7 +1,7 @@
 //! Command-line interface: `terraplan survey`, `terraplan costmap` and
 //! `terraplan route` run the same planners as the service on files; `terraplan dem-info` reads a
 //! DEM as the service does; `terraplan user` manages the service's users. Exit status: 0 success, 2 invalid input (the
-//! message names the fault), 1 any other failure.
+//! message names the fault), 3 a vehicle link failure (`upload`), 1 any other failure.
 //!
 //! This module parses the arguments and dispatches; each subcommand has
 //! its own file, and what they share is in `common`.
@@ -20,6 +20,7 @@ mod import;
 mod route;
 mod serve;
 mod survey;
+mod upload;
 mod user;
 mod worker;
 
@@ -60,6 +61,10 @@ enum Command {
     /// GeoTIFF and write route.json, route.geojson, route.csv and an
     /// ArduPilot Rover mission.waypoints.
     Route(route::RouteArgs),
+    /// Send a mission (`.waypoints` or `.plan`), fence and rally points to
+    /// a vehicle over MAVLink, then read them back and compare item by
+    /// item. Exit status 3 when the link or the vehicle fails.
+    Upload(upload::UploadArgs),
     /// Manage the service's users and their API tokens (on the database
     /// of `serve`'s `--data-dir` / `DATABASE_URL`).
     #[command(subcommand)]
@@ -86,6 +91,7 @@ pub fn run() -> ExitCode {
         Command::Import(args) => import::import(&args),
         Command::Costmap(args) => costmap::costmap(&args),
         Command::Route(args) => route::route(&args),
+        Command::Upload(args) => upload::upload(&args),
         Command::Experiment(command) => experiment::experiment(&command),
         Command::User(command) => user::user(command),
     };
