@@ -68,11 +68,8 @@ pub(super) fn follow_terrain(
     d.plans = plans
         .into_iter()
         .map(|p| {
-            let joined = d.joined.get(p.cell_index).copied().unwrap_or(false);
-            if d.along_line || joined || crate::cancel::check().is_err() {
-                // A corridor's lanes, or a joined cell's (only they cover
-                // it whole); or cancelled, checked again below.
-                return p;
+            if d.along_line || crate::cancel::check().is_err() {
+                return p; // a corridor's lanes; or cancelled, checked again below
             }
             let candidates = coverage::plan_cell_candidates_in(
                 p.cell_index,
