@@ -35,6 +35,8 @@ if [ "${1:-}" = "--with-validators" ]; then
   [ -e /usr/share/proj/egm96_15.gtx ] || need_gdal+=(proj-data)
   # curl: the DEM tests check that it hears the server's early refusals.
   command -v curl >/dev/null 2>&1 || need_gdal+=(curl)
+  # zip: the browser test of the page's GIS import zips a Shapefile.
+  command -v zip >/dev/null 2>&1 || need_gdal+=(zip)
   if [ "${#need_gdal[@]}" -gt 0 ]; then
     echo "setup: installing ${need_gdal[*]} with apt-get" >&2
     SUDO=""
