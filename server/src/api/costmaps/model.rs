@@ -73,7 +73,8 @@ pub struct CostmapResponse {
     dem_id: String,
     /// Creation time, RFC 3339 (UTC).
     created_at: String,
-    /// Last change of status or stage, RFC 3339 (UTC).
+    /// Last change of status, stage or progress (written about every
+    /// second while the job runs), RFC 3339 (UTC).
     updated_at: String,
     status: JobStatus,
     /// Share of the work done, [0, 1].
