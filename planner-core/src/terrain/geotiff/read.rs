@@ -63,23 +63,14 @@ fn read_raster(
     limits: &DemLimits,
 ) -> Result<Dem, TerrainError> {
     let h = parse_header(bytes, limits, page, band)?;
-    let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
-    let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
-    let n = width
-        .checked_mul(height)
-        .ok_or_else(|| invalid("the TIFF's pixel count overflows"))?;
-    // Allocated by the calling thread, not by a worker of the pool below:
-    // an allocator that keeps freed grids for later ones (the CLI's) keeps
-    // them per thread.
-    let mut values = crate::buffer::filled(n, 0.0f64);
     // PROJ's answer about the CRS takes milliseconds of one thread: asked
     // while the pixels are decoded; its error still comes first.
-    let (crs, decoded) = rayon::join(
+    let (crs, pixels) = rayon::join(
         || resolve_crs(h.crs_code.clone(), crs),
-        || read_pixels(bytes, &h, page, width, &mut values),
+        || read_pixels(bytes, &h, page),
     );
     let crs = crs?;
-    decoded?;
+    let (width, height, values) = pixels?;
     Ok(Dem {
         width,
         height,
@@ -91,18 +82,23 @@ fn read_raster(
     })
 }
 
-/// The page's cells into `values` (row-major, `width` wide), nodata
-/// `NaN`, scaled to metres.
+/// The page's cells (width, height, row-major values), nodata `NaN`,
+/// scaled to metres.
 fn read_pixels(
     bytes: &[u8],
     h: &Header,
     page: usize,
-    width: usize,
-    values: &mut [f64],
-) -> Result<(), TerrainError> {
+) -> Result<(usize, usize, Vec<f64>), TerrainError> {
+    let width = usize::try_from(h.width).map_err(|_| invalid("the TIFF is too wide"))?;
+    let height = usize::try_from(h.height).map_err(|_| invalid("the TIFF is too high"))?;
+    let n = width
+        .checked_mul(height)
+        .ok_or_else(|| invalid("the TIFF's pixel count overflows"))?;
     let matcher = NoDataMatch::new(h.nodata, h.sample);
+    let mut values = crate::buffer::filled(n, 0.0f64);
+
     let decoded = catch_unwind(AssertUnwindSafe(|| {
-        decode(bytes, h, page, matcher, width, values)
+        decode(bytes, h, page, matcher, width, &mut values)
     }));
     match decoded {
         Ok(r) => r?,
@@ -113,11 +109,11 @@ fn read_pixels(
         }
     }
     if h.vertical_scale != 1.0 {
-        for v in values.iter_mut() {
+        for v in &mut values {
             *v *= h.vertical_scale;
         }
     }
-    Ok(())
+    Ok((width, height, values))
 }
 
 /// Decode every chunk into `out` (row-major, `width` wide).
