@@ -283,7 +283,7 @@ fn lossy_vehicle_gets_mission_fence_and_rally_equal_to_the_files() {
             "--to",
             &addr(&vehicle),
             "--timeout",
-            "250ms",
+            "150ms",
             "--retries",
             "8",
         ]));
