@@ -10,8 +10,8 @@ use tokio::time::{Instant, timeout_at};
 
 use super::connection::Link;
 use super::exchange::{
-    Options, Progress, ProtocolError, Stage, ack, for_us, mav_type, result_meaning, wire_of_float,
-    wire_of_int,
+    Options, Progress, ProtocolError, Stage, ack, cancel_transfer, for_us, mav_type,
+    result_meaning, wire_of_float, wire_of_int,
 };
 use super::items::{MissionKind, WireItem};
 
@@ -24,13 +24,7 @@ pub async fn download<L: Link>(
 ) -> Result<Vec<WireItem>, ProtocolError> {
     let result = run(link, opts, kind, progress).await;
     if result.is_err() {
-        let _ = link
-            .send(&ack(
-                opts,
-                kind,
-                MavMissionResult::MAV_MISSION_OPERATION_CANCELLED,
-            ))
-            .await;
+        cancel_transfer(link, opts, kind).await;
     }
     result
 }

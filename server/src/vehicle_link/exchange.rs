@@ -11,7 +11,7 @@ use mavlink::dialects::common::{
 };
 use num_traits::FromPrimitive;
 
-use super::connection::{GCS_SYSTEM, LinkError};
+use super::connection::{GCS_SYSTEM, Link, LinkError};
 use super::items::{MissionKind, WireItem, is_global_frame};
 
 /// How long to wait for each answer and how often to ask again.
@@ -136,6 +136,18 @@ pub(super) fn ack(opts: &Options, kind: MissionKind, result: MavMissionResult) -
         mission_type: mav_type(kind),
         ..Default::default()
     })
+}
+
+/// Lets the vehicle leave its transfer state after a failed transfer
+/// rather than wait for its own time-out; the link may be dead, so a
+/// failure to send is moot.
+pub(super) async fn cancel_transfer<L: Link>(link: &mut L, opts: &Options, kind: MissionKind) {
+    let cancelled = ack(
+        opts,
+        kind,
+        MavMissionResult::MAV_MISSION_OPERATION_CANCELLED,
+    );
+    let _ = link.send(&cancelled).await;
 }
 
 /// Why a wire item could not be put in a MISSION_ITEM_INT.

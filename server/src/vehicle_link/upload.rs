@@ -14,7 +14,8 @@ use tokio::time::{Instant, timeout_at};
 
 use super::connection::Link;
 use super::exchange::{
-    Options, Progress, ProtocolError, Stage, ack, for_us, item_message, mav_type, result_meaning,
+    Options, Progress, ProtocolError, Stage, cancel_transfer, for_us, item_message, mav_type,
+    result_meaning,
 };
 use super::items::{MissionKind, WireItem};
 
@@ -28,15 +29,7 @@ pub async fn upload<L: Link>(
 ) -> Result<(), ProtocolError> {
     let result = run(link, opts, kind, items, progress).await;
     if let Err(ProtocolError::TimedOut { .. } | ProtocolError::Protocol { .. }) = result {
-        // Let the vehicle leave its transfer state rather than wait for
-        // its own time-out; the link may be dead, so a failure is moot.
-        let _ = link
-            .send(&ack(
-                opts,
-                kind,
-                MavMissionResult::MAV_MISSION_OPERATION_CANCELLED,
-            ))
-            .await;
+        cancel_transfer(link, opts, kind).await;
     }
     result
 }
