@@ -45,7 +45,7 @@ pub(super) struct UploadArgs {
     #[arg(long, default_value = "1.5s", value_parser = parse_timeout)]
     timeout: Duration,
     /// Ask again this many times before giving up. A dead link fails
-    /// after (retries + 1) × timeout per list.
+    /// after (retries + 1) × timeout at the step where it died.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=100))]
     retries: u32,
     /// The vehicle's MAVLink system id.

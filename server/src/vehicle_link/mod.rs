@@ -1,5 +1,5 @@
 //! Sending missions, fences and rally points to a vehicle over MAVLink
-//! (`terraplan upload`, `POST /api/v1/surveys/{id}/uavs/{uav}/upload`).
+//! (`terraplan upload`; the service's upload endpoint is still to come).
 //!
 //! - `address`: the `udpout:HOST:PORT` / `udpin:` / `tcpout:` /
 //!   `serial:DEV:BAUD` syntax, checked before any socket opens;

@@ -1,5 +1,5 @@
 //! Reading a GeoTIFF page's pixels: strips and tiles decompressed and
-//! un-predicted by the `tiff` crate, one chunk at a time, into `f64`s,
+//! un-predicted by the `tiff` crate, a row of chunks per task in parallel, into `f64`s,
 //! nodata and infinite samples becoming `NaN`.
 
 use std::io::Cursor;
