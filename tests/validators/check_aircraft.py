@@ -52,6 +52,16 @@ from shapely.affinity import rotate, translate
 from shapely.geometry import LineString, Point, Polygon, box, shape
 from shapely.ops import unary_union
 
+
+# The plan's rule (planner-core coverage::photo_count): one photo at a lane's
+# start, then one every trigger distance, the far one counted when the lane
+# reaches within 1 cm of it (files round positions to about a millimetre).
+PHOTO_END_TOLERANCE_M = 0.01
+
+
+def photo_count(length, spacing):
+    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+
 RULE_TOL_M = 1e-3
 # Positions in a .waypoints file have 8 decimals of a degree: up to ~1.2 mm
 # off, which turns a short leg a little.
@@ -252,7 +262,7 @@ def check_mission(wp_path, args, roi, free, nfz, to_utm):
         segments.append(lane)
         ux, uy = (b[0] - a[0]) / lane.length, (b[1] - a[1]) / lane.length
         angle = math.degrees(math.atan2(uy, ux))
-        n = int(lane.length / trigger + 1e-9) + 1
+        n = photo_count(lane.length, trigger)
         for k in range(n):
             cx, cy = a[0] + ux * trigger * k, a[1] + uy * trigger * k
             fp = box(-args.front / 2, -args.side / 2, args.front / 2, args.side / 2)

@@ -41,6 +41,8 @@ from shapely.ops import unary_union
 sys.path.insert(0, str(Path(__file__).parent))
 from clearance import check as clearance_check, inclusion_rings, read_zones  # noqa: E402
 
+PHOTO_END_TOLERANCE_M = 0.01
+
 CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
 CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST
 MIN_COVERAGE = 0.995
@@ -90,12 +92,17 @@ def photos(points, trigger_m, side_m, front_m):
     out = []
     next_at = 0.0
     run = 0.0
-    for a, b in zip(points, points[1:]):
+    last = len(points) - 2
+    for k, (a, b) in enumerate(zip(points, points[1:])):
         seg = math.dist(a, b)
         if seg == 0:
             continue
         ux, uy = (b[0] - a[0]) / seg, (b[1] - a[1]) / seg
-        while next_at <= run + seg + 1e-9:
+        # The plan's rule (planner-core coverage::photo_count): the far
+        # photo counts when the lane reaches within 1 cm of it (files round
+        # positions to about a millimetre).
+        tol = PHOTO_END_TOLERANCE_M if k == last else 1e-9
+        while next_at <= run + seg + tol:
             t = next_at - run
             cx, cy = a[0] + ux * t, a[1] + uy * t
             hx, hy = ux * front_m / 2, uy * front_m / 2

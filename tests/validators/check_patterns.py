@@ -43,6 +43,16 @@ from shapely.ops import unary_union
 sys.path.insert(0, str(Path(__file__).parent))
 from clearance import read_zones  # noqa: E402
 
+
+# The plan's rule (planner-core coverage::photo_count): one photo at a lane's
+# start, then one every trigger distance, the far one counted when the lane
+# reaches within 1 cm of it (files round positions to about a millimetre).
+PHOTO_END_TOLERANCE_M = 0.01
+
+
+def photo_count(length, spacing):
+    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+
 ML = mavutil.mavlink
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
                   "image_width_px": 5472, "image_height_px": 3648}
@@ -81,7 +91,7 @@ def lanes_of(wps, fwd):
                 current, spacing = [last_pos], w.param1
             else:
                 lanes.append((current, spacing))
-                photos += math.floor(length(current) / spacing + 1e-9) + 1
+                photos += photo_count(length(current), spacing)
                 current = None
         elif cmd == ML.MAV_CMD_DO_SET_CAM_TRIGG_INTERVAL:
             spacing = w.param1 / 1000.0 * speed
@@ -90,7 +100,7 @@ def lanes_of(wps, fwd):
                 current = [last_pos]
             else:
                 lanes.append((current, spacing))
-                photos += math.floor(length(current) / spacing + 1e-9) + 1
+                photos += photo_count(length(current), spacing)
                 current = None
         elif cmd == ML.MAV_CMD_IMAGE_START_CAPTURE:
             prev = wps[i - 1]
@@ -119,7 +129,7 @@ def seen_by(lane, spacing, side, front, pitch):
     line = LineString([a, b])
     if pitch is not None and pitch > -90:
         return line.buffer(side / 2, cap_style="flat")
-    n = math.floor(line.length / spacing + 1e-9) + 1
+    n = photo_count(line.length, spacing)
     ux, uy = (b[0] - a[0]) / line.length, (b[1] - a[1]) / line.length
     rects = []
     for k in range(n):

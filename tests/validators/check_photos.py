@@ -9,7 +9,7 @@ For every UAV's `<uav>.photos.geojson` in OUT_DIR:
 - the missions (where the `.waypoints` are there, read by pymavlink): the
   cameras of each sortie's photos are, in order and within 5 cm, where its
   mission takes them (every trigger distance, or interval × speed, from a
-  lane's start where triggering starts, floor(length / spacing) + 1 per
+  lane's start where triggering starts, floor((length + 1 cm) / spacing) + 1 per
   lane; at the waypoint before each IMAGE_START_CAPTURE);
 - the camera: each lane's photos (grouped by sortie and `lane`) lie on one
   line along their `heading_deg` (within 0.05°), `camera_pitch_deg` is
@@ -62,6 +62,16 @@ sys.path.insert(0, str(Path(__file__).parent))
 from camera_rays import rays  # noqa: E402
 from clearance import read_zones  # noqa: E402
 
+
+# The plan's rule (planner-core coverage::photo_count): one photo at a lane's
+# start, then one every trigger distance, the far one counted when the lane
+# reaches within 1 cm of it (files round positions to about a millimetre).
+PHOTO_END_TOLERANCE_M = 0.01
+
+
+def photo_count(length, spacing):
+    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,
                   "image_width_px": 5472, "image_height_px": 3648}
 CORNER_TOL = 0.01
@@ -104,7 +114,7 @@ def mission_stations(path, fwd):
     def close_lane():
         pts = [p for p in lane if p is not None]
         length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(pts, pts[1:]))
-        n = math.floor(length / spacing + 1e-9) + 1
+        n = photo_count(length, spacing)
         out.extend(along(pts, k * spacing) for k in range(n))
 
     for i in range(1, loader.count()):

@@ -124,11 +124,20 @@ for r in rows[1:]:
     else:
         fail(f"unexpected frame {fr}")
     flown.append((lon, lat, z))
+# The mission writer merges a point within 1 cm (3D) of the one before it
+# (SAME_POINT_M): the legs describe the flight more finely than the file.
+SAME_POINT_M = 0.01
+m_lon = 111320 * math.cos(math.radians(flown[0][1]))
+m_lat = 110900
 legs_pts = []
 for leg in terrain["legs"]:
     for p in leg["points"]:
-        if legs_pts and math.dist(p[:2], legs_pts[-1][:2]) < 1e-9 and abs(p[2] - legs_pts[-1][2]) < 0.01:
-            continue
+        if legs_pts:
+            q = legs_pts[-1]
+            d3 = math.sqrt(((p[0] - q[0]) * m_lon) ** 2 + ((p[1] - q[1]) * m_lat) ** 2
+                           + (p[2] - q[2]) ** 2)
+            if d3 < SAME_POINT_M:
+                continue
         legs_pts.append(p)
 legs_pts = legs_pts[1:]  # the first point is reached by the take-off
 if len(legs_pts) != len(flown):

@@ -22,6 +22,17 @@ from osgeo import osr
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from egm96_proj import undulation_function  # noqa: E402
 
+
+# The plan's rule (planner-core coverage::photo_count; DJI's multiple
+# triggers take them the same way): one photo at a lane's start, then one
+# every trigger distance, the far one counted when the lane
+# reaches within 1 cm of it (files round positions to about a millimetre).
+PHOTO_END_TOLERANCE_M = 0.01
+
+
+def photo_count(length, spacing):
+    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+
 KML = "http://www.opengis.net/kml/2.2"
 WPML = "http://www.dji.com/wpmz/1.0.2"
 FILES = ["wpmz/template.kml", "wpmz/waylines.wpml"]
@@ -183,12 +194,6 @@ def read_waypoints(path):
 def utm_length(transform, pts):
     xy = [transform.TransformPoint(lon, lat)[:2] for lon, lat in pts]
     return sum(math.dist(a, b) for a, b in zip(xy, xy[1:]))
-
-
-def photo_count(length, spacing):
-    # A photo at the start and one every `spacing` along (DJI's multiple
-    # triggers; the plan counts a lane's photos the same way).
-    return math.floor(length / spacing + 1e-9) + 1
 
 
 def check_kmz(path, plan, sortie, geoid, transform):

@@ -199,9 +199,17 @@ pub fn altitude_for_gsd(camera: &Camera, gsd_cm_px: f64) -> f64 {
     gsd_cm_px / 100.0 * across_px * camera.focal_length_mm / across_mm
 }
 
+/// A lane within this much of a whole number of trigger distances still
+/// takes its photo at the far end. Lanes are often whole numbers of line
+/// spacings long, which with the usual overlaps are whole numbers of
+/// trigger distances, and the mission files round positions to about a
+/// millimetre: the far photo must not hang on that rounding.
+pub const PHOTO_END_TOLERANCE_M: f64 = 0.01;
+
 /// Photos taken along a lane: one at the start, then one every
-/// `trigger_distance_m`. A non-positive or non-finite trigger distance means
-/// only the first photo; an empty or invalid lane takes none.
+/// `trigger_distance_m`, the last within [`PHOTO_END_TOLERANCE_M`] past the
+/// end counted. A non-positive or non-finite trigger distance means only
+/// the first photo; an empty or invalid lane takes none.
 pub fn photo_count(lane_length_m: f64, trigger_distance_m: f64) -> usize {
     if !lane_length_m.is_finite() || lane_length_m < 0.0 {
         return 0;
@@ -209,9 +217,8 @@ pub fn photo_count(lane_length_m: f64, trigger_distance_m: f64) -> usize {
     if !trigger_distance_m.is_finite() || trigger_distance_m <= 0.0 {
         return 1;
     }
-    // A tiny tolerance so that a lane of exactly k·d metres, computed with
-    // rounding, still gets its photo at the far end. `as` saturates.
-    (lane_length_m / trigger_distance_m + 1e-9).floor() as usize + 1
+    // `as` saturates.
+    ((lane_length_m + PHOTO_END_TOLERANCE_M) / trigger_distance_m).floor() as usize + 1
 }
 
 #[cfg(test)]
@@ -322,6 +329,10 @@ mod tests {
     fn photos_along_a_lane() {
         assert_eq!(photo_count(100.0, 20.0), 6);
         assert_eq!(photo_count(99.9, 20.0), 5);
+        // Rounding of a lane of exactly 5 trigger distances, either way.
+        assert_eq!(photo_count(100.0 - 0.002, 20.0), 6);
+        assert_eq!(photo_count(100.0 + 0.002, 20.0), 6);
+        assert_eq!(photo_count(100.0 - 0.011, 20.0), 5);
         assert_eq!(photo_count(0.0, 20.0), 1);
         assert_eq!(photo_count(0.3 * 3.0, 0.3), 4);
         assert_eq!(photo_count(50.0, 0.0), 1);
