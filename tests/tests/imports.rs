@@ -393,7 +393,7 @@ fn the_service_imports_what_the_cli_does() {
         doc["messages"][0]
             .as_str()
             .unwrap()
-            .contains("Point(s) skipped"),
+            .contains("Placemark 1 (\"mast\"): 1 Point(s) skipped"),
         "{doc}"
     );
 

@@ -44,7 +44,8 @@ pub(super) fn read_kml(bytes: &[u8]) -> Result<Imported, ImportError> {
     let mut stack: Vec<String> = Vec::new();
     let mut text = String::new();
     let mut placemark: Option<Placemark> = None;
-    let mut count = 0usize;
+    // Placemarks are numbered from 1 in messages, as a reader counts them.
+    let mut number = 1usize;
     let mut seen_kml = false;
     let mut out = Imported::default();
     let fault = |reader: &Reader<&[u8]>, m: String| {
@@ -88,13 +89,13 @@ pub(super) fn read_kml(bytes: &[u8]) -> Result<Imported, ImportError> {
                 };
                 if let Some(pm) = placemark.as_mut() {
                     end_in_placemark(pm, &name, &stack, &text)
-                        .map_err(|m| fault(&reader, format!("Placemark {count}: {m}")))?;
+                        .map_err(|m| fault(&reader, format!("Placemark {number}: {m}")))?;
                 }
                 if name == "Placemark"
                     && let Some(pm) = placemark.take()
                 {
-                    finish(pm, count, &mut out);
-                    count += 1;
+                    finish(pm, number, &mut out);
+                    number += 1;
                 }
                 text.clear();
             }
@@ -180,10 +181,10 @@ fn parse_coordinates(text: &str) -> Result<LineString<f64>, String> {
 
 /// The features of one finished Placemark: its polygons as one feature,
 /// its lines as another.
-fn finish(pm: Placemark, index: usize, out: &mut Imported) {
+fn finish(pm: Placemark, number: usize, out: &mut Imported) {
     let label = match &pm.name {
-        Some(n) => format!("Placemark {index} ({n:?})"),
-        None => format!("Placemark {index}"),
+        Some(n) => format!("Placemark {number} ({n:?})"),
+        None => format!("Placemark {number}"),
     };
     let mut properties = Map::new();
     if let Some(n) = &pm.name {
@@ -252,7 +253,7 @@ mod tests {
         assert_eq!(imp.features[0].properties["name"], "field & wood");
         assert!(matches!(imp.features[1].geometry, Geometry::LineString(_)));
         assert_eq!(imp.messages.len(), 1);
-        assert!(imp.messages[0].contains("Placemark 2 (\"mast\"): 1 Point(s) skipped"));
+        assert!(imp.messages[0].contains("Placemark 3 (\"mast\"): 1 Point(s) skipped"));
     }
 
     #[test]
@@ -261,7 +262,7 @@ mod tests {
         let e = read_kml(bad.as_bytes()).unwrap_err();
         assert!(
             e.to_string()
-                .contains("Placemark 1: coordinates \"5.02;52.03\" are not lon,lat"),
+                .contains("Placemark 2: coordinates \"5.02;52.03\" are not lon,lat"),
             "{e}"
         );
         for cut in 0..KML.len() - 1 {
