@@ -53,14 +53,7 @@ from shapely.geometry import LineString, Point, Polygon, box, shape
 from shapely.ops import unary_union
 
 
-# The plan's rule (planner-core coverage::photo_count): one photo at a lane's
-# start, then one every trigger distance, the far one counted when the lane
-# reaches within 1 cm of it (files round positions to about a millimetre).
-PHOTO_END_TOLERANCE_M = 0.01
-
-
-def photo_count(length, spacing):
-    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+from photo_rule import photo_count  # noqa: E402
 
 RULE_TOL_M = 1e-3
 # Positions in a .waypoints file have 8 decimals of a degree: up to ~1.2 mm

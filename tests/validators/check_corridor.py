@@ -41,7 +41,7 @@ from shapely.ops import unary_union
 sys.path.insert(0, str(Path(__file__).parent))
 from clearance import check as clearance_check, inclusion_rings, read_zones  # noqa: E402
 
-PHOTO_END_TOLERANCE_M = 0.01
+from photo_rule import PHOTO_END_TOLERANCE_M  # noqa: E402
 
 CMD_WAYPOINT = mavutil.mavlink.MAV_CMD_NAV_WAYPOINT
 CMD_TRIGG = mavutil.mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST

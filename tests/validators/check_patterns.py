@@ -44,14 +44,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from clearance import read_zones  # noqa: E402
 
 
-# The plan's rule (planner-core coverage::photo_count): one photo at a lane's
-# start, then one every trigger distance, the far one counted when the lane
-# reaches within 1 cm of it (files round positions to about a millimetre).
-PHOTO_END_TOLERANCE_M = 0.01
-
-
-def photo_count(length, spacing):
-    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+from photo_rule import photo_count  # noqa: E402
 
 ML = mavutil.mavlink
 DEFAULT_CAMERA = {"sensor_width_mm": 13.2, "sensor_height_mm": 8.8, "focal_length_mm": 8.8,

@@ -23,15 +23,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from egm96_proj import undulation_function  # noqa: E402
 
 
-# The plan's rule (planner-core coverage::photo_count; DJI's multiple
-# triggers take them the same way): one photo at a lane's start, then one
-# every trigger distance, the far one counted when the lane
-# reaches within 1 cm of it (files round positions to about a millimetre).
-PHOTO_END_TOLERANCE_M = 0.01
-
-
-def photo_count(length, spacing):
-    return math.floor((length + PHOTO_END_TOLERANCE_M) / spacing) + 1
+from photo_rule import photo_count  # noqa: E402
 
 KML = "http://www.opengis.net/kml/2.2"
 WPML = "http://www.dji.com/wpmz/1.0.2"
