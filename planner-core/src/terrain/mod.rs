@@ -19,6 +19,7 @@ mod hillshade;
 mod info;
 mod read;
 mod sample;
+mod windows;
 
 pub(crate) use cell_size::cell_size_m;
 pub use crs::Crs;
@@ -29,6 +30,7 @@ pub use hillshade::hillshade_png;
 pub use info::raster_bounds;
 pub use read::{geotiff_pages, read_dem, read_geotiff_band, read_geotiff_page_band};
 pub use sample::TerrainSampler;
+pub use windows::{DemWindows, RasterGrid, RasterWindows, check_window};
 
 use serde::{Deserialize, Serialize};
 
