@@ -23,7 +23,7 @@ use utoipa_swagger_ui::SwaggerUi;
 
 use crate::api::{
     cameras, costmaps, dems, health, imports, members, password, projects, routes, session,
-    surveys, tokens, users, vehicles,
+    surveys, tokens, users, vehicle_links, vehicles,
 };
 use crate::error::ApiError;
 use crate::guard::{self, AllowedHosts};
@@ -45,6 +45,7 @@ use crate::state::AppState;
         (name = "routes", description = "UGV routes across a finished costmap: the cheapest safe path (A* or D* Lite), incremental replanning around blocked areas, GeoJSON, CSV (UTM) and ArduPilot Rover missions"),
         (name = "accounts", description = "Signing in (session cookie and CSRF token, or an API token), a user's own API tokens, and users (admins)"),
         (name = "projects", description = "Projects and their members: every DEM, survey, costmap and route belongs to one; viewers read, editors also create and delete, owners also manage members"),
+        (name = "vehicle-links", description = "Sending a stored survey's mission (and fence and rally points) to a vehicle over MAVLink, with progress as Server-Sent Events; switched off unless the service is started with --vehicle-links"),
         (name = "service", description = "Health"),
     ),
     components(schemas(crate::error::Problem, crate::error::IssueSchema))
@@ -66,6 +67,7 @@ pub fn router(
         .merge(imports::routes(max_dem_bytes))
         .merge(costmaps::routes())
         .merge(vehicles::routes())
+        .merge(vehicle_links::routes())
         .merge(cameras::routes())
         .merge(routes::routes())
         .merge(session::routes())

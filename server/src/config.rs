@@ -148,6 +148,21 @@ pub struct ServeConfig {
     /// more get 429 with Retry-After.
     #[arg(long, env = "TERRAPLAN_PROJECT_QUEUED_JOBS", default_value_t = 8)]
     pub project_queued_jobs: u64,
+    /// Vehicles the service may send missions to
+    /// (`POST /api/v1/surveys/{id}/uavs/{uav}/upload`), comma-separated or
+    /// repeated: an exact address (`udpout:192.168.1.10:14550`,
+    /// `tcpout:127.0.0.1:5760`, `serial:/dev/ttyACM0:57600`) or one whose
+    /// port (baud rate) is a range (`udpout:10.0.0.5:14550-14560`) or any
+    /// (`udpout:10.0.0.5:*`); hosts are always named exactly. None: the
+    /// upload endpoint answers 404 (switched off).
+    #[arg(
+        long = "vehicle-links",
+        env = "TERRAPLAN_VEHICLE_LINKS",
+        value_delimiter = ',',
+        value_name = "ADDR",
+        value_parser = crate::vehicle_link::allow::parse_link_pattern
+    )]
+    pub vehicle_links: Vec<crate::vehicle_link::LinkPattern>,
     /// Mark the session cookie `Secure` on every answer (it is anyway when
     /// a proxy sends `X-Forwarded-Proto: https`): for a service behind TLS.
     #[arg(long, env = "TERRAPLAN_COOKIE_SECURE")]

@@ -49,6 +49,8 @@ pub struct AppState {
     pub quotas: Quotas,
     /// `--cookie-secure`: the session cookie is always `Secure`.
     pub cookie_secure: bool,
+    /// `--vehicle-links`: the vehicles uploads may reach, and those in use.
+    pub vehicle_links: Arc<crate::vehicle_link::VehicleLinks>,
 }
 
 impl AppState {
@@ -79,6 +81,9 @@ impl AppState {
                 config.planning_per_minute,
             )),
             cookie_secure: config.cookie_secure,
+            vehicle_links: Arc::new(crate::vehicle_link::VehicleLinks::new(
+                config.vehicle_links.clone(),
+            )),
         }
     }
 

@@ -20,6 +20,7 @@ pub mod session;
 pub mod surveys;
 pub mod tokens;
 pub mod users;
+pub mod vehicle_links;
 pub mod vehicles;
 
 /// The first 8 characters of an id, for download file names.

@@ -20,7 +20,7 @@ pub async fn download<L: Link>(
     link: &mut L,
     opts: &Options,
     kind: MissionKind,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut (dyn FnMut(Progress) + Send),
 ) -> Result<Vec<WireItem>, ProtocolError> {
     let result = run(link, opts, kind, progress).await;
     if result.is_err() {
@@ -35,7 +35,7 @@ async fn run<L: Link>(
     link: &mut L,
     opts: &Options,
     kind: MissionKind,
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut (dyn FnMut(Progress) + Send),
 ) -> Result<Vec<WireItem>, ProtocolError> {
     let want = mav_type(kind);
     let list_request = MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA {

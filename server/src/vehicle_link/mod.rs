@@ -1,5 +1,6 @@
 //! Sending missions, fences and rally points to a vehicle over MAVLink
-//! (`terraplan upload`; the service's upload endpoint is still to come).
+//! (`terraplan upload`, and the service's
+//! `POST /api/v1/surveys/{id}/uavs/{uav}/upload`).
 //!
 //! - `address`: the `udpout:HOST:PORT` / `udpin:` / `tcpout:` /
 //!   `serial:DEV:BAUD` syntax, checked before any socket opens;
@@ -12,9 +13,13 @@
 //!   state machines over any `Link` (unit-tested against an in-memory
 //!   vehicle, `test_vehicle`);
 //! - `compare`: the read-back against what was sent;
-//! - `transfer`: upload + read-back + compare for each list.
+//! - `transfer`: upload + read-back + compare for each list;
+//! - `allow` / `busy`: the addresses the service may reach
+//!   (`serve --vehicle-links`) and the one upload per address it runs.
 
 pub mod address;
+pub mod allow;
+pub mod busy;
 pub mod compare;
 pub mod connection;
 pub mod download;
@@ -27,6 +32,8 @@ pub mod transfer;
 pub mod upload;
 
 pub use address::VehicleAddress;
+pub use allow::LinkPattern;
+pub use busy::VehicleLinks;
 pub use connection::MavlinkLink;
 pub use exchange::{Options, Progress, Stage};
 pub use items::MissionKind;

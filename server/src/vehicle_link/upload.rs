@@ -25,7 +25,7 @@ pub async fn upload<L: Link>(
     opts: &Options,
     kind: MissionKind,
     items: &[WireItem],
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut (dyn FnMut(Progress) + Send),
 ) -> Result<(), ProtocolError> {
     let result = run(link, opts, kind, items, progress).await;
     if let Err(ProtocolError::TimedOut { .. } | ProtocolError::Protocol { .. }) = result {
@@ -41,7 +41,7 @@ async fn run<L: Link>(
     opts: &Options,
     kind: MissionKind,
     items: &[WireItem],
-    progress: &mut dyn FnMut(Progress),
+    progress: &mut (dyn FnMut(Progress) + Send),
 ) -> Result<(), ProtocolError> {
     let total = items.len();
     let count = u16::try_from(total).map_err(|_| ProtocolError::Protocol {
