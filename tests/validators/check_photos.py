@@ -199,24 +199,27 @@ def cell_figures(lanes):
                     continue
                 width = own[1] - own[0]
                 for sign in (1.0, -1.0):
-                    # The lanes on this side nearest first; those with a
-                    # photo abeam up to a quarter width beyond the first.
+                    # The lanes on this side up to a quarter width beyond
+                    # the nearest, whether or not that one reaches abeam
+                    # (past a no-fly zone a joined cell wraps around, the
+                    # next lane is not a neighbour); a sample when one of
+                    # them has a photo abeam.
                     cands = sorted((sign * (offsets[j] - offsets[k]), j) for j in members
                                    if j != k and 0.05 * width < sign * (offsets[j] - offsets[k]) <= 2.0 * width)
-                    covered, nearest = [], None
+                    covered, abeam = [], False
+                    nearest = cands[0][0] if cands else None
                     for gap, j in cands:
-                        if nearest is not None and gap > nearest + 0.25 * width:
+                        if gap > nearest + 0.25 * width:
                             break
                         for q in lanes[j]:
                             sp = span(q["poly"], p["centre"], across)
                             if sp is None:
                                 continue
-                            if nearest is None:
-                                nearest = gap
+                            abeam = True
                             lo, hi = max(sp[0], own[0]), min(sp[1], own[1])
                             if hi > lo:
                                 covered.append((lo, hi))
-                    if nearest is not None:
+                    if abeam:
                         side.append(union_length(covered) / width)
     gsd = [p["gsd"] for lane in lanes for p in lane]
     return front, side, gsd

@@ -227,6 +227,20 @@ impl CellLayouts {
         2 * self.lanes.saturating_sub(1)
     }
 
+    /// Lanes of the cell's plans.
+    pub fn lanes(&self) -> usize {
+        self.lanes
+    }
+
+    /// No plan of the cell is shorter: the least of the finalists' lower
+    /// bounds (their lanes contain the cell's part of every lane line).
+    pub fn length_lower_bound(&self) -> f64 {
+        self.all_finalists()
+            .iter()
+            .map(|l| l.length_lower_bound())
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// The shortest plan (lanes and links) among the finalists; the first
     /// in candidate order among equally long ones. Finalists are planned by
     /// increasing lower bound (the cell's own part of every lane: the flown
@@ -757,6 +771,31 @@ mod tests {
         assert!(plan.links.iter().all(Vec::is_empty));
         assert_abs_diff_eq!(plan.length_m(), 5.0 * 200.0 + 4.0 * 20.0, epsilon = 1e-6);
         assert_boustrophedon(&plan);
+    }
+
+    /// The lower bound is never above the best plan's length, and equals
+    /// the lanes' length where lanes end on the cell's sides.
+    #[test]
+    fn length_lower_bound_bounds_the_best_plan() {
+        let rect = poly(&[(0., 0.), (200., 0.), (200., 100.), (0., 100.)]);
+        let layouts = CellLayouts::new(0, &rect, 20.0, 0.0).unwrap();
+        assert_eq!(layouts.lanes(), 5);
+        assert_abs_diff_eq!(layouts.length_lower_bound(), 1000.0, epsilon = 1e-4);
+        let free = FreeSpace::new(&MultiPolygon(vec![rect.clone()]));
+        let plan = layouts.best_plan(&rect, &free).unwrap();
+        assert!(layouts.length_lower_bound() <= plan.length_m() + 1e-9);
+        // A trapezoid: lanes reach past the slanted side, the bound does not.
+        let trap = poly(&[(0., 0.), (200., 0.), (150., 100.), (0., 100.)]);
+        let layouts = CellLayouts::new(0, &trap, 20.0, 0.0).unwrap();
+        let free = FreeSpace::new(&MultiPolygon(vec![trap.clone()]));
+        let plan = layouts.best_plan(&trap, &free).unwrap();
+        let lanes: f64 = plan
+            .lanes
+            .iter()
+            .map(|l| (l.end - l.start).x.hypot((l.end - l.start).y))
+            .sum();
+        assert!(layouts.length_lower_bound() <= lanes + 1e-9);
+        assert!(layouts.length_lower_bound() > 0.8 * lanes);
     }
 
     #[test]

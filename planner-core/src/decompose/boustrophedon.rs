@@ -166,9 +166,40 @@ impl<'a> PreparedFree<'a> {
         }
     }
 
+    /// The cells of [`decompose_merged`] at `slice_angle_deg`.
+    pub fn decompose_merged(
+        &self,
+        slice_angle_deg: f64,
+        line_spacing_m: f64,
+    ) -> Result<Vec<MergedCell>, DecomposeError> {
+        if !(line_spacing_m.is_finite() && line_spacing_m > 0.0) {
+            return Err(DecomposeError::NonPositiveSpacing);
+        }
+        match self.rotated(slice_angle_deg, Some(line_spacing_m)) {
+            Ok(cells) => Ok(cells),
+            Err(
+                e @ (DecomposeError::Cancelled(_)
+                | DecomposeError::NonFiniteAngle
+                | DecomposeError::EmptyFreeSpace),
+            ) => Err(e),
+            Err(_) => decompose_merged(self.free, slice_angle_deg, line_spacing_m),
+        }
+    }
+
     /// The cells from the prepared rings turned to the slice frame, without
     /// the fallback.
     fn rotated_cells(&self, slice_angle_deg: f64) -> Result<Vec<Polygon<f64>>, DecomposeError> {
+        let cells = self.rotated(slice_angle_deg, None)?;
+        Ok(cells.into_iter().map(|c| c.polygon).collect())
+    }
+
+    /// The cells (joined when `merge_spacing` is given) from the prepared
+    /// rings turned to the slice frame.
+    fn rotated(
+        &self,
+        slice_angle_deg: f64,
+        merge_spacing: Option<f64>,
+    ) -> Result<Vec<MergedCell>, DecomposeError> {
         if !slice_angle_deg.is_finite() {
             return Err(DecomposeError::NonFiniteAngle);
         }
@@ -187,8 +218,7 @@ impl<'a> PreparedFree<'a> {
             eps: self.eps,
             expected: self.expected,
         };
-        let cells = cells_of(swept, None, &slicing)?;
-        Ok(cells.into_iter().map(|c| c.polygon).collect())
+        cells_of(swept, merge_spacing, &slicing)
     }
 }
 
@@ -438,6 +468,45 @@ mod tests {
         assert_eq!(
             prepared.decompose(f64::NAN).err(),
             Some(DecomposeError::NonFiniteAngle)
+        );
+    }
+
+    /// The prepared merged cells are [`decompose_merged`]'s (same count,
+    /// joins and areas up to rounding) where nothing touches.
+    #[test]
+    fn prepared_free_space_merges_as_decompose_merged_does() {
+        let free = mp(vec![Polygon::new(
+            rect(0.0, 0.0, 40.0, 40.0).exterior().clone(),
+            vec![
+                rect(10.0, 10.0, 18.0, 17.0).exterior().clone(),
+                poly(&[(22.0, 21.0), (31.0, 26.0), (25.0, 33.0)])
+                    .exterior()
+                    .clone(),
+            ],
+        )]);
+        let total = free.unsigned_area();
+        let prepared = PreparedFree::new(&free).unwrap();
+        for angle in [0.0, 30.0, 90.0, 135.0] {
+            for spacing in [3.0, 9.0, 50.0] {
+                let fast = prepared.decompose_merged(angle, spacing).unwrap();
+                let direct = decompose_merged(&free, angle, spacing).unwrap();
+                assert_eq!(fast.len(), direct.len(), "angle {angle}, spacing {spacing}");
+                for (a, b) in fast.iter().zip(&direct) {
+                    assert_eq!(a.joined, b.joined, "angle {angle}, spacing {spacing}");
+                    let (a, b) = (a.polygon.unsigned_area(), b.polygon.unsigned_area());
+                    assert!((a - b).abs() < 1e-8 * total, "angle {angle}: {a} vs {b}");
+                }
+                let cells: Vec<Polygon<f64>> = fast.into_iter().map(|c| c.polygon).collect();
+                let sum: f64 = cells.iter().map(|c| c.unsigned_area()).sum();
+                assert!(
+                    (sum - total).abs() < 1e-6 * total,
+                    "angle {angle}: {sum} vs {total}"
+                );
+            }
+        }
+        assert_eq!(
+            prepared.decompose_merged(0.0, 0.0).err(),
+            Some(DecomposeError::NonPositiveSpacing)
         );
     }
 

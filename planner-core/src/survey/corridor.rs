@@ -162,6 +162,7 @@ pub(super) fn lay_corridor(
     let direction = laid.plans.first().map_or(0.0, |p| p.direction_deg);
     Ok(Decomposition {
         slice_angle_deg: direction,
+        joined: vec![false; laid.cells.len()],
         cells: laid.cells,
         plans: laid.plans,
         along_line: true,

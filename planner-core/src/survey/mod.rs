@@ -37,6 +37,7 @@ mod plane_transit;
 mod rally;
 mod request;
 mod result;
+mod slice_angle;
 mod terrain_flight;
 mod terrain_prep;
 
@@ -89,10 +90,20 @@ pub fn plan_survey_over(
     let mut d = if let Some((line, width)) = &prepared.centre {
         corridor::lay_corridor(line, *width, &setup.flyable, flight.geometry.line_spacing_m)?
     } else {
-        cells::decompose_and_cover(
+        let compare = match (params.plane(), setup.homes.first()) {
+            (None, Some(&start)) => slice_angle::Compare::WholePlan {
+                start,
+                obstacles: &setup.obstacles,
+                free: &free,
+                footprint_side_m: flight.geometry.footprint_side_m,
+            },
+            _ => slice_angle::Compare::FewestTurns,
+        };
+        slice_angle::decompose_and_cover(
             &setup.flyable,
             params.slice_angle_deg,
             flight.geometry.line_spacing_m,
+            &compare,
         )?
     };
     let over_dem = match dem {

@@ -220,10 +220,13 @@ fn side_overlaps(lanes: &[LaneShots]) -> Vec<f64> {
 }
 
 /// The side overlap samples of one photo (of a lane placed at `offset`)
-/// with the lanes `near` it, one per side with a photo abeam: of the lanes
-/// on that side (farther across than 5 % of its width, within twice it)
-/// nearest first, those with a photo abeam up to a quarter of its width
-/// beyond the first such.
+/// with the lanes `near` it, at most one per side: the lanes on that side
+/// (farther across than 5 % of its width, within twice it) up to a quarter
+/// of its width beyond the nearest, when one of them has a photo abeam.
+/// The window is anchored at the nearest lane even when that lane does
+/// not reach abeam: a joined cell can wrap around a no-fly zone, and the
+/// lane past the zone is not this photo's neighbour (no sample there, as
+/// at the cell's edge).
 fn shot_side_overlaps(shot: &Shot, offset: f64, near: &[&Placed], dir: [f64; 2]) -> Vec<f64> {
     let across = [-dir[1], dir[0]];
     let Some((lo, hi)) = interval(&shot.quad, shot.centre, across) else {
@@ -240,7 +243,8 @@ fn shot_side_overlaps(shot: &Shot, offset: f64, near: &[&Placed], dir: [f64; 2])
             .collect();
         side.sort_by(|x, y| x.0.total_cmp(&y.0));
         let mut covered: Vec<(f64, f64)> = Vec::new();
-        let mut nearest: Option<f64> = None;
+        let nearest = side.first().map(|s| s.0);
+        let mut abeam = false;
         for (gap, other) in side {
             if nearest.is_some_and(|g| gap > g + 0.25 * width) {
                 break;
@@ -252,14 +256,14 @@ fn shot_side_overlaps(shot: &Shot, offset: f64, near: &[&Placed], dir: [f64; 2])
                 }
                 let q = &other.lane.shots[k].quad;
                 if let Some((s, e)) = interval(q, shot.centre, across) {
-                    nearest.get_or_insert(gap);
+                    abeam = true;
                     if e.min(hi) > s.max(lo) {
                         covered.push((s.max(lo), e.min(hi)));
                     }
                 }
             }
         }
-        if nearest.is_some() {
+        if abeam {
             out.push(ratio(union_length(&mut covered), width));
         }
     }
@@ -435,6 +439,32 @@ mod tests {
         // second.
         assert_eq!(f.side_overlap_min, Some(0.5));
         assert_eq!(f.side_overlap_median, Some(0.6));
+    }
+
+    /// A cell wrapping around a no-fly zone: lanes 0–1 pass west of it,
+    /// lanes 2–4 stop short of it (south), lanes 5–6 pass east. The
+    /// photos of lane 1 beside the zone see lane 5 abeam 180 m away, but
+    /// lane 2 is their neighbour and reaches no further: no side sample
+    /// there (as at the cell's edge), not a sample of 0.
+    #[test]
+    fn a_lane_past_a_no_fly_zone_is_no_neighbour() {
+        let lane = |k: usize, rows: std::ops::Range<usize>| LaneShots {
+            dir: [0.0, 1.0],
+            shots: rows
+                .map(|i| shot(45.0 * k as f64, 20.0 * i as f64, 150.0, 100.0))
+                .collect(),
+        };
+        let lanes: Vec<LaneShots> = (0..7)
+            .map(|k| lane(k, if (2..5).contains(&k) { 0..3 } else { 0..12 }))
+            .collect();
+        let f = measure(&lanes).unwrap();
+        assert_eq!(f.side_overlap_min, Some(0.7), "{f:?}");
+        // Without the short lanes the cell is two strips 180 m apart,
+        // each photo's footprint 150 m wide: no neighbour within reach
+        // that overlaps, and lanes 1 and 5 are each other's nearest.
+        let apart: Vec<LaneShots> = [0, 1, 5, 6].into_iter().map(|k| lane(k, 0..12)).collect();
+        let f = measure(&apart).unwrap();
+        assert_eq!(f.side_overlap_min, Some(0.0), "{f:?}");
     }
 
     #[test]

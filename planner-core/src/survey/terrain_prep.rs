@@ -68,8 +68,11 @@ pub(super) fn follow_terrain(
     d.plans = plans
         .into_iter()
         .map(|p| {
-            if d.along_line || crate::cancel::check().is_err() {
-                return p; // a corridor's lanes; or cancelled, checked again below
+            let joined = d.joined.get(p.cell_index).copied().unwrap_or(false);
+            if d.along_line || joined || crate::cancel::check().is_err() {
+                // A corridor's lanes, or a joined cell's (only they cover
+                // it whole); or cancelled, checked again below.
+                return p;
             }
             let candidates = coverage::plan_cell_candidates_in(
                 p.cell_index,
