@@ -3,7 +3,7 @@
 //! checked against the limits before any pixel is allocated.
 
 use super::geokeys::GeoKeys;
-use super::ifd::{Ifd, tiff_bytes};
+use super::ifd::{Ifd, TiffBytes, tiff_bytes};
 use super::tags::*;
 use super::{invalid, unsupported};
 use crate::terrain::common::{c_atof, check_limits};
@@ -173,7 +173,17 @@ pub(super) fn parse_header(
     page: usize,
     band: Option<usize>,
 ) -> Result<Header, TerrainError> {
-    let file = tiff_bytes(bytes)?;
+    parse_header_of(tiff_bytes(bytes)?, limits, page, band)
+}
+
+/// [`parse_header`] of a file seen through `file` (the whole file, or
+/// the pieces of a file on disk its header occupies).
+pub(super) fn parse_header_of(
+    file: TiffBytes<'_>,
+    limits: &DemLimits,
+    page: usize,
+    band: Option<usize>,
+) -> Result<Header, TerrainError> {
     let (le, big) = (file.le, file.big);
     let offsets = file.ifd_offsets(page.saturating_add(1))?;
     let Some(&at) = offsets.get(page) else {
@@ -209,8 +219,7 @@ pub(super) fn parse_header(
         (sample, spp, planar, sample_index),
         limits,
     )?;
-    let (offsets, byte_counts) =
-        chunk_offsets(&ifd, [width, height], &grid, planes, bytes.len() as u64)?;
+    let (offsets, byte_counts) = chunk_offsets(&ifd, [width, height], &grid, planes, file.len())?;
     let n = grid.count();
     let (transform, crs_code, nodata, vertical_scale) = georeferencing_and_units(&ifd)?;
 

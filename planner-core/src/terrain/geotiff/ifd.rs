@@ -20,19 +20,56 @@ pub(super) struct Entry {
     pub(super) pos: u64,
 }
 
+/// The bytes a [`TiffBytes`] sees: the whole file, or the pieces of a
+/// file on disk that its header, IFDs and tag values occupy (read by
+/// `windows::read_header_pieces`), with the file's length.
+#[derive(Clone, Copy)]
+pub(super) enum Source<'a> {
+    Whole(&'a [u8]),
+    /// (offset, bytes) pieces of a file of `len` bytes.
+    Pieces {
+        pieces: &'a [(u64, Vec<u8>)],
+        len: u64,
+    },
+}
+
 /// A bounds-checked view of a TIFF file's bytes.
 #[derive(Clone, Copy)]
 pub(super) struct TiffBytes<'a> {
-    pub(super) b: &'a [u8],
+    pub(super) b: Source<'a>,
     pub(super) le: bool,
     pub(super) big: bool,
 }
 
 impl<'a> TiffBytes<'a> {
     pub(super) fn slice(&self, off: u64, len: u64) -> Option<&'a [u8]> {
-        let start = usize::try_from(off).ok()?;
-        let end = start.checked_add(usize::try_from(len).ok()?)?;
-        self.b.get(start..end)
+        match self.b {
+            Source::Whole(b) => {
+                let start = usize::try_from(off).ok()?;
+                let end = start.checked_add(usize::try_from(len).ok()?)?;
+                b.get(start..end)
+            }
+            Source::Pieces { pieces, .. } => {
+                let end = off.checked_add(len)?;
+                pieces.iter().find_map(|(at, piece)| {
+                    let piece_end = at.checked_add(piece.len() as u64)?;
+                    if *at <= off && end <= piece_end {
+                        let start = usize::try_from(off - at).ok()?;
+                        piece.get(start..start + usize::try_from(len).ok()?)
+                    } else {
+                        None
+                    }
+                })
+            }
+        }
+    }
+
+    /// The file's length in bytes.
+    pub(super) fn len(&self) -> u64 {
+        match self.b {
+            Source::Whole(b) => b.len() as u64,
+            Source::Pieces { len, .. } => len,
+        }
     }
 
     pub(super) fn arr<const N: usize>(&self, off: u64) -> Option<[u8; N]> {
@@ -99,11 +136,11 @@ impl<'a> TiffBytes<'a> {
             )));
         }
         let table_end = n.checked_mul(entry_len).and_then(|l| l.checked_add(first));
-        if table_end.is_none_or(|end| end > self.b.len() as u64) {
+        if table_end.is_none_or(|end| end > self.len()) {
             return Err(invalid(format!(
                 "the TIFF's image directory ({n} entries at offset {ifd}) runs past the \
                  end of the file ({} bytes): the file is truncated or corrupt",
-                self.b.len()
+                self.len()
             )));
         }
         Ok((n, first, entry_len, inline_len))
@@ -182,7 +219,7 @@ impl<'a> TiffBytes<'a> {
     pub(super) fn ifd_outside(&self, ifd: u64) -> TerrainError {
         invalid(format!(
             "the TIFF's image directory offset ({ifd}) is outside the file ({} bytes)",
-            self.b.len()
+            self.len()
         ))
     }
 
@@ -190,12 +227,24 @@ impl<'a> TiffBytes<'a> {
     pub(super) fn raw(&self, e: &Entry) -> Result<&'a [u8], TerrainError> {
         let len = type_size(e.typ).and_then(|s| s.checked_mul(e.count));
         len.and_then(|len| self.slice(e.data, len)).ok_or_else(|| {
+            let inside = len
+                .and_then(|len| e.data.checked_add(len))
+                .is_some_and(|end| end <= self.len());
+            if inside {
+                // Only pieces of a file on disk are missing a value that
+                // lies inside the file: those too large to read.
+                return invalid(format!(
+                    "the TIFF's {} ({} values) is too large to read",
+                    tag_name(e.tag),
+                    e.count
+                ));
+            }
             invalid(format!(
                 "the TIFF's {} ({} values) lies outside the file ({} bytes): the file is \
                  truncated or corrupt",
                 tag_name(e.tag),
                 e.count,
-                self.b.len()
+                self.len()
             ))
         })
     }
@@ -369,13 +418,44 @@ impl Ifd<'_> {
 pub(super) fn tiff_bytes(bytes: &[u8]) -> Result<TiffBytes<'_>, TerrainError> {
     let le = bytes.first() == Some(&b'I');
     let big = matches!(bytes.get(2..4), Some(b"+\0" | b"\0+"));
-    let file = TiffBytes { b: bytes, le, big };
+    let file = TiffBytes {
+        b: Source::Whole(bytes),
+        le,
+        big,
+    };
+    check_bigtiff(file)?;
+    Ok(file)
+}
+
+/// A bounds-checked view of the `pieces` of a TIFF file of `len` bytes
+/// (the first starting at offset 0 with the header).
+pub(super) fn tiff_pieces(
+    pieces: &[(u64, Vec<u8>)],
+    len: u64,
+) -> Result<TiffBytes<'_>, TerrainError> {
+    let start = pieces
+        .iter()
+        .find(|(at, _)| *at == 0)
+        .map_or(&[][..], |(_, b)| &b[..]);
+    let le = start.first() == Some(&b'I');
+    let big = matches!(start.get(2..4), Some(b"+\0" | b"\0+"));
+    let file = TiffBytes {
+        b: Source::Pieces { pieces, len },
+        le,
+        big,
+    };
+    check_bigtiff(file)?;
+    Ok(file)
+}
+
+fn check_bigtiff(file: TiffBytes<'_>) -> Result<(), TerrainError> {
+    let big = file.big;
     if big && (file.u16(4) != Some(8) || file.u16(6) != Some(0)) {
         return Err(invalid(
             "the BigTIFF header is corrupt (offset size is not 8)",
         ));
     }
-    Ok(file)
+    Ok(())
 }
 
 /// A page of a TIFF (an IFD of its main chain; page n is GDAL's

@@ -27,11 +27,15 @@
 //! SamplesPerPixel samples apart), PlanarConfiguration 2 stores band b's
 //! chunks after all of band b−1's.
 //!
+//! A file on disk can also be read a window at a time ([`GeoTiffWindows`]):
+//! its header pieces read with bounded positioned reads, then only the
+//! strips or tiles a window touches decoded, through the same decoder.
+//!
 //! Writing: see [`write_geotiff`].
 //!
 //! Modules, lowest first: `tags` (numbers and names), `ifd` (reading IFDs),
 //! `geokeys` (CRS from and to GeoKeys), `header` (a page's header, read),
-//! `read` (its pixels), `raster` (what the writer is given), `write_ifd`
+//! `read` (its pixels), `windows` (its pixels a window at a time), `raster` (what the writer is given), `write_ifd`
 //! (the writer's IFDs), `write` (the writer).
 
 mod geokeys;
@@ -40,6 +44,7 @@ mod ifd;
 mod raster;
 mod read;
 mod tags;
+mod windows;
 mod write;
 mod write_ifd;
 
@@ -47,6 +52,7 @@ pub use ifd::TiffPage;
 pub(super) use ifd::pages;
 pub use raster::{Band, BandData, Page, SampleType};
 pub(super) use read::{read, read_band};
+pub use windows::{GeoTiffWindows, MAX_CHUNK_BYTES};
 pub use write::write_geotiff;
 
 use super::TerrainError;

@@ -14,7 +14,7 @@ use super::{invalid, unsupported};
 use crate::terrain::common::resolve_crs;
 use crate::terrain::{Dem, DemFormat, DemLimits, TerrainError};
 
-fn tiff_error(e: TiffError) -> TerrainError {
+pub(super) fn tiff_error(e: TiffError) -> TerrainError {
     match e {
         TiffError::UnsupportedError(u) => {
             unsupported(format!("the TIFF uses an unsupported feature: {u}"))
@@ -278,43 +278,58 @@ fn decode_chunk_row(
 
 /// A copy of the file whose ImageWidth entry says `new_width` (as a LONG).
 fn widen(bytes: &[u8], h: &Header, pos: u64, new_width: u64) -> Result<Vec<u8>, TerrainError> {
-    let value = u32::try_from(new_width).map_err(|_| invalid("the TIFF's tiles are too wide"))?;
+    let entry = width_entry(h, new_width)?;
     let mut b = bytes.to_vec();
-    let mut put = |at: u64, data: &[u8]| -> Option<()> {
-        let at = usize::try_from(at).ok()?;
-        b.get_mut(at..at.checked_add(data.len())?)?
-            .copy_from_slice(data);
-        Some(())
-    };
-    let (typ, count, v) = if h.le {
-        (4u16.to_le_bytes(), 1u64.to_le_bytes(), value.to_le_bytes())
-    } else {
-        (4u16.to_be_bytes(), 1u64.to_be_bytes(), value.to_be_bytes())
-    };
-    let ok = if h.big {
-        put(pos + 2, &typ)
-            .and_then(|_| put(pos + 4, &count))
-            .and_then(|_| put(pos + 12, &[0; 8]))
-            .and_then(|_| put(pos + 12, &v))
-    } else {
-        let count32 = if h.le {
-            1u32.to_le_bytes()
-        } else {
-            1u32.to_be_bytes()
-        };
-        put(pos + 2, &typ)
-            .and_then(|_| put(pos + 4, &count32))
-            .and_then(|_| put(pos + 8, &v))
-    };
-    ok.ok_or_else(|| invalid("the TIFF's ImageWidth entry is outside the file"))?;
+    usize::try_from(pos)
+        .ok()
+        .and_then(|at| b.get_mut(at..at.checked_add(entry.len())?))
+        .ok_or_else(|| invalid("the TIFF's ImageWidth entry is outside the file"))?
+        .copy_from_slice(&entry);
     Ok(b)
+}
+
+/// The bytes of an ImageWidth IFD entry saying `new_width` (as a LONG),
+/// in the file's byte order and entry size: what `widen` writes over the
+/// original entry (the windowed reader lays it over the file as it reads).
+pub(super) fn width_entry(h: &Header, new_width: u64) -> Result<Vec<u8>, TerrainError> {
+    let value = u32::try_from(new_width).map_err(|_| invalid("the TIFF's tiles are too wide"))?;
+    let mut e = Vec::with_capacity(20);
+    let (tag, typ) = (super::tags::IMAGE_WIDTH, 4u16);
+    if h.le {
+        e.extend_from_slice(&tag.to_le_bytes());
+        e.extend_from_slice(&typ.to_le_bytes());
+    } else {
+        e.extend_from_slice(&tag.to_be_bytes());
+        e.extend_from_slice(&typ.to_be_bytes());
+    }
+    match (h.big, h.le) {
+        (true, true) => {
+            e.extend_from_slice(&1u64.to_le_bytes());
+            e.extend_from_slice(&value.to_le_bytes());
+            e.extend_from_slice(&[0; 4]);
+        }
+        (true, false) => {
+            e.extend_from_slice(&1u64.to_be_bytes());
+            e.extend_from_slice(&value.to_be_bytes());
+            e.extend_from_slice(&[0; 4]);
+        }
+        (false, true) => {
+            e.extend_from_slice(&1u32.to_le_bytes());
+            e.extend_from_slice(&value.to_le_bytes());
+        }
+        (false, false) => {
+            e.extend_from_slice(&1u32.to_be_bytes());
+            e.extend_from_slice(&value.to_be_bytes());
+        }
+    }
+    Ok(e)
 }
 
 /// Copy sample `sample` of every pixel of one decoded chunk (`cw`×`ch`
 /// pixels of `spp` interleaved samples, rows `src_width` pixels apart)
 /// into the output.
 #[allow(clippy::too_many_arguments)]
-fn put_chunk(
+pub(super) fn put_chunk(
     res: DecodingResult,
     white_is_zero: bool,
     nd: NoDataMatch,
@@ -394,4 +409,4 @@ fn put_chunk(
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;

@@ -8,7 +8,7 @@ use tiff::tags::{Predictor, Tag};
 
 /// A tag value for the hand-made TIFFs.
 #[derive(Clone, Debug)]
-enum V {
+pub(in crate::terrain::geotiff) enum V {
     Short(Vec<u16>),
     Long(Vec<u32>),
     Double(Vec<f64>),
@@ -20,8 +20,8 @@ enum V {
 /// Writes a one-IFD TIFF by hand: header, chunks, tag data, IFD.
 /// StripOffsets/TileOffsets and the byte counts are added from `chunks`
 /// (tiled if `tiled`).
-struct Builder {
-    le: bool,
+pub(in crate::terrain::geotiff) struct Builder {
+    pub(in crate::terrain::geotiff) le: bool,
     big: bool,
     tags: Vec<(u16, V)>,
     chunks: Vec<Vec<u8>>,
@@ -29,7 +29,7 @@ struct Builder {
 }
 
 impl Builder {
-    fn new() -> Builder {
+    pub(in crate::terrain::geotiff) fn new() -> Builder {
         Builder {
             le: true,
             big: false,
@@ -39,14 +39,19 @@ impl Builder {
         }
     }
 
-    fn tag(mut self, tag: u16, v: V) -> Builder {
+    pub(in crate::terrain::geotiff) fn tag(mut self, tag: u16, v: V) -> Builder {
         self.tags.retain(|(t, _)| *t != tag);
         self.tags.push((tag, v));
         self
     }
 
     /// A north-up single-band image with the usual tags.
-    fn image(width: u32, height: u32, format: u16, bits: u16) -> Builder {
+    pub(in crate::terrain::geotiff) fn image(
+        width: u32,
+        height: u32,
+        format: u16,
+        bits: u16,
+    ) -> Builder {
         Builder::new()
             .tag(IMAGE_WIDTH, V::Long(vec![width]))
             .tag(IMAGE_LENGTH, V::Long(vec![height]))
@@ -66,13 +71,22 @@ impl Builder {
             )
     }
 
-    fn strips(mut self, rows_per_strip: u32, chunks: Vec<Vec<u8>>) -> Builder {
+    pub(in crate::terrain::geotiff) fn strips(
+        mut self,
+        rows_per_strip: u32,
+        chunks: Vec<Vec<u8>>,
+    ) -> Builder {
         self.chunks = chunks;
         self.tiled = false;
         self.tag(ROWS_PER_STRIP, V::Long(vec![rows_per_strip]))
     }
 
-    fn tiles(mut self, tw: u32, th: u32, chunks: Vec<Vec<u8>>) -> Builder {
+    pub(in crate::terrain::geotiff) fn tiles(
+        mut self,
+        tw: u32,
+        th: u32,
+        chunks: Vec<Vec<u8>>,
+    ) -> Builder {
         self.chunks = chunks;
         self.tiled = true;
         self.tag(TILE_WIDTH, V::Long(vec![tw]))
@@ -127,7 +141,7 @@ impl Builder {
         }
     }
 
-    fn build(&self) -> Vec<u8> {
+    pub(in crate::terrain::geotiff) fn build(&self) -> Vec<u8> {
         let mut out = Vec::new();
         if self.le {
             out.extend(b"II")
@@ -219,7 +233,7 @@ impl Builder {
     }
 }
 
-fn geokeys(keys: &[(u16, u16)]) -> Vec<u16> {
+pub(in crate::terrain::geotiff) fn geokeys(keys: &[(u16, u16)]) -> Vec<u16> {
     let mut v = vec![1, 1, 0, keys.len() as u16];
     for (k, val) in keys {
         v.extend([*k, 0, 1, *val]);
@@ -227,7 +241,7 @@ fn geokeys(keys: &[(u16, u16)]) -> Vec<u16> {
     v
 }
 
-fn i16_le(v: &[i16]) -> Vec<u8> {
+pub(in crate::terrain::geotiff) fn i16_le(v: &[i16]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
@@ -556,7 +570,11 @@ fn other_sample_types() {
 }
 
 /// A GeoTIFF written by the tiff crate's encoder (compressed strips).
-fn encoded(compression: Compression, predictor: Predictor, big: bool) -> Vec<u8> {
+pub(in crate::terrain::geotiff) fn encoded(
+    compression: Compression,
+    predictor: Predictor,
+    big: bool,
+) -> Vec<u8> {
     let (w, h) = (37u32, 23u32);
     let data: Vec<i16> = (0..w * h).map(|i| ((i * 37) % 1000) as i16 - 300).collect();
     let mut cur = std::io::Cursor::new(Vec::new());
@@ -910,7 +928,7 @@ fn expected(b: usize, x: usize, y: usize) -> Option<f64> {
 }
 
 #[derive(Clone, Copy, Debug)]
-enum Chunks {
+pub(in crate::terrain::geotiff) enum Chunks {
     Strips(usize),
     Tiles(usize, usize),
 }
@@ -919,7 +937,7 @@ enum Chunks {
 /// interleaved samples each (`value(x, y, s)`), with a predictor
 /// (as libtiff's horDiff32 / fpDiff on a little-endian host) and a
 /// compression.
-fn encode_f32_chunk(
+pub(in crate::terrain::geotiff) fn encode_f32_chunk(
     rows: usize,
     row_px: usize,
     spp: usize,
@@ -972,7 +990,7 @@ fn encode_f32_chunk(
 
 /// A `w`×`h` GeoTIFF of `spp` Float32 bands (`band_value`) with
 /// GDAL_NODATA -9999, interleaved per pixel or in separate planes.
-fn multiband_f32(
+pub(in crate::terrain::geotiff) fn multiband_f32(
     (w, h, spp): (usize, usize, usize),
     planar: bool,
     chunks: Chunks,
