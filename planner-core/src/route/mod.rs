@@ -7,6 +7,12 @@
 //!   change cost (Koenig & Likhachev 2002, optimised version), its first
 //!   search guided by A*'s costs (`landmark`), 21 bytes per cell including
 //!   the costs;
+//! - [`coarse_to_fine()`]: routes on maps too big for A*'s arrays: A* on
+//!   block minima places a corridor, A* inside it reads the costs on
+//!   demand through an LRU of tiles (`tile_cache`, from a [`CostSource`])
+//!   with state only for the corridor blocks it touches
+//!   (`corridor_search`), and a coarse lower bound (`coarse_bound`)
+//!   proves the route optimal for the whole grid or widens the corridor;
 //! - [`smooth`]: post-smoothing of a cell path into a few waypoints;
 //! - [`changes`]: the replanning rules, how blocked areas and cost
 //!   changes change cells and how a D* Lite search is repaired for them;
@@ -35,8 +41,14 @@
 
 mod arc_model;
 pub mod astar;
+mod block_minima;
 mod bucket_queue;
 pub mod changes;
+mod coarse_bound;
+mod coarse_route;
+pub mod coarse_to_fine;
+mod corridor_search;
+pub mod cost_source;
 mod dist_array;
 pub mod dstar_lite;
 mod landmark;
@@ -47,10 +59,16 @@ mod pages;
 pub mod smooth;
 #[cfg(test)]
 mod testing;
+mod tile_cache;
 mod tiles;
 
 pub use astar::astar;
 pub use changes::{BlockedEnd, CellChanges, ChangeError, ChangedArea};
+pub use coarse_to_fine::{
+    BigRouteError, CoarseToFine, CoarseToFineOptions, CoarseToFineStats, coarse_to_fine,
+    coarse_to_fine_route,
+};
+pub use cost_source::{CostSource, CostSourceError, WindowCosts};
 pub use dstar_lite::DStarLite;
 pub use map_route::{MapRoute, RoutePoint};
 pub use on_map::{Endpoint, MapRouteError, Position, RouteMap};
