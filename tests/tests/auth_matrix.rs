@@ -120,12 +120,21 @@ fn cases() -> Vec<Case> {
         ),
         c("GET", "/api/v1/projects/{id}", 0, S404, OK, OK),
         c("GET", "/api/v1/projects/{id}/members", 0, S404, OK, OK),
+        c("GET", "/api/v1/vehicle-links", 0, OK, OK, OK),
         // Writes.
         c("POST", "/api/v1/surveys", 1, S422, S403, OK),
         c("POST", "/api/v1/dems", 1, S422, S403, OK),
         c("POST", "/api/v1/costmaps", 1, S422, S403, OK),
         c("POST", "/api/v1/costmaps/{id}/routes", 1, S404, S403, OK),
         c("POST", "/api/v1/routes/{id}/replan", 1, S404, S403, OK),
+        c(
+            "POST",
+            "/api/v1/surveys/{id}/uavs/{uav}/upload",
+            1,
+            S404,
+            S403,
+            OK,
+        ),
         c("POST", "/api/v1/projects", 1, OK, OK, OK),
         c("POST", "/api/v1/projects/{id}/members", 1, S404, S403, OK),
         c("POST", "/api/v1/tokens", 1, OK, OK, OK),
@@ -439,6 +448,9 @@ impl Fixture {
             ("POST", "/api/v1/projects/{id}/members") => {
                 json_body(json!({"user": self.new_member, "role": "viewer"}))
             }
+            ("POST", "/api/v1/surveys/{id}/uavs/{uav}/upload") => {
+                json_body(json!({"to": "udpout:127.0.0.1:9", "timeout_ms": 10, "retries": 0}))
+            }
             ("POST", "/api/v1/tokens") => json_body(json!({"name": "matrix"})),
             ("POST", "/api/v1/users") => {
                 json_body(json!({"name": unique_user_name("made"), "password": "a long password"}))
@@ -487,7 +499,12 @@ fn documented_operations(server: &Server) -> Vec<(String, String)> {
 #[test]
 fn every_documented_operation_checks_credentials_membership_and_role() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(&dir.path().join("data"), &[]);
+    // Vehicle links on, to a port where no vehicle answers: the owner's
+    // upload starts (200, an event stream ending in `failed`).
+    let server = Server::start(
+        &dir.path().join("data"),
+        &["--vehicle-links", "udpout:127.0.0.1:9"],
+    );
     let (viewer_name, viewer_token) = make_user(&server, "viewer");
     let (_, stranger_token) = make_user(&server, "stranger");
     let fx = fixture(&server, &viewer_name);
