@@ -46,6 +46,40 @@ pub fn resample_factor(res_m: [f64; 2], target_m: f64) -> [usize; 2] {
 /// than half its cells valid is unknown). Rows and columns left over at
 /// the right and bottom edges, less than a block, are dropped.
 pub fn work_grid(dem: Cow<'_, Dem>, factor: [usize; 2]) -> WorkGrid {
+    let geometry = work_geometry(&dem, factor);
+    let z = if factor == [1, 1] {
+        dem.into_owned().values
+    } else {
+        average_blocks(
+            &dem.values,
+            dem.width,
+            geometry.width,
+            geometry.height,
+            factor,
+        )
+    };
+    WorkGrid {
+        width: geometry.width,
+        height: geometry.height,
+        z,
+        transform: geometry.transform,
+        row_size_m: geometry.row_size_m,
+        factor,
+    }
+}
+
+/// The working grid's size, georeferencing and row sizes, without its
+/// heights: what a tiled run needs before reading any tile. `dem` needs
+/// no values (only its size, transform and CRS are read).
+pub struct WorkGeometry {
+    pub width: usize,
+    pub height: usize,
+    pub transform: GeoTransform,
+    pub row_size_m: Vec<[f64; 2]>,
+}
+
+/// The [`WorkGeometry`] of `dem` resampled by `factor`.
+pub fn work_geometry(dem: &Dem, factor: [usize; 2]) -> WorkGeometry {
     let [fx, fy] = factor;
     let t = dem.transform;
     let width = dem.width / fx;
@@ -68,41 +102,49 @@ pub fn work_grid(dem: Cow<'_, Dem>, factor: [usize; 2]) -> WorkGrid {
             })
         })
         .collect();
-    let z = if fx == 1 && fy == 1 {
-        dem.into_owned().values
-    } else {
-        let mut z = vec![f64::NAN; width * height];
-        let need = (fx * fy).div_ceil(2);
-        let mut sums = vec![(0.0f64, 0usize); width];
-        for (r, out) in z.chunks_mut(width.max(1)).enumerate().take(height) {
-            sums.fill((0.0, 0));
-            for src_row in r * fy..(r + 1) * fy {
-                let row = &dem.values[src_row * dem.width..src_row * dem.width + width * fx];
-                for (c, block) in row.chunks_exact(fx).enumerate() {
-                    for &v in block {
-                        if !v.is_nan() {
-                            sums[c].0 += v;
-                            sums[c].1 += 1;
-                        }
+    WorkGeometry {
+        width,
+        height,
+        transform,
+        row_size_m,
+    }
+}
+
+/// `width` × `height` working cells, each the mean of the valid heights
+/// of its `fx`×`fy` block of `values` (row-major, `src_width` cells wide,
+/// the first block at its top-left); a block with fewer than half its
+/// cells valid is unknown. A window of a DEM whose corner is on a block
+/// corner gives the same bits as the whole DEM there.
+pub fn average_blocks(
+    values: &[f64],
+    src_width: usize,
+    width: usize,
+    height: usize,
+    [fx, fy]: [usize; 2],
+) -> Vec<f64> {
+    let mut z = vec![f64::NAN; width * height];
+    let need = (fx * fy).div_ceil(2);
+    let mut sums = vec![(0.0f64, 0usize); width];
+    for (r, out) in z.chunks_mut(width.max(1)).enumerate().take(height) {
+        sums.fill((0.0, 0));
+        for src_row in r * fy..(r + 1) * fy {
+            let row = &values[src_row * src_width..src_row * src_width + width * fx];
+            for (c, block) in row.chunks_exact(fx).enumerate() {
+                for &v in block {
+                    if !v.is_nan() {
+                        sums[c].0 += v;
+                        sums[c].1 += 1;
                     }
                 }
             }
-            for (o, &(s, n)) in out.iter_mut().zip(&sums) {
-                if n >= need {
-                    *o = s / n as f64;
-                }
+        }
+        for (o, &(s, n)) in out.iter_mut().zip(&sums) {
+            if n >= need {
+                *o = s / n as f64;
             }
         }
-        z
-    };
-    WorkGrid {
-        width,
-        height,
-        z,
-        transform,
-        row_size_m,
-        factor,
     }
+    z
 }
 
 #[cfg(test)]

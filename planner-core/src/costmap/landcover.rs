@@ -20,6 +20,22 @@ pub fn landcover_costs(
     transform: &GeoTransform,
     grid_epsg: u32,
 ) -> Result<Vec<f32>, CostmapError> {
+    landcover_costs_window(raster, table, [0, 0], width, height, transform, grid_epsg)
+}
+
+/// [`landcover_costs`] of the `width`×`height` window whose top-left cell
+/// is `[col0, row0]` of the grid georeferenced by `transform`: cell
+/// centres are computed from the grid's own transform, so a window gives
+/// the same bits as the whole grid there.
+pub fn landcover_costs_window(
+    raster: &Dem,
+    table: &LandcoverOptions,
+    [col0, row0]: [usize; 2],
+    width: usize,
+    height: usize,
+    transform: &GeoTransform,
+    grid_epsg: u32,
+) -> Result<Vec<f32>, CostmapError> {
     // Fail early, with the reason, if the CRSs cannot be related.
     TerrainSampler::new(raster, grid_epsg).map_err(|e| {
         CostmapError::invalid(
@@ -48,7 +64,7 @@ pub fn landcover_costs(
                 return;
             };
             for (c, o) in row.iter_mut().enumerate() {
-                let (x, y) = transform.apply(c as f64 + 0.5, r as f64 + 0.5);
+                let (x, y) = transform.apply((col0 + c) as f64 + 0.5, (row0 + r) as f64 + 0.5);
                 let Some((lx, ly)) = sampler.to_dem(Coord { x, y }) else {
                     continue;
                 };

@@ -18,26 +18,34 @@
 //! and [`preview`] (PNG + legend) and [`stats`] for the results.
 
 mod bands;
+pub mod class_store;
 pub mod distance;
 pub mod grid;
+pub mod halo;
 pub mod inflate;
 pub mod landcover;
 pub mod normals;
 pub mod params;
 pub mod pipeline;
 pub mod preview;
+pub mod preview_tiles;
 pub mod progress;
+pub mod region_join;
 pub mod regions;
 pub mod smooth;
 pub mod stats;
 pub mod steps;
+pub mod tiled;
 pub mod vehicle;
 
 pub use distance::distance_transform;
 pub use pipeline::build_costmap;
-pub use preview::{legend_svg, preview_png};
+pub use preview::{legend_svg, legend_svg_of, preview_png};
 pub use progress::{Progress, Stage};
 pub use stats::{CostHistogram, CostmapStats};
+pub use tiled::{
+    CostmapTile, TileSink, TiledCostmap, TiledError, TiledOptions, build_costmap_tiled,
+};
 pub use vehicle::{Vehicle, VehiclePreset, VehicleSpec};
 
 use serde::{Deserialize, Serialize};

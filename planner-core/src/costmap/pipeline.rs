@@ -130,7 +130,7 @@ fn run(
 
 /// The options' own checks, then those against the DEM, and a land-cover
 /// raster when the options ask for one; every fault at once.
-fn check_request(
+pub(super) fn check_request(
     dem: &Dem,
     vehicle: &Vehicle,
     options: &CostmapOptions,
@@ -155,18 +155,18 @@ fn check_request(
 
 /// The per-cell grids of the working grid that classes and costs are
 /// made of (row-major).
-struct CellLayers {
+pub(super) struct CellLayers {
     /// Step height (SPEC §4.2 step 4), when kept as a layer.
-    step: Option<Vec<f32>>,
+    pub step: Option<Vec<f32>>,
     /// Depth below the local plane, and the deepest allowed (negative
     /// steps, optional).
-    negative: Option<(Vec<f32>, f64)>,
+    pub negative: Option<(Vec<f32>, f64)>,
     /// |n_z| of the surface normal (step 2).
-    zcomp: Vec<f32>,
+    pub zcomp: Vec<f32>,
     /// Plane-fit residual (optional).
-    roughness: Option<Vec<f32>>,
+    pub roughness: Option<Vec<f32>>,
     /// Land-cover class costs, `INFINITY` where lethal (optional).
-    landcover_cost: Option<Vec<f32>>,
+    pub landcover_cost: Option<Vec<f32>>,
 }
 
 /// SPEC §4.2 step 1: the working grid, DEM cells averaged in blocks of the
@@ -182,7 +182,20 @@ fn resample(
 ) -> Result<WorkGrid, CostmapError> {
     Ticker::new(progress, Stage::Resample, 1).check()?;
     let grid = work_grid(dem, params.resample_factor);
-    coarse_warnings(params, vehicle, grid.centre_size_m(), warnings);
+    resample_warnings(vehicle, options, params, grid.centre_size_m(), warnings);
+    Ok(grid)
+}
+
+/// The warnings of step 1: a grid too coarse for the vehicle (cells of
+/// `centre_m` at its centre), a resolution taken other than asked.
+pub(super) fn resample_warnings(
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    params: &ResolvedParams,
+    centre_m: [f64; 2],
+    warnings: &mut Vec<String>,
+) {
+    coarse_warnings(params, vehicle, centre_m, warnings);
     if let Some(r) = options.resolution_m {
         let [ax, ay] = params.resolution_m;
         if (ax - r).abs() > 0.01 * r || (ay - r).abs() > 0.01 * r {
@@ -193,7 +206,6 @@ fn resample(
             ));
         }
     }
-    Ok(grid)
 }
 
 /// SPEC §4.2 steps 2–4 and the union of step 5 for the step and slope
@@ -205,7 +217,36 @@ fn surface_and_classes(
     params: &ResolvedParams,
     progress: &dyn Progress,
 ) -> Result<Surface, CostmapError> {
-    let [sx, sy] = grid.centre_size_m();
+    let heights = Heights {
+        z: &grid.z,
+        width: grid.width,
+        height: grid.height,
+        row_size_m: &grid.row_size_m,
+        centre_m: grid.centre_size_m(),
+    };
+    surface_of(&heights, vehicle, options, params, progress)
+}
+
+/// Heights of the working grid or of a window of it: `row_size_m` holds
+/// the window's rows, `centre_m` the whole grid's centre cell (what the
+/// kernels in cells are derived from).
+pub(super) struct Heights<'a> {
+    pub z: &'a [f64],
+    pub width: usize,
+    pub height: usize,
+    pub row_size_m: &'a [[f64; 2]],
+    pub centre_m: [f64; 2],
+}
+
+/// [`surface_and_classes`] of any heights.
+pub(super) fn surface_of(
+    grid: &Heights<'_>,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    params: &ResolvedParams,
+    progress: &dyn Progress,
+) -> Result<Surface, CostmapError> {
+    let [sx, sy] = grid.centre_m;
     // Stage::Steps is reported as begun; the pass ticks as the normals.
     Ticker::new(progress, Stage::Steps, 1).check()?;
     let ticker = Ticker::new(progress, Stage::Normals, grid.height);
@@ -215,10 +256,10 @@ fn surface_and_classes(
         3.0,
     );
     let normals = NormalsJob::new(
-        &grid.z,
+        grid.z,
         grid.width,
         grid.height,
-        &grid.row_size_m,
+        grid.row_size_m,
         params.pca_radius_m,
         smoother.as_ref(),
     );
@@ -239,6 +280,23 @@ fn negative_steps(
     options: &CostmapOptions,
     progress: &dyn Progress,
 ) -> Result<Option<(Vec<f32>, f64)>, CostmapError> {
+    let heights = Heights {
+        z: &grid.z,
+        width: grid.width,
+        height: grid.height,
+        row_size_m: &grid.row_size_m,
+        centre_m: grid.centre_size_m(),
+    };
+    negative_steps_of(&heights, vehicle, options, progress)
+}
+
+/// [`negative_steps`] of any heights.
+pub(super) fn negative_steps_of(
+    grid: &Heights<'_>,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    progress: &dyn Progress,
+) -> Result<Option<(Vec<f32>, f64)>, CostmapError> {
     let Some(n) = &options.negative_steps else {
         return Ok(None);
     };
@@ -246,7 +304,7 @@ fn negative_steps(
     let ticker = Ticker::new(progress, Stage::Layers, h);
     let r = negative_radius(vehicle, n.radius_m);
     Ok(Some((
-        depth_below_plane(&grid.z, w, h, &grid.row_size_m, r, &ticker)?,
+        depth_below_plane(grid.z, w, h, grid.row_size_m, r, &ticker)?,
         n.max_depth_m.unwrap_or(vehicle.max_step_m),
     )))
 }
@@ -255,7 +313,7 @@ fn negative_steps(
 /// deeper than allowed are steps, lethal land cover an "other" obstacle
 /// where the cell would be traversable (precedence step > slope > other;
 /// unknown cells stay unknown).
-fn add_layer_obstacles(class: &mut [u8], layers: &CellLayers) {
+pub(super) fn add_layer_obstacles(class: &mut [u8], layers: &CellLayers) {
     let (unknown, trav) = (Class::Unknown as u8, Class::Traversable as u8);
     if let Some((depth, max)) = &layers.negative {
         class
@@ -341,7 +399,7 @@ fn inflate(
 /// inflation (plus the optional costs) on traversable cells, NaN
 /// elsewhere; in place of the inflation, which is also returned when kept
 /// as a layer.
-fn costs(
+pub(super) fn costs(
     inflated: Vec<f32>,
     class: &[u8],
     layers: &CellLayers,
@@ -405,6 +463,11 @@ fn statistics(
     vehicle: &Vehicle,
     options: &CostmapOptions,
 ) -> CostmapStats {
+    costmap_stats(w, h, cost, class, sx * sy, cost_range(vehicle, options))
+}
+
+/// The range of costs the weights allow: [w_slope, the highest].
+pub(super) fn cost_range(vehicle: &Vehicle, options: &CostmapOptions) -> [f64; 2] {
     let mut cost_hi = vehicle.w_infl + vehicle.w_slope * SLOPE_COST_MAX;
     if let Some(o) = &options.roughness {
         cost_hi += o.weight;
@@ -420,11 +483,11 @@ fn statistics(
         );
         cost_hi += most;
     }
-    costmap_stats(w, h, cost, class, sx * sy, [vehicle.w_slope, cost_hi])
+    [vehicle.w_slope, cost_hi]
 }
 
 /// The per-layer rasters asked for, in [`Layer::ALL`] order.
-fn layer_rasters(
+pub(super) fn layer_rasters(
     layers: &CellLayers,
     inflation_layer: Option<Vec<f32>>,
     options: &CostmapOptions,

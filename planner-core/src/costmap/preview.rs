@@ -43,9 +43,7 @@ fn priority(class: Class) -> u8 {
 /// RGBA PNG of `map`, at most `max_side` pixels on its longer side (never
 /// enlarged).
 pub fn preview_png(map: &Costmap, max_side: usize) -> Vec<u8> {
-    let scale = (map.width.max(map.height) as f64 / max_side.max(1) as f64).max(1.0);
-    let pw = ((map.width as f64 / scale).round() as usize).max(1);
-    let ph = ((map.height as f64 / scale).round() as usize).max(1);
+    let (pw, ph) = preview_size(map.width, map.height, max_side);
     let range = map.stats.cost_range;
     let mut pixels = vec![0u8; pw * ph * 4];
     // Pixel rows in parallel: each reads its own band of the map.
@@ -71,18 +69,42 @@ pub fn preview_png(map: &Costmap, max_side: usize) -> Vec<u8> {
                         }
                     }
                 }
-                let rgba = if worst != Class::Unknown {
-                    let [r, g, b] = class_colour(worst);
-                    [r, g, b, 255]
-                } else if n > 0 {
-                    let v = grey(sum / n as f64, range);
-                    [v, v, v, 255]
-                } else {
-                    [0, 0, 0, 0]
-                };
-                line[px * 4..px * 4 + 4].copy_from_slice(&rgba);
+                line[px * 4..px * 4 + 4].copy_from_slice(&pixel(worst, sum, n, range));
             }
         });
+    encode_png(&pixels, pw, ph)
+}
+
+/// The preview's size for a `width`×`height` map: at most `max_side`
+/// pixels on its longer side, never enlarged.
+pub(super) fn preview_size(width: usize, height: usize, max_side: usize) -> (usize, usize) {
+    let scale = (width.max(height) as f64 / max_side.max(1) as f64).max(1.0);
+    let pw = ((width as f64 / scale).round() as usize).max(1);
+    let ph = ((height as f64 / scale).round() as usize).max(1);
+    (pw, ph)
+}
+
+/// A pixel's colour: the worst obstacle of its block, else the grey of
+/// its mean traversable cost (`sum` / `n`), else transparent.
+pub(super) fn pixel(worst: Class, sum: f64, n: usize, range: [f64; 2]) -> [u8; 4] {
+    if worst != Class::Unknown {
+        let [r, g, b] = class_colour(worst);
+        [r, g, b, 255]
+    } else if n > 0 {
+        let v = grey(sum / n as f64, range);
+        [v, v, v, 255]
+    } else {
+        [0, 0, 0, 0]
+    }
+}
+
+/// Which obstacle a block shows: the one of higher priority.
+pub(super) fn worse(a: Class, b: Class) -> Class {
+    if priority(b) > priority(a) { b } else { a }
+}
+
+/// RGBA pixels as a PNG.
+pub(super) fn encode_png(pixels: &[u8], pw: usize, ph: usize) -> Vec<u8> {
     let mut buf = Vec::new();
     {
         // Writing to memory only fails on sizes beyond u32, excluded above.
@@ -91,9 +113,7 @@ pub fn preview_png(map: &Costmap, max_side: usize) -> Vec<u8> {
         enc.set_depth(png::BitDepth::Eight);
         enc.set_compression(png::Compression::Fast);
         let mut writer = enc.write_header().expect("PNG header in memory");
-        writer
-            .write_image_data(&pixels)
-            .expect("PNG data in memory");
+        writer.write_image_data(pixels).expect("PNG data in memory");
         writer.finish().expect("PNG end in memory");
     }
     buf
@@ -102,8 +122,13 @@ pub fn preview_png(map: &Costmap, max_side: usize) -> Vec<u8> {
 /// An SVG legend for [`preview_png`]: the cost ramp with its range, and
 /// each obstacle class with its share of the map.
 pub fn legend_svg(map: &Costmap) -> String {
-    let [lo, hi] = map.stats.cost_range;
-    let f = &map.stats.class_fractions;
+    legend_svg_of(&map.stats, &map.vehicle.name)
+}
+
+/// [`legend_svg`] from a costmap's statistics and its vehicle's name.
+pub fn legend_svg_of(stats: &super::CostmapStats, vehicle_name: &str) -> String {
+    let [lo, hi] = stats.cost_range;
+    let f = &stats.class_fractions;
     let rows = [
         (Class::Slope, "slope > max", f.slope),
         (Class::Step, "step > max", f.step),
@@ -121,7 +146,7 @@ pub fn legend_svg(map: &Costmap) -> String {
          <rect x=\"8\" y=\"24\" width=\"204\" height=\"14\" fill=\"url(#ramp)\"/>\n\
          <text x=\"8\" y=\"52\">{lo:.1}</text><text x=\"212\" y=\"52\" text-anchor=\"end\">{hi:.1}</text>\n",
         h = 74 + 20 * rows.len() + 20,
-        vehicle = xml_escape(&map.vehicle.name),
+        vehicle = xml_escape(vehicle_name),
     );
     let mut y = 70;
     for (class, label, frac) in rows {

@@ -78,38 +78,103 @@ pub fn costmap_stats(
     cell_area_m2: f64,
     cost_range: [f64; 2],
 ) -> CostmapStats {
-    let [lo, hi] = cost_range;
-    let span = (hi - lo).max(f64::MIN_POSITIVE);
-    let bins_per_cost = HISTOGRAM_BINS as f64 / span;
+    let bins = Bins::new(cost_range);
     // One parallel pass: class counts, and min / max / sum / bins of the
     // traversable costs.
-    let (counts, bins, min, max, sum, n) = cost
+    let tally = cost
         .par_chunks(CHUNK)
         .zip(class.par_chunks(CHUNK))
         .map(|(costs, classes)| {
             let mut t = empty_tally();
-            for (&c, &k) in costs.iter().zip(classes) {
-                t.0[usize::from(k.min(5))] += 1;
-                if k == Class::Traversable as u8 && c.is_finite() {
-                    let c = f64::from(c);
-                    t.2 = t.2.min(c);
-                    t.3 = t.3.max(c);
-                    t.4 += c;
-                    t.5 += 1;
-                    // Truncation is floor here: below 0 is bin 0 anyway.
-                    let b = (c - lo) * bins_per_cost;
-                    let bin = if b > 0.0 { b as usize } else { 0 };
-                    t.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
-                }
-            }
+            bins.add(&mut t, costs, classes);
             t
         })
-        .reduce(empty_tally, |mut a, b| {
-            a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
-            a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
-            (a.0, a.1, a.2.min(b.2), a.3.max(b.3), a.4 + b.4, a.5 + b.5)
-        });
-    let cells = class.len() as u64;
+        .reduce(empty_tally, merge);
+    finish(tally, width, height, cell_area_m2, cost_range)
+}
+
+/// Where a cost falls in the histogram.
+#[derive(Clone, Copy)]
+struct Bins {
+    lo: f64,
+    per_cost: f64,
+}
+
+impl Bins {
+    fn new([lo, hi]: [f64; 2]) -> Bins {
+        let span = (hi - lo).max(f64::MIN_POSITIVE);
+        Bins {
+            lo,
+            per_cost: HISTOGRAM_BINS as f64 / span,
+        }
+    }
+
+    fn add(self, t: &mut Tally, costs: &[f32], classes: &[u8]) {
+        for (&c, &k) in costs.iter().zip(classes) {
+            t.0[usize::from(k.min(5))] += 1;
+            if k == Class::Traversable as u8 && c.is_finite() {
+                let c = f64::from(c);
+                t.2 = t.2.min(c);
+                t.3 = t.3.max(c);
+                t.4 += c;
+                t.5 += 1;
+                // Truncation is floor here: below 0 is bin 0 anyway.
+                let b = (c - self.lo) * self.per_cost;
+                let bin = if b > 0.0 { b as usize } else { 0 };
+                t.1[bin.min(HISTOGRAM_BINS - 1)] += 1;
+            }
+        }
+    }
+}
+
+fn merge(mut a: Tally, b: Tally) -> Tally {
+    a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
+    a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
+    (a.0, a.1, a.2.min(b.2), a.3.max(b.3), a.4 + b.4, a.5 + b.5)
+}
+
+/// Statistics gathered a piece of the map at a time (a tiled run): the
+/// same counts, extremes and histogram as [`costmap_stats`]; the mean
+/// differs from it only by the order its sum was added in.
+pub struct StatsTally {
+    bins: Bins,
+    tally: Tally,
+}
+
+impl StatsTally {
+    pub fn new(cost_range: [f64; 2]) -> StatsTally {
+        StatsTally {
+            bins: Bins::new(cost_range),
+            tally: empty_tally(),
+        }
+    }
+
+    /// Adds the cells of a piece (`cost` and `class` of the same cells).
+    pub fn add(&mut self, cost: &[f32], class: &[u8]) {
+        self.bins.add(&mut self.tally, cost, class);
+    }
+
+    pub fn finish(
+        self,
+        width: usize,
+        height: usize,
+        cell_area_m2: f64,
+        cost_range: [f64; 2],
+    ) -> CostmapStats {
+        finish(self.tally, width, height, cell_area_m2, cost_range)
+    }
+}
+
+fn finish(
+    (counts, bins, min, max, sum, n): Tally,
+    width: usize,
+    height: usize,
+    cell_area_m2: f64,
+    cost_range: [f64; 2],
+) -> CostmapStats {
+    let [lo, hi] = cost_range;
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let cells: u64 = counts.iter().sum();
     let frac = |c: Class| {
         if cells == 0 {
             0.0
