@@ -13,6 +13,7 @@ import { formatArea, formatDegrees, formatDuration, formatLength, formatNumber, 
 import { ImportError, parsePolygons, ringCrossesItself, utmArea, type PolygonRings } from './geo-import';
 import type { MapView } from './map';
 import { SURVEY_FIELDS } from './problems';
+import { VehicleUpload } from './vehicle-upload';
 import { cellOverlaps, footprints, lowOverlapCells, requestedOverlaps, shortfallText, uavPhotosUrl } from './photos';
 import { renderProfileChart, sortieProfile } from './profile-chart';
 import type { DemSelection } from './state';
@@ -44,6 +45,8 @@ export class SurveyPanel {
   private lastPreset: CameraPreset | null = null;
   /** Request members of a reopened survey the form has no control for. */
   private extra: Record<string, unknown> = {};
+  /** "Send to vehicle" buttons (vehicle-upload.ts). */
+  private readonly vehicles = new VehicleUpload();
 
   constructor(
     private readonly map: MapView,
@@ -527,7 +530,7 @@ export class SurveyPanel {
         const shown = u.sorties.length > 1 ? ` (sortie ${so.number}, ${formatDuration(so.stats.flight_time_s)})` : '';
         return h(
           'li',
-          {},
+          { 'data-uav': u.id, 'data-sortie': String(so.number) },
           swatch(uavColour(i)),
           h('strong', {}, `${u.id}${shown}: `),
           link(so.files.waypoints, '.waypoints', `${u.id} mission waypoints${tag}`),
@@ -542,6 +545,8 @@ export class SurveyPanel {
       }),
     );
     byId('uav-downloads').replaceChildren(...downloads);
+    // "Send to vehicle" per sortie, when the server allows vehicle links.
+    void this.vehicles.attach(byId('uav-downloads'), survey);
     byId('uav-table').querySelector('tbody')!.replaceChildren(...rows);
     byId<HTMLAnchorElement>('cells-link').href = survey.files.cells;
 
