@@ -113,7 +113,7 @@ struct Layout {
 }
 
 fn write_raster<W: Write + Seek>(mut out: W, r: &Raster<'_>, opts: Options) -> io::Result<()> {
-    validate(r)?;
+    validate(r, true)?;
     let position = out.stream_position()?;
     if position != 0 {
         return Err(invalid_input(format!(
@@ -235,7 +235,7 @@ fn layout(r: &Raster<'_>, strips: &[Strips], big: bool) -> io::Result<Option<Lay
 }
 
 /// `v` rounded up to a multiple of 8; an error on overflow (of `v` too).
-fn align8(v: Option<u64>) -> io::Result<u64> {
+pub(super) fn align8(v: Option<u64>) -> io::Result<u64> {
     v.and_then(|v| v.checked_next_multiple_of(8))
         .ok_or_else(too_large)
 }
@@ -247,7 +247,9 @@ fn plain_name(name: &str) -> bool {
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
-fn validate(r: &Raster<'_>) -> io::Result<()> {
+/// Checks what the writer is given; the bands' lengths only with
+/// `with_data` (a tiled file's bands come a tile at a time).
+fn validate(r: &Raster<'_>, with_data: bool) -> io::Result<()> {
     if r.width == 0 || r.height == 0 {
         return Err(invalid_input(format!(
             "cannot write a {}×{} GeoTIFF: width and height must be positive",
@@ -289,7 +291,7 @@ fn validate(r: &Raster<'_>) -> io::Result<()> {
         let sample = page_sample(page);
         for (i, band) in page.bands.iter().enumerate() {
             let b = i + 1;
-            if band.data.len() != cells {
+            if with_data && band.data.len() != cells {
                 return Err(invalid_input(format!(
                     "page {p} band {b} ({:?}) has {} values, expected {}×{} = {cells}",
                     band.description,
@@ -343,6 +345,9 @@ fn validate(r: &Raster<'_>) -> io::Result<()> {
     }
     Ok(())
 }
+
+mod tiled;
+pub use tiled::TiledGeoTiffWriter;
 
 #[cfg(test)]
 mod tests;

@@ -11,14 +11,14 @@ use crate::xml::xml_escape;
 
 /// One IFD entry with its value already little-endian encoded.
 pub(super) struct Entry {
-    tag: u16,
+    pub(super) tag: u16,
     kind: u16,
     count: u64,
     bytes: Vec<u8>,
 }
 
 impl Entry {
-    fn shorts(tag: u16, values: &[u16]) -> Entry {
+    pub(super) fn shorts(tag: u16, values: &[u16]) -> Entry {
         Entry {
             tag,
             kind: SHORT,
@@ -27,7 +27,7 @@ impl Entry {
         }
     }
 
-    fn long(tag: u16, value: u32) -> Entry {
+    pub(super) fn long(tag: u16, value: u32) -> Entry {
         Entry {
             tag,
             kind: LONG,
@@ -37,7 +37,7 @@ impl Entry {
     }
 
     /// LONG values in a classic TIFF, LONG8 in a BigTIFF.
-    fn offsets(tag: u16, values: &[u64], big: bool) -> io::Result<Entry> {
+    pub(super) fn offsets(tag: u16, values: &[u64], big: bool) -> io::Result<Entry> {
         let bytes = if big {
             values.iter().flat_map(|v| v.to_le_bytes()).collect()
         } else {
@@ -88,10 +88,8 @@ pub(super) fn ifd_entries(
     big: bool,
 ) -> io::Result<Vec<Entry>> {
     let n = page.bands.len();
-    let samples = u16::try_from(n).map_err(|_| too_large())?;
     let height = r.height;
     let dim = |v: usize| u32::try_from(v).map_err(|_| too_large());
-    let (bits, format) = page_sample(page).tiff_tags();
 
     let mut offsets = Vec::with_capacity(n * strips.per_band);
     let mut counts = Vec::with_capacity(n * strips.per_band);
@@ -107,17 +105,32 @@ pub(super) fn ifd_entries(
     }
 
     let mut entries = vec![
+        Entry::offsets(STRIP_OFFSETS, &offsets, big)?,
+        Entry::long(ROWS_PER_STRIP, dim(strips.rows_per_strip)?),
+        Entry::offsets(STRIP_BYTE_COUNTS, &counts, big)?,
+    ];
+    entries.extend(image_entries(r, page)?);
+    entries.sort_by_key(|e| e.tag);
+    Ok(entries)
+}
+
+/// The entries of a page whatever its layout (strips or tiles): size,
+/// sample type, planes, georeferencing, GeoKeys, GDAL metadata and
+/// nodata; unsorted.
+pub(super) fn image_entries(r: &Raster<'_>, page: &Page<'_>) -> io::Result<Vec<Entry>> {
+    let n = page.bands.len();
+    let samples = u16::try_from(n).map_err(|_| too_large())?;
+    let dim = |v: usize| u32::try_from(v).map_err(|_| too_large());
+    let (bits, format) = page_sample(page).tiff_tags();
+    let mut entries = vec![
         Entry::long(IMAGE_WIDTH, dim(r.width)?),
-        Entry::long(IMAGE_LENGTH, dim(height)?),
+        Entry::long(IMAGE_LENGTH, dim(r.height)?),
         Entry::shorts(BITS_PER_SAMPLE, &vec![bits; n]),
         // No compression.
         Entry::shorts(COMPRESSION, &[1]),
         // BlackIsZero.
         Entry::shorts(PHOTOMETRIC, &[1]),
-        Entry::offsets(STRIP_OFFSETS, &offsets, big)?,
         Entry::shorts(SAMPLES_PER_PIXEL, &[samples]),
-        Entry::long(ROWS_PER_STRIP, dim(strips.rows_per_strip)?),
-        Entry::offsets(STRIP_BYTE_COUNTS, &counts, big)?,
         // Separate planes.
         Entry::shorts(PLANAR_CONFIG, &[2]),
         Entry::shorts(SAMPLE_FORMAT, &vec![format; n]),
@@ -163,7 +176,6 @@ pub(super) fn ifd_entries(
     if let Some(v) = page.nodata {
         entries.push(Entry::ascii(GDAL_NODATA, &format_nodata(v)));
     }
-    entries.sort_by_key(|e| e.tag);
     Ok(entries)
 }
 
