@@ -62,15 +62,15 @@ const SERVERS = new Map();
  * listens. On a terraplan with accounts it first makes `users` (the first
  * one is the tests' default user: `server.fetch` calls the API as it, and
  * `openPage` signs the page in as it). `server.users[name]` has each one's
- * `password` and `token`.
+ * `password` and `token`. `args`: more arguments of `serve`.
  */
-export async function startServer({ users = ['tester'] } = {}) {
+export async function startServer({ users = ['tester'], args = [] } = {}) {
   checkPrerequisites();
   const dataDir = mkdtempSync(path.join(tmpdir(), 'terraplan-browser-'));
   const accounts = serverHasAccounts();
   const made = {};
   if (accounts) for (const name of users) made[name] = createUser(dataDir, name, `${name}-browser-password`);
-  const proc = spawn(BINARY, ['serve', '--port', '0', '--data-dir', dataDir, '--web-dir', WEB_DIR], {
+  const proc = spawn(BINARY, ['serve', '--port', '0', '--data-dir', dataDir, '--web-dir', WEB_DIR, ...args], {
     cwd: ROOT,
     stdio: ['ignore', 'pipe', 'pipe'],
   });

@@ -134,6 +134,12 @@ export const UPLOAD_START: UploadView = { fraction: 0, status: 'Connecting…', 
 
 const listName = (kind: ListKind) => (kind === 'mission' ? 'Mission' : kind === 'fence' ? 'Fence' : 'Rally points');
 
+/** "37 mission items", "1 rally point". */
+export function countText(kind: ListKind, n: number): string {
+  const noun = kind === 'rally' ? 'rally point' : `${kind} item`;
+  return `${n} ${noun}${n === 1 ? '' : 's'}`;
+}
+
 /** The view after one more event. */
 export function nextView(view: UploadView, ev: UploadEvent): UploadView {
   const lists = view.lists.map((l) => ({ ...l }));
@@ -142,7 +148,7 @@ export function nextView(view: UploadView, ev: UploadEvent): UploadView {
   switch (ev.event) {
     case 'started': {
       const named = (ev.lists ?? []).map((l) => ({ kind: l.kind, items: l.items, sent: 0, readBack: 0, verified: false }));
-      const what = named.map((l) => `${listName(l.kind).toLowerCase()} (${l.items} items)`).join(', ');
+      const what = named.map((l) => countText(l.kind, l.items)).join(', ');
       return { ...view, lists: named, status: `Sending ${what} to ${ev.to}…`, fraction: 0 };
     }
     case 'progress':
@@ -158,12 +164,12 @@ export function nextView(view: UploadView, ev: UploadEvent): UploadView {
         list.sent = list.items;
         list.readBack = list.items;
         list.verified = true;
-        status = `${listName(list.kind)}: read back and verified (${list.items} items)`;
+        status = `${listName(list.kind)}: read back and verified (${countText(list.kind, list.items)})`;
       }
       break;
     case 'done': {
-      const sent = (ev.sent ?? []).map((l) => `${listName(l.kind).toLowerCase()} ${l.items}`).join(', ');
-      return { ...view, lists: lists.map((l) => ({ ...l, sent: l.items, readBack: l.items, verified: true })), fraction: 1, finished: true, error: null, status: `Sent to ${ev.to} and verified: ${sent} items.` };
+      const sent = (ev.sent ?? []).map((l) => countText(l.kind, l.items)).join(', ');
+      return { ...view, lists: lists.map((l) => ({ ...l, sent: l.items, readBack: l.items, verified: true })), fraction: 1, finished: true, error: null, status: `Sent to ${ev.to} and verified: ${sent}.` };
     }
     case 'failed':
       return { ...view, lists, finished: true, error: ev.error ?? 'the upload failed', status: 'The upload failed.' };

@@ -124,7 +124,11 @@ export class VehicleUpload {
     form.addEventListener('submit', (e) => {
       e.preventDefault();
       if (running) return;
+      // A new try: the last one's outcome goes.
       showError(null);
+      status.textContent = '';
+      progress.hidden = true;
+      progress.value = 0;
       const e0 = entry();
       if (!e0) return;
       const chosen = chosenAddress(e0, port.value);

@@ -10,6 +10,7 @@ import {
   LINKS_OFF,
   UPLOAD_START,
   chosenAddress,
+  countText,
   fetchVehicleLinks,
   nextView,
   portRange,
@@ -98,16 +99,16 @@ describe('the event stream', () => {
     const views: UploadView[] = [];
     let view = UPLOAD_START;
     for (const ev of STREAM) views.push((view = nextView(view, ev)));
-    expect(views[0].status).toBe(`Sending mission (4 items), fence (2 items) to ${TO}…`);
+    expect(views[0].status).toBe(`Sending 4 mission items, 2 fence items to ${TO}…`);
     // 12 steps in all: 4 + 4 of the mission, 2 + 2 of the fence.
     expect(views[2].fraction).toBeCloseTo(4 / 12, 12);
     expect(views[3].status).toBe('Mission: reading back 2 of 4');
     expect(views[3].fraction).toBeCloseTo(6 / 12, 12);
     expect(views[4].fraction).toBeCloseTo(8 / 12, 12);
-    expect(views[4].status).toBe('Mission: read back and verified (4 items)');
+    expect(views[4].status).toBe('Mission: read back and verified (4 mission items)');
     const fractions = views.map((v) => v.fraction);
     expect(fractions).toEqual([...fractions].sort((a, b) => a - b));
-    expect(view).toMatchObject({ fraction: 1, finished: true, error: null, status: `Sent to ${TO} and verified: mission 4, fence 2 items.` });
+    expect(view).toMatchObject({ fraction: 1, finished: true, error: null, status: `Sent to ${TO} and verified: 4 mission items, 2 fence items.` });
   });
 
   it('ends with the error of a failed event', () => {
@@ -150,6 +151,13 @@ describe('sending', () => {
     const last = await sendToVehicle('s1', 'u1', {}, () => {}, undefined, fetchFn as unknown as typeof fetch);
     expect(last.finished).toBe(true);
     expect(last.error).toContain('lost contact');
+  });
+
+  it('counts items and rally points in words', () => {
+    expect(countText('mission', 37)).toBe('37 mission items');
+    expect(countText('fence', 1)).toBe('1 fence item');
+    expect(countText('rally', 1)).toBe('1 rally point');
+    expect(countText('rally', 2)).toBe('2 rally points');
   });
 
   it('lists several faults of a 422', () => {
@@ -229,7 +237,7 @@ describe('the button on the downloads', () => {
     const progress = form.querySelector('progress')!;
     await vi.waitFor(() => expect(progress.value).toBe(1));
     expect(error.hidden).toBe(true);
-    expect(form.querySelector('.upload-status')!.textContent).toBe(`Sent to ${TO} and verified: mission 4, fence 2 items.`);
+    expect(form.querySelector('.upload-status')!.textContent).toBe(`Sent to ${TO} and verified: 4 mission items, 2 fence items.`);
     expect(calls[0]).toEqual({ url: '/api/v1/surveys/s1/uavs/u2/upload', body: { to: TO, fence: true, rally: false, sortie: 2 } });
     // Again: the server refuses (busy), and says why.
     await vi.waitFor(() => expect(form.querySelector<HTMLButtonElement>('button[type=submit]')!.disabled).toBe(false));
