@@ -36,6 +36,7 @@ pub mod smooth;
 pub mod stats;
 pub mod steps;
 pub mod tiled;
+pub mod tiled_tiff;
 pub mod vehicle;
 
 pub use distance::distance_transform;

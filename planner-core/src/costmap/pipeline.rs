@@ -590,6 +590,14 @@ fn coarse_warnings(
     }
 }
 
+/// The class band's metadata: `CLASS_<code>` and each class's name.
+pub(super) fn class_names() -> Vec<(String, &'static str)> {
+    Class::ALL
+        .iter()
+        .map(|c| (format!("CLASS_{}", *c as u8), c.name()))
+        .collect()
+}
+
 impl Costmap {
     /// The costmap as a GeoTIFF in the DEM's CRS, in two pages (images; a
     /// TIFF image has one sample type and GDAL one nodata value per image):
@@ -598,10 +606,7 @@ impl Costmap {
     /// `GTIFF_DIR:2:costmap.tif`) the class codes (Byte, no unit, nodata 0 =
     /// unknown, the codes' names in the band's metadata as `CLASS_<code>`).
     pub fn write_geotiff<W: Write + Seek>(&self, out: W) -> std::io::Result<()> {
-        let names: Vec<(String, &str)> = Class::ALL
-            .iter()
-            .map(|c| (format!("CLASS_{}", *c as u8), c.name()))
-            .collect();
+        let names = class_names();
         let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
         write_geotiff(
             out,
