@@ -638,3 +638,39 @@ fn another_users_survey_is_404_and_a_viewer_is_refused() {
     let r = post_json_as(&Auth::None, &url, &body);
     assert_eq!(r.status, 401, "{}", r.text());
 }
+
+#[test]
+fn a_server_stop_ends_an_upload_with_a_failed_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("data"), &["--vehicle-links", LINKS]);
+    let survey = stored_survey(&server);
+    // A silent address: the upload would wait 2 s × 6 tries per step.
+    let dead = format!("udpout:127.0.0.1:{}", free_udp_port());
+    let mut open = try_open(
+        &server,
+        &survey,
+        &json!({"to": dead, "timeout_ms": 2000, "retries": 5}),
+    )
+    .expect("the upload starts");
+    // SIGTERM: the graceful stop does not wait for the upload's time-outs.
+    let status = server.stop();
+    assert!(status.success(), "{status:?}");
+    let mut rest = Vec::new();
+    open.stream.read_to_end(&mut rest).unwrap();
+    let body = format!("{}{}", open.received, text(&rest));
+    // The chunked framing's size lines sit between the events' lines.
+    let events: Vec<Value> = body
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .map(|d| serde_json::from_str(d).unwrap())
+        .collect();
+    let last = events.last().unwrap();
+    assert_eq!(last["event"], "failed", "{body}");
+    assert!(
+        last["error"]
+            .as_str()
+            .unwrap()
+            .contains("the service is shutting down"),
+        "{last}"
+    );
+}

@@ -12,6 +12,7 @@
 //! OPERATION_CANCELLED and the link closed.
 
 use std::convert::Infallible;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use axum::extract::{Path, State};
@@ -27,6 +28,7 @@ use crate::api::access::visible;
 use crate::api::json_body::JsonBody;
 use crate::auth::{Caller, Role};
 use crate::error::{ApiError, Problem};
+use crate::jobs::CostmapJobs;
 use crate::state::{AppState, off_runtime};
 use crate::vehicle_link::busy::Claim;
 use crate::vehicle_link::transfer::{Sent, cancel};
@@ -38,6 +40,10 @@ use crate::vehicle_link::{
 /// last are always sent): a browser needs no more, and a slow client
 /// cannot make the queue grow with the items.
 const PROGRESS_GAP: Duration = Duration::from_millis(100);
+
+/// The failure of an upload the server's stop (SIGTERM) ended.
+const SHUTTING_DOWN: &str =
+    "the service is shutting down: the upload was stopped; send it again when the service is back";
 
 /// The answer while uploads are switched off.
 const LINKS_OFF: &str = "vehicle links are switched off on this service: its operator starts it \
@@ -160,7 +166,10 @@ pub async fn upload_to_vehicle(
         ))
     })?;
     let (tx, rx) = mpsc::unbounded_channel();
-    tokio::spawn(run(address, opts, lists, tx, claim));
+    // The server's graceful stop (SIGTERM) ends an upload too, rather than
+    // wait for it: the same signal ends the costmap event streams.
+    let jobs = state.costmaps.clone();
+    tokio::spawn(run(address, opts, lists, tx, claim, jobs));
     let stream = futures_util::stream::unfold(rx, |mut rx| async move {
         rx.recv()
             .await
@@ -213,13 +222,15 @@ fn failed(to: &str, kind: Option<MissionKind>, error: String) -> UploadEvent {
 }
 
 /// The upload, holding `_claim` on the address until it ends; events go
-/// to `tx`, whose closing (the client went away) stops it.
+/// to `tx`. The client going away (`tx` closed) or the server stopping
+/// (`jobs`' shutdown signal) stops it.
 async fn run(
     address: VehicleAddress,
     opts: Options,
     lists: Vec<ItemList>,
     tx: mpsc::UnboundedSender<UploadEvent>,
     _claim: Claim,
+    jobs: Arc<CostmapJobs>,
 ) {
     let to = address.to_string();
     let started = UploadEvent {
@@ -241,6 +252,10 @@ async fn run(
     let opened = tokio::select! {
         opened = open => opened,
         () = tx.closed() => return,
+        () = jobs.shutdown_signal() => {
+            let _ = tx.send(failed(&to, None, SHUTTING_DOWN.into()));
+            return;
+        }
     };
     let mut link = match opened {
         Ok(link) => link,
@@ -266,23 +281,27 @@ async fn run(
             &mut on_progress,
         );
         let outcome = tokio::select! {
-            result = step => Some(result),
-            () = tx.closed() => None,
+            result = step => Ok(result),
+            () = tx.closed() => Err(None),
+            () = jobs.shutdown_signal() => Err(Some(SHUTTING_DOWN)),
         };
         match outcome {
-            // The client went away mid-transfer: let the vehicle leave it
-            // too; the link closes as `link` is dropped.
-            None => {
-                tracing::info!(to = %to, kind = list.kind.name(), "upload stopped: the client went away");
+            // Stopped mid-transfer: let the vehicle leave it too; the link
+            // closes as `link` is dropped.
+            Err(why) => {
+                tracing::info!(to = %to, kind = list.kind.name(), why = why.unwrap_or("the client went away"), "upload stopped");
                 cancel(&mut link, &opts, list.kind).await;
+                if let Some(why) = why {
+                    let _ = tx.send(failed(&to, Some(list.kind), why.into()));
+                }
                 return;
             }
-            Some(Err(e)) => {
+            Ok(Err(e)) => {
                 tracing::info!(to = %to, error = %e, "upload failed");
                 let _ = tx.send(failed(&to, Some(list.kind), format!("{to}: {e}")));
                 return;
             }
-            Some(Ok(mut done)) => {
+            Ok(Ok(mut done)) => {
                 let _ = tx.send(UploadEvent {
                     kind: Some(list.kind),
                     done: Some(list.items.len()),
