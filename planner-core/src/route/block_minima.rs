@@ -18,7 +18,7 @@ use super::cost_source::{CostSource, CostSourceError};
 
 /// Cells read per band at most (a band is whole rows: its f32 costs and,
 /// for a raster source, the f64 window it converts from).
-const BAND_CELLS: usize = 1 << 22;
+const BAND_CELLS: usize = 1 << 20;
 
 /// Block minima and maxima of a cost raster.
 #[derive(Clone, Debug)]
@@ -173,8 +173,8 @@ mod tests {
 
     #[test]
     fn bands_split_tall_maps_without_changing_the_result() {
-        // 2^22 cells per band: a 3000-wide map of 16-blocks reads 87 block
-        // rows per band, so 2000 rows take two bands.
+        // 2^20 cells per band: a 3000-wide map of 16-blocks reads 21 block
+        // rows per band, so 2000 rows take several bands.
         let (w, h) = (3000, 2000);
         let costs = (0..w * h)
             .map(|i| {

@@ -684,4 +684,42 @@ mod tests {
             agree(&grid, start, goal, ArcCost::thesis(), &c2f);
         }
     }
+
+    /// Release-mode figures next to plain A* on the benchmark's costmap
+    /// styles, corner to corner (run with `cargo test --release -p
+    /// planner-core --lib route::coarse_to_fine::tests::timing -- --ignored
+    /// --nocapture`; sizes from `ROUTE_SIZES`, default 2000,4000).
+    #[test]
+    #[ignore]
+    fn timing_against_plain_a_star() {
+        use crate::route::testing::{far_corners, timing_costmaps};
+        for (size, kind, grid) in timing_costmaps() {
+            let (start, goal) = far_corners(&grid);
+            let t = Instant::now();
+            let plain = astar(&grid, start, goal, &RouteOptions::default(), &|| false).unwrap();
+            let plain_s = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let found = coarse_to_fine(
+                &grid,
+                start,
+                goal,
+                &RouteOptions::default(),
+                &CoarseToFineOptions::default(),
+                &|| false,
+            )
+            .unwrap();
+            let ours_s = t.elapsed().as_secs_f64();
+            println!(
+                "{kind} {size}²: A* {plain_s:.3} s cost {:.4} ({} expanded); coarse-to-fine \
+                 {ours_s:.3} s cost {:.4} proven {} bound {:.4}, {:?}",
+                plain.cost,
+                plain.expanded,
+                found.cost,
+                found.proven_optimal,
+                found.lower_bound,
+                found.stats
+            );
+            assert!((found.cost - plain.cost).abs() <= 1e-9 * plain.cost);
+        }
+    }
 }

@@ -10,9 +10,10 @@ use planner_core::export::ground_route::{route_csv, route_geojson, rover_mission
 use planner_core::export::write_waypoints;
 use planner_core::route::changes::{self, CellChanges, ChangeError, ChangedArea};
 use planner_core::route::{
-    ArcCost, DStarLite, Endpoint, MapRoute, MapRouteError, Position, RouteMap, RouteOptions, astar,
+    ArcCost, BigRouteError, CoarseToFine, CoarseToFineOptions, DStarLite, Endpoint, MapRoute,
+    MapRouteError, Position, RouteMap, RouteOptions, WindowedMap, WindowedRouteError, astar,
 };
-use planner_core::terrain::DemLimits;
+use planner_core::terrain::{DemLimits, GeoTiffWindows, RasterWindows};
 use serde_json::{Map, Value, json};
 
 use super::common::{Failure, list_issues, read_dem_file, read_json};
@@ -72,10 +73,34 @@ pub(super) struct RouteArgs {
         requires = "block"
     )]
     replan_from: Option<String>,
-    /// Most pixels (width × height) accepted.
-    #[arg(long, default_value_t = DemLimits::default().max_pixels)]
-    max_pixels: u64,
+    /// Most pixels (width × height) accepted: by default 64 M for a
+    /// costmap read whole (plain A*, `--dem`, `--block`) and 4 G for one
+    /// read by windows (coarse to fine).
+    #[arg(long)]
+    max_pixels: Option<u64>,
+    /// Plan coarse to fine whatever the costmap's size: A* on 16 × 16
+    /// block minima, then A* in a corridor around that route, widened
+    /// until the route is proven optimal for the whole map. Without
+    /// `--dem` the costmap is read a window at a time (no heights, the
+    /// waypoints are the path's turning points); not with `--block`.
+    #[arg(long, conflicts_with = "block")]
+    coarse_to_fine: bool,
+    /// Plan coarse to fine (as `--coarse-to-fine`) when the costmap has
+    /// more cells than this.
+    #[arg(long, value_name = "CELLS", default_value_t = COARSE_TO_FINE_ABOVE)]
+    coarse_to_fine_above: u64,
+    /// Most cells a coarse-to-fine corridor may cover: beyond it the
+    /// route found so far is written with how far from optimal it may be.
+    #[arg(long, value_name = "CELLS")]
+    max_corridor_cells: Option<u64>,
 }
+
+/// Costmaps above this many cells (4000 × 4000) are planned coarse to
+/// fine by default: plain A* holds 16 bytes for every cell.
+const COARSE_TO_FINE_ABOVE: u64 = 16_000_000;
+
+/// Most cells of a costmap read by windows, by default.
+const WINDOWED_MAX_PIXELS: u64 = 4_000_000_000;
 
 /// `LON,LAT` or `utm:E,N`.
 fn parse_position(text: &str, flag: &str) -> Result<Position, Failure> {
@@ -174,9 +199,16 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
     }
 
     let limits = DemLimits {
-        max_pixels: args.max_pixels,
+        max_pixels: args.max_pixels.unwrap_or(DemLimits::default().max_pixels),
         ..DemLimits::default()
     };
+    if let Some(cells) = coarse_to_fine_size(args)? {
+        let c2f = CoarseToFineOptions {
+            max_corridor_cells: args.max_corridor_cells.unwrap_or(u64::MAX),
+            ..CoarseToFineOptions::default()
+        };
+        return route_coarse_to_fine(args, &start, &goal, &options, &c2f, &limits, cells);
+    }
     let bytes = std::fs::read(&args.costmap).map_err(|e| {
         Failure::input(format!(
             "cannot read costmap file {}: {e}",
@@ -225,6 +257,140 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
     replan(
         args, &mut map, &planned, &start, &goal, &options, &blocked, request,
     )
+}
+
+/// The costmap's cells when it is to be planned coarse to fine (forced,
+/// or above the size), read off its header; `None` for plain A*.
+fn coarse_to_fine_size(args: &RouteArgs) -> Result<Option<u64>, Failure> {
+    if !args.block.is_empty() {
+        return Ok(None);
+    }
+    let windows = open_windows(args, 1, 1)?;
+    let cells = windows.grid().width as u64 * windows.grid().height as u64;
+    Ok((args.coarse_to_fine || cells > args.coarse_to_fine_above).then_some(cells))
+}
+
+fn open_windows(args: &RouteArgs, page: usize, band: usize) -> Result<GeoTiffWindows, Failure> {
+    let path = &args.costmap;
+    let file = std::fs::File::open(path)
+        .map_err(|e| Failure::input(format!("cannot read costmap file {}: {e}", path.display())))?;
+    let limits = DemLimits {
+        max_pixels: args.max_pixels.unwrap_or(WINDOWED_MAX_PIXELS),
+        ..DemLimits::default()
+    };
+    GeoTiffWindows::open_band(file, page, band, None, &limits)
+        .map_err(|e| Failure::input(format!("{}: {e}", path.display())))
+}
+
+fn big_failure(e: WindowedRouteError, args: &RouteArgs) -> Failure {
+    match e {
+        WindowedRouteError::Map(e) => map_failure(e, args),
+        WindowedRouteError::Search(BigRouteError::Route(e)) => {
+            map_failure(MapRouteError::Search(e), args)
+        }
+        WindowedRouteError::Search(BigRouteError::Source(e)) => {
+            Failure::input(format!("{}: {e}", args.costmap.display()))
+        }
+        WindowedRouteError::Search(e @ BigRouteError::CorridorLimit { .. }) => {
+            Failure::other(e.to_string())
+        }
+    }
+}
+
+/// A route planned coarse to fine: on the costmap read by windows, or read
+/// whole when `--dem` asks for heights along it.
+fn route_coarse_to_fine(
+    args: &RouteArgs,
+    start: &Position,
+    goal: &Position,
+    options: &RouteOptions,
+    c2f: &CoarseToFineOptions,
+    limits: &DemLimits,
+    cells: u64,
+) -> Result<(), Failure> {
+    if options.epsilon != 1.0 {
+        return Err(Failure::input(
+            "coarse-to-fine routes are proven optimal: --epsilon must be 1 \
+             (the costmap is planned coarse to fine above --coarse-to-fine-above cells)",
+        ));
+    }
+    let loaded = Instant::now();
+    let (planned, found, how) = if let Some(path) = &args.dem {
+        let dem = read_dem_file(path, args.dem_crs.as_deref(), "--dem-crs", limits.clone())?.0;
+        let bytes = std::fs::read(&args.costmap).map_err(|e| {
+            Failure::input(format!(
+                "cannot read costmap file {}: {e}",
+                args.costmap.display()
+            ))
+        })?;
+        let map = RouteMap::from_costmap_geotiff(&bytes, Some(&dem), limits)
+            .map_err(|e| map_failure(e, args))?;
+        drop((bytes, dem));
+        let (planned, found) = map
+            .plan_coarse_to_fine(start, goal, options, c2f, &|| false)
+            .map_err(|e| big_failure(e, args))?;
+        (planned, found, "read whole for the DEM's heights")
+    } else {
+        let costs = open_windows(args, 1, 1)?;
+        // The class codes name what a blocked endpoint is on: page 2, or
+        // band 2 of costmaps written before the class page.
+        let classes = open_windows(args, 2, 1)
+            .or_else(|_| open_windows(args, 1, 2))
+            .ok();
+        let map = WindowedMap::new(&costs, classes.as_ref().map(|c| c as &dyn RasterWindows))
+            .map_err(|e| map_failure(e, args))?;
+        let (planned, found) = map
+            .plan(start, goal, options, c2f, &|| false)
+            .map_err(|e| big_failure(e, args))?;
+        (planned, found, "read by windows")
+    };
+    let total_ms = loaded.elapsed().as_secs_f64() * 1e3;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", args.out.display())))?;
+    let request = json!({
+        "start": start, "goal": goal, "options": options, "speed_m_s": args.speed,
+        "search": search_report(&found),
+    });
+    write_route(&args.out, &planned, &request, args.speed)?;
+    let s = &found.stats;
+    let proof = if found.proven_optimal {
+        "proven optimal".to_string()
+    } else {
+        format!(
+            "NOT proven optimal: within {:.3} % of the optimum (lower bound {:.1})",
+            100.0 * found.gap(),
+            found.lower_bound
+        )
+    };
+    println!(
+        "route {:.1} m ({} waypoints), cost {:.1}, {proof}; coarse to fine on {} cells ({how}): \
+         {} corridor(s), last {} blocks each side ({} cells, {} touched), {} cells expanded, \
+         search state ≤ {:.0} MiB, {:.0} ms in all -> {}",
+        planned.length_2d_m,
+        planned.waypoints.len(),
+        planned.path_cost,
+        cells,
+        s.corridors,
+        s.halfwidth,
+        s.corridor_cells,
+        s.cells_touched,
+        s.expanded,
+        s.peak_bytes as f64 / (1024.0 * 1024.0),
+        total_ms,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// What route.json says of a coarse-to-fine search.
+fn search_report(found: &CoarseToFine) -> Value {
+    json!({
+        "method": "coarse_to_fine",
+        "proven_optimal": found.proven_optimal,
+        "lower_bound": found.lower_bound,
+        "gap": found.gap(),
+        "stats": found.stats,
+    })
 }
 
 /// Block `areas` (each with the file it came from), then replan from the
