@@ -57,7 +57,7 @@ mod surveys;
 
 pub use accounts::{SessionRow, TokenRow, UserRow};
 pub use costmaps::{CostmapFileRow, CostmapRow};
-pub use dems::DemMetaRow;
+pub use dems::{DemMetaRow, DemTileRow, DemTileSetRow};
 pub use files::StoredFile;
 pub use projects::{MemberChange, MemberRow, MembershipRow, ProjectRow};
 pub use routes::RouteRow;

@@ -2,6 +2,8 @@
 //! cache of parsed rasters and the loader that reads a stored DEM (once)
 //! with room for it in the memory budget, for handlers and costmap jobs.
 
+pub mod tiles;
+
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -248,7 +250,7 @@ impl DemLoader {
             .memory
             .reserve_within(need, &doing(w, h), timeout)
             .await?;
-        let dem = Arc::new(self.read(id).await?);
+        let dem = Arc::new(self.read(&meta).await?);
         cache.insert(id, dem.clone(), Some(epoch));
         if cache.get(id).is_some_and(|d| Arc::ptr_eq(&d, &dem)) {
             // Kept in the cache, whose memory is its own: only the work's
@@ -258,8 +260,29 @@ impl DemLoader {
         Ok((dem, room))
     }
 
-    /// Read stored DEM `id` again, on a DEM planner slot.
-    async fn read(&self, id: &str) -> Result<Dem, ApiError> {
+    /// Read stored DEM `meta` again, on a DEM planner slot: from its tiles
+    /// when it has them, else from its file.
+    async fn read(&self, meta: &DemMetaRow) -> Result<Dem, ApiError> {
+        let id = meta.id.as_str();
+        let info = crate::api::dems::stored_dem_info(meta)?;
+        if let Some((set, grid)) = tiles::stored_set(&self.db, id, &info).await? {
+            let src = tiles::StoredTiles::new(
+                self.db.clone(),
+                tokio::runtime::Handle::current(),
+                id,
+                set,
+                0,
+                &grid,
+            );
+            let format = info.format;
+            return self
+                .planner
+                .run(Work::Dem, move |_| src.read_whole(format))
+                .await?
+                .map_err(|e| {
+                    ApiError::Internal(format!("stored DEM {id} does not read again: {e}"))
+                });
+        }
         let row = self
             .db
             .get_dem_data(id)

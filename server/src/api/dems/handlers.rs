@@ -9,7 +9,10 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use geo_types::Coord;
 use planner_core::geo::{Issue, escape_pointer_token};
-use planner_core::terrain::{Dem, TerrainError, TerrainSampler, hillshade_png};
+use planner_core::terrain::{
+    Dem, DemFormat, DemWindows, RasterGrid, RasterWindows, TerrainError, TerrainSampler,
+    hillshade_png,
+};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use utoipa::{IntoParams, ToSchema};
@@ -20,8 +23,10 @@ use crate::api::immutable::Immutable;
 use crate::api::json_body::JsonBody;
 use crate::api::paging::ListQuery;
 use crate::auth::{Caller, Role};
+use crate::db::DemMetaRow;
 use crate::error::{ApiError, Problem, deleted};
-use crate::memory::hillshade_bytes;
+use crate::memory::{Reservation, hillshade_bytes};
+use crate::state::dem_store::tiles::{self, StoredTiles, TileSet};
 use crate::state::{AppState, Work};
 
 /// Most points in one `POST …/elevation`.
@@ -150,9 +155,14 @@ pub async fn hillshade(
         return Ok(answer.not_modified());
     }
     let side = max_side as u64;
-    let (dem, room) = state
-        .load_dem_for(&id, "a hillshade", |w, h| hillshade_bytes(w, h, side))
-        .await?;
+    let (dem, room) = match overview_for(&state, &id, side).await? {
+        Some(found) => found,
+        None => {
+            state
+                .load_dem_for(&id, "a hillshade", |w, h| hillshade_bytes(w, h, side))
+                .await?
+        }
+    };
     let png = state
         .run_planner(Work::Dem, move |_| hillshade_png(&dem, max_side as usize))
         .await??;
@@ -161,6 +171,175 @@ pub async fn hillshade(
     res.headers_mut()
         .insert(header::CONTENT_TYPE, HeaderValue::from_static("image/png"));
     answer.apply(&mut res);
+    Ok(res)
+}
+
+/// DEMs of more cells than this are previewed from an overview level
+/// of their tiles rather than read whole (smaller ones exactly as before).
+const BIG_DEM_PIXELS: u64 = 64_000_000;
+
+/// The stored tiles of DEM `id` and its level-0 grid, when it has them.
+async fn tile_source(
+    state: &AppState,
+    id: &str,
+) -> Result<Option<(TileSet, RasterGrid, DemMetaRow)>, ApiError> {
+    let meta = state
+        .db
+        .get_dem_meta(id)
+        .await?
+        .ok_or_else(|| crate::error::not_found("DEM", id))?;
+    let info = stored_info(&meta)?;
+    Ok(tiles::stored_set(&state.db, id, &info)
+        .await?
+        .map(|(set, grid)| (set, grid, meta)))
+}
+
+/// A big DEM's hillshade source: the smallest overview level at least
+/// `side` cells on its longer side, read whole (with room for it and the
+/// shading); `None` for a DEM of at most [`BIG_DEM_PIXELS`] or without
+/// tiles.
+async fn overview_for(
+    state: &AppState,
+    id: &str,
+    side: u64,
+) -> Result<Option<(Arc<Dem>, Reservation)>, ApiError> {
+    let Some((set, grid, _)) = tile_source(state, id).await? else {
+        return Ok(None);
+    };
+    if (set.width as u64).saturating_mul(set.height as u64) <= BIG_DEM_PIXELS {
+        return Ok(None);
+    }
+    let level = (0..set.levels)
+        .rev()
+        .find(|&l| {
+            let (w, h) = set.level_size(l);
+            w.max(h) as u64 >= side
+        })
+        .unwrap_or(0);
+    let (w, h) = set.level_size(level);
+    let (w, h) = (w as u64, h as u64);
+    let need = w
+        .saturating_mul(h)
+        .saturating_mul(8)
+        .saturating_add(hillshade_bytes(w, h, side));
+    let room = state
+        .memory
+        .reserve(
+            need,
+            &format!("a hillshade of DEM {id} (overview {w} × {h})"),
+        )
+        .await?;
+    let src = StoredTiles::new(
+        state.db.clone(),
+        tokio::runtime::Handle::current(),
+        id,
+        set,
+        level,
+        &grid,
+    );
+    let dem = state
+        .run_planner(Work::Dem, move |_| src.read_whole(DemFormat::GeoTiff))
+        .await?
+        .map_err(|e| ApiError::Internal(format!("stored DEM {id} does not read again: {e}")))?;
+    Ok(Some((Arc::new(dem), room)))
+}
+
+/// Most cells one window request answers (32 MiB of f64).
+const MAX_WINDOW_CELLS: u64 = 4 << 20;
+
+/// The cells of a window of a stored DEM (or of one of its overview
+/// levels), read from its tiles: `width × height` little-endian f64,
+/// row by row from the top, NaN for nodata.
+#[utoipa::path(
+    get,
+    path = "/api/v1/dems/{id}/window",
+    tag = "dems",
+    params(("id" = String, Path, description = "DEM id"), WindowQuery),
+    responses(
+        (status = 200, description = "The window's cells, f64 little-endian, row-major", content_type = "application/octet-stream", body = BinaryFile),
+        (status = 400, description = "A window outside the raster (or level), or too many cells", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "No such DEM", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner or the memory budget is busy; retry", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn window(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    query: Result<Query<WindowQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) =
+        query.map_err(|e| ApiError::BadRequest(format!("bad query string: {}", e.body_text())))?;
+    let cells = q.width.saturating_mul(q.height);
+    if cells > MAX_WINDOW_CELLS {
+        return Err(ApiError::BadRequest(format!(
+            "a window of {} × {} cells is over the limit of {MAX_WINDOW_CELLS} cells",
+            q.width, q.height
+        )));
+    }
+    visible_dem(&state, &caller, &id, Role::Viewer).await?;
+    let level = q.level.unwrap_or(0);
+    let room = state
+        .memory
+        .reserve(cells.saturating_mul(16) + (8 << 20), "a window of a DEM")
+        .await?;
+    let (c0, r0, w, h) = (
+        q.col as usize,
+        q.row as usize,
+        q.width as usize,
+        q.height as usize,
+    );
+    let cells = match tile_source(&state, &id).await? {
+        Some((set, grid, _)) => {
+            if level as usize >= set.levels {
+                return Err(ApiError::BadRequest(format!(
+                    "level {level} does not exist: DEM {id} has levels 0 to {}",
+                    set.levels - 1
+                )));
+            }
+            let src = StoredTiles::new(
+                state.db.clone(),
+                tokio::runtime::Handle::current(),
+                &id,
+                set,
+                level as usize,
+                &grid,
+            );
+            state
+                .run_planner(Work::Dem, move |_| {
+                    let mut out = vec![0.0; w * h];
+                    src.read_window(c0, r0, w, h, &mut out).map(|_| out)
+                })
+                .await?
+        }
+        None if level > 0 => {
+            return Err(ApiError::BadRequest(format!(
+                "DEM {id} was stored before tiles: it has level 0 only"
+            )));
+        }
+        None => {
+            let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
+            state
+                .run_planner(Work::Dem, move |_| {
+                    let mut out = vec![0.0; w * h];
+                    DemWindows::new(&dem)
+                        .read_window(c0, r0, w, h, &mut out)
+                        .map(|_| out)
+                })
+                .await?
+        }
+    }
+    .map_err(|e| ApiError::BadRequest(e.to_string()))?;
+    let mut body = Vec::with_capacity(cells.len() * 8);
+    for v in cells {
+        body.extend_from_slice(&v.to_le_bytes());
+    }
+    drop(room);
+    let mut res = body.into_response();
+    res.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/octet-stream"),
+    );
     Ok(res)
 }
 
@@ -330,6 +509,22 @@ pub async fn elevations(
     let (dem, _room) = state.load_dem_for(&id, "", |_, _| 0).await?;
     let elevations = heights(&state, dem, points).await?;
     Ok(Json(Elevations { elevations }))
+}
+
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct WindowQuery {
+    /// The window's first column (0 is the left).
+    col: u64,
+    /// The window's first row (0 is the top).
+    row: u64,
+    /// Columns, at least 0.
+    width: u64,
+    /// Rows, at least 0.
+    height: u64,
+    /// The level: 0 the DEM itself, k its k-th overview (2^k times
+    /// coarser, each cell the mean of the cells below it).
+    level: Option<u64>,
 }
 
 #[derive(Deserialize, IntoParams)]

@@ -13,6 +13,7 @@ use axum::extract::DefaultBodyLimit;
 use utoipa_axum::router::{OpenApiRouter, UtoipaMethodRouterExt};
 use utoipa_axum::routes;
 
+pub(crate) use self::model::stored_info as stored_dem_info;
 pub use self::model::{BinaryFile, dem_fault, parse_epsg, visible_dem};
 use crate::state::AppState;
 
@@ -25,5 +26,6 @@ pub fn routes(max_dem_bytes: usize) -> OpenApiRouter<AppState> {
         )
         .routes(routes!(handlers::get_dem, handlers::delete_dem))
         .routes(routes!(handlers::hillshade))
+        .routes(routes!(handlers::window))
         .routes(routes!(handlers::elevation, handlers::elevations))
 }

@@ -69,7 +69,7 @@ pub fn parse_epsg(text: &str) -> Result<u32, String> {
     }
 }
 
-pub(super) fn stored_info(row: &DemMetaRow) -> Result<DemInfo, ApiError> {
+pub(crate) fn stored_info(row: &DemMetaRow) -> Result<DemInfo, ApiError> {
     let mut info: DemInfo = serde_json::from_str(&row.info).map_err(|e| {
         ApiError::Internal(format!("stored DEM info of {} unreadable: {e}", row.id))
     })?;

@@ -23,7 +23,9 @@ use axum::extract::{FromRequest, Multipart, Query, Request, State, rejection::Qu
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::geo::Issue;
-use planner_core::terrain::{TerrainError, read_dem};
+use planner_core::terrain::{
+    Dem, DemFormat, DemInfo, GeoTiffWindows, RasterWindows, TerrainError, read_dem,
+};
 use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
 
@@ -36,6 +38,7 @@ use crate::clock::now_millis;
 use crate::db::{CHUNK_BYTES, DemMetaRow};
 use crate::error::{ApiError, Problem};
 use crate::memory::{Reservation, dem_read_bytes, mib};
+use crate::state::dem_store::tiles;
 use crate::state::{AppState, Work};
 
 /// What the upload limits' messages call a DEM upload.
@@ -304,8 +307,147 @@ pub async fn upload_dem(
     };
     let (labels, spool) = labels(q, upload)?;
 
+    let usage = state.quotas.usage(&state.db, &project_id).await?;
+    usage.check_bytes(&project_id, spool.len, "the DEM file")?;
+    let id = uuid::Uuid::now_v7().to_string();
+    let (row, info) = if spool_is_tiff(&spool).await? {
+        store_geotiff(&state, spool, labels, &id, project_id).await?
+    } else {
+        store_whole(&state, spool, labels, &id, project_id).await?
+    };
+    let body = response(&row, info);
+    let mut headers = HeaderMap::new();
+    if let Ok(v) = HeaderValue::from_str(&body.url) {
+        headers.insert(header::LOCATION, v);
+    }
+    Ok((StatusCode::CREATED, headers, Json(body)).into_response())
+}
+
+/// Whether the spooled file starts as a TIFF does.
+async fn spool_is_tiff(spool: &Spool) -> Result<bool, ApiError> {
+    use tokio::io::AsyncReadExt;
+    let mut f = tokio::fs::File::open(&spool.path)
+        .await
+        .map_err(spool_error)?;
+    let mut head = [0u8; 4];
+    let mut got = 0;
+    while got < 4 {
+        match f.read(&mut head[got..]).await.map_err(spool_error)? {
+            0 => break,
+            n => got += n,
+        }
+    }
+    Ok(matches!(
+        &head[..got],
+        b"II*\0" | b"MM\0*" | b"II+\0" | b"MM\0+"
+    ))
+}
+
+/// A GeoTIFF upload, read a window at a time from its spool file and
+/// stored as tiles: neither the file nor the raster is held in memory
+/// (the memory held is a band of 512 rows, see `tiles::cut_bytes`).
+async fn store_geotiff(
+    state: &AppState,
+    spool: Spool,
+    labels: Labels,
+    id: &str,
+    project_id: String,
+) -> Result<(DemMetaRow, DemInfo), ApiError> {
+    // The declared size first: a chunk too large to decode within the
+    // memory budget is refused before the file is opened as a raster.
+    let (at, len) = (spool.path.clone(), spool.len);
+    let declared = tokio::task::spawn_blocking(move || {
+        let mut f = std::fs::File::open(at).ok()?;
+        dem_header::declared(&mut f, len, None)
+    })
+    .await
+    .map_err(spool_error)?;
+    if let Some(d) = &declared {
+        check_pixels(state, d)?;
+        let need = tiles::cut_bytes(d.width).saturating_add(d.chunk_bytes.saturating_mul(3));
+        check_budget(state, Some(d), len, need)?;
+    }
+    let limits = state.dems.limits.clone();
+    let (path, crs) = (spool.path.clone(), labels.crs);
+    let windows = state
+        .run_planner(Work::Dem, move |_| {
+            let file = std::fs::File::open(&path)
+                .map_err(|e| TerrainError::Invalid(format!("cannot read the upload: {e}")))?;
+            GeoTiffWindows::open(file, crs, &limits)
+        })
+        .await??;
+    let (width, height) = (windows.grid().width, windows.grid().height);
+    let chunk = declared.as_ref().map_or(0, |d| d.chunk_bytes);
+    let need = tiles::cut_bytes(width as u64).saturating_add(chunk.saturating_mul(3));
+    let _room = state
+        .memory
+        .reserve(need, "cutting the uploaded DEM into tiles")
+        .await?;
+    let exact = windows.exact_in_f32();
+    let mut info = geometry_info(&windows)?;
+    let stored = tiles::store_tiles(&state.db, &state.planner, id, windows, Some(exact)).await?;
+    fill_stats(&mut info, &stored.stats);
+    let pixels = (width as u64).saturating_mul(height as u64);
+    let row = DemMetaRow {
+        id: id.to_string(),
+        name: labels.name,
+        created_at: now_millis(),
+        file_name: labels.file_name,
+        crs_override: crs.map(i64::from),
+        info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
+        size_bytes: spool.len as i64,
+        // Read whole again from its tiles: the heights and a tile or two.
+        read_bytes: i64::try_from(dem_read_bytes(pixels, 4 << 20, 0)).ok(),
+        project_id: Some(project_id),
+    };
+    drop(spool);
+    if let Err(e) = state.db.insert_dem_tiled(&row, &stored.row, &[]).await {
+        let _ = state.db.delete_dem_tiles(id).await;
+        return Err(e.into());
+    }
+    Ok((row, info))
+}
+
+/// The info of a raster read a window at a time: its geometry now (the
+/// statistics come from its cells, see [`fill_stats`]).
+fn geometry_info(src: &dyn RasterWindows) -> Result<DemInfo, ApiError> {
+    let g = src.grid();
+    let empty = Dem {
+        width: g.width,
+        height: g.height,
+        values: Vec::new(),
+        nodata: g.nodata,
+        transform: g.transform,
+        crs: g.crs.clone(),
+        format: DemFormat::GeoTiff,
+    };
+    Ok(empty.info()?)
+}
+
+/// The statistics of `info` from the cells' (as `Dem::info` counts them).
+fn fill_stats(info: &mut DemInfo, stats: &tiles::CellStats) {
+    let has_values = stats.nodata < stats.cells;
+    info.min = has_values.then_some(stats.min);
+    info.max = has_values.then_some(stats.max);
+    info.nodata_fraction = if stats.cells == 0 {
+        1.0
+    } else {
+        stats.nodata as f64 / stats.cells as f64
+    };
+}
+
+/// Any other upload (an ESRI ASCII grid, an SRTM `.hgt` tile): read whole
+/// as before (with room for it in the memory budget), stored as its file
+/// and as tiles, and kept in the DEM cache.
+async fn store_whole(
+    state: &AppState,
+    spool: Spool,
+    labels: Labels,
+    id: &str,
+    project_id: String,
+) -> Result<(DemMetaRow, DemInfo), ApiError> {
     // The room for reading the raster is held until it is stored.
-    let (data, need, _room) = read_spool(&state, spool, labels.file_name.clone()).await?;
+    let (data, need, _room) = read_spool(state, spool, labels.file_name.clone()).await?;
     let limits = state.dems.limits.clone();
     let (parse_name, parse_data, crs) = (labels.file_name.clone(), data.clone(), labels.crs);
     let (dem, info) = state
@@ -315,11 +457,17 @@ pub async fn upload_dem(
             Ok::<_, TerrainError>((dem, info))
         })
         .await??;
-
-    let usage = state.quotas.usage(&state.db, &project_id).await?;
-    usage.check_bytes(&project_id, data.len() as u64, "the DEM file")?;
+    let dem = Arc::new(dem);
+    let stored = tiles::store_tiles(
+        &state.db,
+        &state.planner,
+        id,
+        tiles::SharedDem::new(dem.clone()),
+        None,
+    )
+    .await?;
     let row = DemMetaRow {
-        id: uuid::Uuid::now_v7().to_string(),
+        id: id.to_string(),
         name: labels.name,
         created_at: now_millis(),
         file_name: labels.file_name,
@@ -329,14 +477,12 @@ pub async fn upload_dem(
         read_bytes: i64::try_from(need).ok(),
         project_id: Some(project_id),
     };
-    state.db.insert_dem(&row, &data).await?;
-    state.dems.cache.insert(&row.id, Arc::new(dem), None);
-    let body = response(&row, info);
-    let mut headers = HeaderMap::new();
-    if let Ok(v) = HeaderValue::from_str(&body.url) {
-        headers.insert(header::LOCATION, v);
+    if let Err(e) = state.db.insert_dem_tiled(&row, &stored.row, &data).await {
+        let _ = state.db.delete_dem_tiles(id).await;
+        return Err(e.into());
     }
-    Ok((StatusCode::CREATED, headers, Json(body)).into_response())
+    state.dems.cache.insert(&row.id, dem, None);
+    Ok((row, info))
 }
 
 /// What the uploader says of the file: its label, its file name and its CRS.
@@ -429,29 +575,47 @@ async fn read_spool(
 /// The memory reading a raster of `len` bytes declaring `declared` needs;
 /// 413 over the pixel limits or the memory budget.
 fn read_bytes(state: &AppState, declared: Option<&Declared>, len: u64) -> Result<u64, ApiError> {
-    let limits = &state.dems.limits;
     let need = match declared {
         Some(d) => {
-            let over_side = d.width.max(d.height) > u64::from(limits.max_side);
-            if over_side || d.pixels() > limits.max_pixels {
-                // The same refusal the full read gives, before it.
-                return Err(TerrainError::TooLarge {
-                    width: d.width,
-                    height: d.height,
-                    limit: if over_side {
-                        format!("{} pixels per side", limits.max_side)
-                    } else {
-                        format!("{} pixels", limits.max_pixels)
-                    },
-                }
-                .into());
-            }
+            check_pixels(state, d)?;
             dem_read_bytes(d.pixels(), d.chunk_bytes, len)
         }
         // Not a raster whose header says its size: the full read refuses
         // it without allocating much.
         None => dem_read_bytes(0, 0, len),
     };
+    check_budget(state, declared, len, need)?;
+    Ok(need)
+}
+
+/// 413 for a raster over the pixel limits (the refusal the full read
+/// gives, before it).
+fn check_pixels(state: &AppState, d: &Declared) -> Result<(), ApiError> {
+    let limits = &state.dems.limits;
+    let over_side = d.width.max(d.height) > u64::from(limits.max_side);
+    if over_side || d.pixels() > limits.max_pixels {
+        return Err(TerrainError::TooLarge {
+            width: d.width,
+            height: d.height,
+            limit: if over_side {
+                format!("{} pixels per side", limits.max_side)
+            } else {
+                format!("{} pixels (--max-dem-pixels)", limits.max_pixels)
+            },
+        }
+        .into());
+    }
+    Ok(())
+}
+
+/// 413 when reading a raster of `len` bytes declaring `declared` needs
+/// `need` bytes, more than the whole memory budget.
+fn check_budget(
+    state: &AppState,
+    declared: Option<&Declared>,
+    len: u64,
+    need: u64,
+) -> Result<(), ApiError> {
     let budget = state.memory.total();
     if need > budget {
         let what = match declared {
@@ -471,7 +635,7 @@ fn read_bytes(state: &AppState, declared: Option<&Declared>, len: u64) -> Result
             mib(budget)
         )));
     }
-    Ok(need)
+    Ok(())
 }
 
 /// `multipart/form-data` upload: the file in the part `file`.
