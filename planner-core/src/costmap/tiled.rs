@@ -75,8 +75,24 @@ pub struct CostmapTile<'a> {
     pub layers: &'a [(Layer, Vec<f32>)],
 }
 
-/// Where a tiled run's tiles go, in row-major tile order.
+/// The map a tiled run is about to make, told to its sink first.
+#[derive(Clone, Debug)]
+pub struct MapHeader {
+    pub width: usize,
+    pub height: usize,
+    pub transform: GeoTransform,
+    pub crs: Crs,
+    /// The tile side: every tile but the last column's and row's is this
+    /// wide and high.
+    pub tile: usize,
+    /// The layers every tile holds, in [`Layer::ALL`] order.
+    pub layers: Vec<Layer>,
+}
+
+/// Where a tiled run's tiles go: [`TileSink::begin`] once the map's size
+/// is known (after the checks), then every tile in row-major tile order.
 pub trait TileSink {
+    fn begin(&mut self, map: &MapHeader) -> io::Result<()>;
     fn tile(&mut self, tile: &CostmapTile<'_>) -> io::Result<()>;
 }
 
@@ -362,6 +378,18 @@ pub fn build_costmap_tiled(
     drop(join);
 
     // Pass 3: inflation and costs.
+    sink.begin(&MapHeader {
+        width: w,
+        height: h,
+        transform: run.geometry.transform,
+        crs: shell.crs.clone(),
+        tile: layout.tile,
+        layers: Layer::ALL
+            .into_iter()
+            .filter(|l| options.layers.contains(l))
+            .collect(),
+    })
+    .map_err(TiledError::Write)?;
     let range = cost_range(vehicle, options);
     let mut tally = StatsTally::new(range);
     let mut preview = PreviewTiles::new(w, h, tiled.preview_max_side);
@@ -515,6 +543,11 @@ mod tests {
     }
 
     impl TileSink for Assemble {
+        fn begin(&mut self, map: &MapHeader) -> io::Result<()> {
+            assert_eq!(map.width, self.width);
+            Ok(())
+        }
+
         fn tile(&mut self, t: &CostmapTile<'_>) -> io::Result<()> {
             self.order.push((t.tx, t.ty));
             if self.layers.is_empty() {
@@ -758,6 +791,10 @@ mod tests {
         };
         struct Nothing;
         impl TileSink for Nothing {
+            fn begin(&mut self, _: &MapHeader) -> io::Result<()> {
+                Ok(())
+            }
+
             fn tile(&mut self, _: &CostmapTile<'_>) -> io::Result<()> {
                 Ok(())
             }
@@ -791,6 +828,10 @@ mod tests {
         // A sink that fails: the error says so.
         struct Full;
         impl TileSink for Full {
+            fn begin(&mut self, _: &MapHeader) -> io::Result<()> {
+                Ok(())
+            }
+
             fn tile(&mut self, _: &CostmapTile<'_>) -> io::Result<()> {
                 Err(io::Error::other("disk full"))
             }

@@ -7,69 +7,44 @@ use std::io::{self, Write};
 
 use super::Layer;
 use super::pipeline::{CLASS_NODATA, class_names};
-use super::tiled::{CostmapTile, TileSink};
+use super::tiled::{CostmapTile, MapHeader, TileSink};
 use crate::terrain::geotiff::{Band, BandData, Page, TiledGeoTiffWriter};
-use crate::terrain::{Crs, GeoTransform};
 
 /// The costmap's GeoTIFF and its layers' being written tile by tile.
 pub struct TiledTiffFiles<W: Write> {
-    costmap: TiledGeoTiffWriter<W>,
-    layers: Vec<(Layer, TiledGeoTiffWriter<W>)>,
+    state: State<W>,
+}
+
+enum State<W: Write> {
+    /// Before [`TileSink::begin`]: where the files go.
+    Pending {
+        costmap: W,
+        layers: Vec<(Layer, W)>,
+    },
+    Writing {
+        costmap: TiledGeoTiffWriter<W>,
+        layers: Vec<(Layer, TiledGeoTiffWriter<W>)>,
+    },
+    Failed,
 }
 
 impl<W: Write> TiledTiffFiles<W> {
-    /// Starts the costmap's file in `costmap` and one per layer in
-    /// `layers` (the layers the run keeps, in [`Layer::ALL`] order), for a
-    /// `width`×`height` map in tiles of `tile` cells (a multiple of 16).
-    pub fn new(
-        costmap: W,
-        layers: Vec<(Layer, W)>,
-        [width, height]: [usize; 2],
-        tile: usize,
-        transform: &GeoTransform,
-        crs: &Crs,
-    ) -> io::Result<TiledTiffFiles<W>> {
-        let names = class_names();
-        let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
-        let cost = [Band::new("cost", "cost", BandData::F32(&[]))];
-        let class = [Band {
-            description: "class",
-            unit: "",
-            metadata: &names,
-            data: BandData::U8(&[]),
-        }];
-        let pages = [
-            Page {
-                bands: &cost,
-                nodata: Some(f64::NAN),
-            },
-            Page {
-                bands: &class,
-                nodata: Some(f64::from(CLASS_NODATA)),
-            },
-        ];
-        let costmap =
-            TiledGeoTiffWriter::new(costmap, width, height, tile, transform, crs, &pages)?;
-        let layers = layers
-            .into_iter()
-            .map(|(layer, out)| {
-                let band = [Band::new(layer.name(), layer.unit(), BandData::F32(&[]))];
-                let page = [Page {
-                    bands: &band,
-                    nodata: Some(f64::NAN),
-                }];
-                TiledGeoTiffWriter::new(out, width, height, tile, transform, crs, &page)
-                    .map(|w| (layer, w))
-            })
-            .collect::<io::Result<Vec<_>>>()?;
-        Ok(TiledTiffFiles { costmap, layers })
+    /// The costmap's file goes to `costmap`, each layer's to its writer in
+    /// `layers` (the run's layers, which it checks). The tile side must be
+    /// a multiple of 16.
+    pub fn new(costmap: W, layers: Vec<(Layer, W)>) -> TiledTiffFiles<W> {
+        TiledTiffFiles {
+            state: State::Pending { costmap, layers },
+        }
     }
 
     /// Flushes every file once every tile is written.
     pub fn finish(self) -> io::Result<(W, Vec<(Layer, W)>)> {
-        let costmap = self.costmap.finish()?;
-        let layers = self
-            .layers
+        let State::Writing { costmap, layers } = self.state else {
+            return Err(io::Error::other("the costmap's files were never begun"));
+        };
+        let costmap = costmap.finish()?;
+        let layers = layers
             .into_iter()
             .map(|(l, w)| w.finish().map(|w| (l, w)))
             .collect::<io::Result<Vec<_>>>()?;
@@ -77,11 +52,71 @@ impl<W: Write> TiledTiffFiles<W> {
     }
 }
 
+fn start<W: Write>(costmap: W, layers: Vec<(Layer, W)>, map: &MapHeader) -> io::Result<State<W>> {
+    let wanted: Vec<Layer> = layers.iter().map(|(l, _)| *l).collect();
+    if wanted != map.layers {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "files for the layers {wanted:?}, but the run keeps {:?}",
+                map.layers
+            ),
+        ));
+    }
+    let (size, tile, t, crs) = ((map.width, map.height), map.tile, &map.transform, &map.crs);
+    let names = class_names();
+    let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+    let cost = [Band::new("cost", "cost", BandData::F32(&[]))];
+    let class = [Band {
+        description: "class",
+        unit: "",
+        metadata: &names,
+        data: BandData::U8(&[]),
+    }];
+    let pages = [
+        Page {
+            bands: &cost,
+            nodata: Some(f64::NAN),
+        },
+        Page {
+            bands: &class,
+            nodata: Some(f64::from(CLASS_NODATA)),
+        },
+    ];
+    let costmap = TiledGeoTiffWriter::new(costmap, size.0, size.1, tile, t, crs, &pages)?;
+    let layers = layers
+        .into_iter()
+        .map(|(layer, out)| {
+            let band = [Band::new(layer.name(), layer.unit(), BandData::F32(&[]))];
+            let page = [Page {
+                bands: &band,
+                nodata: Some(f64::NAN),
+            }];
+            TiledGeoTiffWriter::new(out, size.0, size.1, tile, t, crs, &page).map(|w| (layer, w))
+        })
+        .collect::<io::Result<Vec<_>>>()?;
+    Ok(State::Writing { costmap, layers })
+}
+
 impl<W: Write> TileSink for TiledTiffFiles<W> {
+    fn begin(&mut self, map: &MapHeader) -> io::Result<()> {
+        match std::mem::replace(&mut self.state, State::Failed) {
+            State::Pending { costmap, layers } => {
+                self.state = start(costmap, layers, map)?;
+                Ok(())
+            }
+            _ => Err(io::Error::other("the costmap's files were begun already")),
+        }
+    }
+
     fn tile(&mut self, t: &CostmapTile<'_>) -> io::Result<()> {
-        self.costmap
-            .write_tile(&[BandData::F32(t.cost), BandData::U8(t.class)])?;
-        for (layer, w) in &mut self.layers {
+        let State::Writing { costmap, layers } = &mut self.state else {
+            return Err(io::Error::other(
+                "a tile before the costmap's files were begun",
+            ));
+        };
+        costmap.write_tile(&[BandData::F32(t.cost), BandData::U8(t.class)])?;
+        for (layer, w) in layers {
             let data = t
                 .layers
                 .iter()
@@ -140,12 +175,7 @@ mod tests {
         let mut files = TiledTiffFiles::new(
             Vec::new(),
             vec![(Layer::Slope, Vec::new()), (Layer::Inflation, Vec::new())],
-            [whole.width, whole.height],
-            16,
-            &whole.transform,
-            &whole.crs,
-        )
-        .unwrap();
+        );
         let opts = TiledOptions {
             tile: 16,
             scratch_dir: std::env::temp_dir(),

@@ -1,17 +1,26 @@
 //! `terraplan costmap`: the traversability costmap of a DEM file, written
 //! as the service serves it (GeoTIFF, preview, legend, stats, layers).
+//!
+//! A GeoTIFF DEM of more than [`TILED_ABOVE_CELLS`] cells (or any DEM with
+//! `--tile-size`) is mapped tile by tile
+//! ([`planner_core::costmap::build_costmap_tiled`]): the DEM is read a
+//! window at a time from the file, the costmap and its layers are written
+//! as tiled GeoTIFFs a tile at a time, so memory is bounded by the tile
+//! size, not the map's; the result is the same as the whole-raster run's.
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use planner_core::costmap::pipeline::{build_costmap_owned, check_against_dem};
+use planner_core::costmap::tiled_tiff::TiledTiffFiles;
 use planner_core::costmap::{
-    Costmap, CostmapError, CostmapOptions, Layer, Stage, VehiclePreset, VehicleSpec, legend_svg,
+    CostmapError, CostmapOptions, CostmapStats, Layer, ResolvedParams, Stage, TiledError,
+    TiledOptions, Vehicle, VehiclePreset, VehicleSpec, build_costmap_tiled, legend_svg_of,
     preview_png,
 };
 use planner_core::geo::{Issue, deserialize_at};
-use planner_core::terrain::DemLimits;
+use planner_core::terrain::{DemLimits, DemWindows, GeoTiffWindows, RasterWindows, TerrainError};
 use serde_json::json;
 
 use super::common::{Failure, list_issues, read_dem_file, read_json};
@@ -46,10 +55,32 @@ pub(super) struct CostmapArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Most pixels (width × height) accepted.
-    #[arg(long, default_value_t = DemLimits::default().max_pixels)]
-    max_pixels: u64,
+    /// Most pixels (width × height) accepted. Default 64 000 000 for a
+    /// DEM read whole, 1 000 000 000 for one mapped tile by tile.
+    #[arg(long)]
+    max_pixels: Option<u64>,
+    /// Map tile by tile, tiles of N × N working cells (a multiple of 16,
+    /// 16 to 8192): memory is bounded by the tiles (a GeoTIFF DEM is read
+    /// a window at a time; other formats are still read whole). Without
+    /// it, GeoTIFF DEMs of more than 64 000 000 cells are mapped in tiles
+    /// of 1024.
+    #[arg(long, value_name = "N")]
+    tile_size: Option<usize>,
+    /// Where a tiled run keeps its scratch file of classes (one byte per
+    /// working cell, removed at the end); default the output directory.
+    #[arg(long, value_name = "DIR")]
+    scratch_dir: Option<PathBuf>,
 }
+
+/// GeoTIFF DEMs with more cells than this are mapped tile by tile (the
+/// largest DEM the whole-raster run accepts by default).
+pub(super) const TILED_ABOVE_CELLS: u64 = 64_000_000;
+
+/// The tile side of an automatic tiled run.
+const DEFAULT_TILE: usize = 1024;
+
+/// Most cells of a DEM mapped tile by tile, unless `--max-pixels` says.
+const TILED_MAX_PIXELS: u64 = 1_000_000_000;
 
 /// Where the vehicle of `terraplan costmap` came from.
 enum VehicleSource<'a> {
@@ -95,14 +126,73 @@ pub(super) fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
         .resolve("/vehicle")
         .map_err(|issues| Failure::input(describe(&issues)))?;
     let options = read_options(args, &describe)?;
+    if let Some(n) = args.tile_size
+        && (!n.is_multiple_of(16) || !(16..=8192).contains(&n))
+    {
+        return Err(Failure::input(format!(
+            "--tile-size {n}: tiles are a multiple of 16 cells, from 16 to 8192"
+        )));
+    }
 
     let limits = DemLimits {
-        max_pixels: args.max_pixels,
+        max_pixels: args.max_pixels.unwrap_or(DemLimits::default().max_pixels),
         ..DemLimits::default()
     };
-    let (dem, _, _) = read_dem_file(&args.dem, args.crs.as_deref(), "--crs", limits.clone())?;
-    // A land-cover source is a raster file, relative to the options file.
-    let landcover = match &options.landcover {
+    let tiled_limits = DemLimits {
+        max_pixels: args.max_pixels.unwrap_or(TILED_MAX_PIXELS),
+        ..DemLimits::default()
+    };
+    let windows = open_geotiff_windows(&args.dem, args.crs.as_deref(), &tiled_limits)?;
+    let tile = match (&windows, args.tile_size) {
+        (_, Some(n)) => Some(n),
+        (Some(w), None) => {
+            let g = w.grid();
+            ((g.width as u64).saturating_mul(g.height as u64) > TILED_ABOVE_CELLS)
+                .then_some(DEFAULT_TILE)
+        }
+        (None, None) => None,
+    };
+    let landcover = read_landcover(args, &options, limits.clone())?;
+    if let Some(tile) = tile {
+        return costmap_tiled(
+            args, windows, tile, &vehicle, &options, landcover, &describe, started,
+        );
+    }
+    let (dem, _, _) = read_dem_file(&args.dem, args.crs.as_deref(), "--crs", limits)?;
+    let issues = check_against_dem(&dem, &vehicle, &options, "/options");
+    if !issues.is_empty() {
+        return Err(Failure::input(describe(&issues)));
+    }
+    let (dem_w, dem_h) = (dem.width, dem.height);
+
+    let progress = stage_printer();
+    let map = build_costmap_owned(dem, &vehicle, &options, landcover.as_ref(), &progress).map_err(
+        |e| match e {
+            CostmapError::Invalid(issues) => Failure::input(describe(&issues)),
+            CostmapError::Cancelled => Failure::other("the costmap was cancelled"),
+        },
+    )?;
+    write_files(&map, &args.out)?;
+    let summary = Summary {
+        width: map.width,
+        height: map.height,
+        params: &map.params,
+        vehicle: &map.vehicle,
+        stats: &map.stats,
+        warnings: &map.warnings,
+    };
+    print_summary(&summary, [dem_w, dem_h], started, &args.out, None);
+    Ok(())
+}
+
+/// The options' land-cover raster, read whole (relative to the options
+/// file).
+fn read_landcover(
+    args: &CostmapArgs,
+    options: &CostmapOptions,
+    limits: DemLimits,
+) -> Result<Option<planner_core::terrain::Dem>, Failure> {
+    Ok(match &options.landcover {
         None => None,
         Some(l) => {
             let given = Path::new(&l.source);
@@ -113,16 +203,14 @@ pub(super) fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
             let crs = args.landcover_crs.as_deref();
             Some(read_dem_file(&path, crs, "--landcover-crs", limits)?.0)
         }
-    };
-    let issues = check_against_dem(&dem, &vehicle, &options, "/options");
-    if !issues.is_empty() {
-        return Err(Failure::input(describe(&issues)));
-    }
-    let (dem_w, dem_h) = (dem.width, dem.height);
+    })
+}
 
+/// The stage names on stderr as they begin, when it is a terminal.
+fn stage_printer() -> impl Fn(Stage, f64) -> bool + Sync {
     let show_progress = std::io::stderr().is_terminal();
     let last_stage = std::sync::Mutex::new(None::<Stage>);
-    let progress = |stage: Stage, _done: f64| -> bool {
+    move |stage: Stage, _done: f64| -> bool {
         if show_progress {
             let mut last = last_stage.lock().unwrap_or_else(|p| p.into_inner());
             if *last != Some(stage) {
@@ -131,16 +219,196 @@ pub(super) fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
             }
         }
         true
+    }
+}
+
+/// The DEM as a GeoTIFF read a window at a time; `None` when the file is
+/// not a TIFF (other formats are read whole).
+fn open_geotiff_windows(
+    path: &Path,
+    crs: Option<&str>,
+    limits: &DemLimits,
+) -> Result<Option<GeoTiffWindows>, Failure> {
+    use std::io::Read;
+    let shown = path.display();
+    let cannot = |e: std::io::Error| Failure::input(format!("cannot read DEM file {shown}: {e}"));
+    let mut file = std::fs::File::open(path).map_err(cannot)?;
+    let mut magic = [0u8; 4];
+    let got = file.read(&mut magic).map_err(cannot)?;
+    if got < 4 || !matches!(&magic, b"II*\0" | b"MM\0*" | b"II+\0" | b"MM\0+") {
+        return Ok(None);
+    }
+    let crs = crs
+        .map(crate::api::dems::parse_epsg)
+        .transpose()
+        .map_err(|m| Failure::input(format!("--crs: {m}")))?;
+    GeoTiffWindows::open(file, crs, limits)
+        .map(Some)
+        .map_err(|e| Failure::input(describe_dem_fault(path, e)))
+}
+
+/// A DEM's fault as `read_dem_file` words it.
+fn describe_dem_fault(path: &Path, e: TerrainError) -> String {
+    let path = path.display();
+    match e {
+        TerrainError::UnknownCrs(why) => format!(
+            "{path}: the raster's coordinate reference system cannot be determined ({why}); \
+             give it with --crs, e.g. --crs EPSG:32633"
+        ),
+        TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
+        other => format!("{path}: {other}"),
+    }
+}
+
+/// The costmap of the DEM tile by tile: read from `windows` (a GeoTIFF
+/// read a window at a time) or else from the DEM read whole; the files
+/// written as the tiles come.
+#[allow(clippy::too_many_arguments)]
+fn costmap_tiled(
+    args: &CostmapArgs,
+    windows: Option<GeoTiffWindows>,
+    tile: usize,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<planner_core::terrain::Dem>,
+    describe: &dyn Fn(&[Issue]) -> String,
+    started: Instant,
+) -> Result<(), Failure> {
+    let whole;
+    let source: &dyn RasterWindows = match &windows {
+        Some(w) => w,
+        None => {
+            let limits = DemLimits {
+                max_pixels: args.max_pixels.unwrap_or(DemLimits::default().max_pixels),
+                ..DemLimits::default()
+            };
+            whole = read_dem_file(&args.dem, args.crs.as_deref(), "--crs", limits)?.0;
+            &DemWindows::new(&whole)
+        }
     };
-    let map = build_costmap_owned(dem, &vehicle, &options, landcover.as_ref(), &progress).map_err(
-        |e| match e {
-            CostmapError::Invalid(issues) => Failure::input(describe(&issues)),
-            CostmapError::Cancelled => Failure::other("the costmap was cancelled"),
-        },
+    let (dem_w, dem_h) = (source.grid().width, source.grid().height);
+    let out = &args.out;
+    let layers_dir = out.join("layers");
+    create_dir(out)?;
+    let kept: Vec<Layer> = Layer::ALL
+        .into_iter()
+        .filter(|l| options.layers.contains(l))
+        .collect();
+    if !kept.is_empty() {
+        create_dir(&layers_dir)?;
+    }
+    let create = |path: &Path| {
+        std::fs::File::create(path)
+            .map(|f| std::io::BufWriter::with_capacity(1 << 20, f))
+            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+    };
+    let costmap_path = out.join("costmap.tif");
+    let layer_paths: Vec<(Layer, PathBuf)> = kept
+        .iter()
+        .map(|l| (*l, layers_dir.join(format!("{}.tif", l.name()))))
+        .collect();
+    let mut files = TiledTiffFiles::new(
+        create(&costmap_path)?,
+        layer_paths
+            .iter()
+            .map(|(l, p)| create(p).map(|w| (*l, w)))
+            .collect::<Result<Vec<_>, _>>()?,
+    );
+    let tiled = TiledOptions {
+        tile,
+        scratch_dir: args.scratch_dir.clone().unwrap_or_else(|| out.clone()),
+        preview_max_side: crate::jobs::PREVIEW_MAX_SIDE,
+    };
+    let progress = stage_printer();
+    let result = build_costmap_tiled(
+        source,
+        vehicle,
+        options,
+        landcover.as_ref(),
+        &tiled,
+        &progress,
+        &mut files,
+    );
+    let map = match result {
+        Ok(map) => map,
+        Err(e) => {
+            // Nothing half-written is left behind.
+            drop(files);
+            let _ = std::fs::remove_file(&costmap_path);
+            for (_, p) in &layer_paths {
+                let _ = std::fs::remove_file(p);
+            }
+            return Err(match e {
+                TiledError::Costmap(CostmapError::Invalid(issues)) => {
+                    Failure::input(describe(&issues))
+                }
+                TiledError::Costmap(CostmapError::Cancelled) => {
+                    Failure::other("the costmap was cancelled")
+                }
+                TiledError::Read(e) => Failure::input(describe_dem_fault(&args.dem, e)),
+                other => Failure::other(format!("the tiled costmap failed: {other}")),
+            });
+        }
+    };
+    files
+        .finish()
+        .and_then(|(mut c, layers)| {
+            c.flush()?;
+            for (_, mut w) in layers {
+                w.flush()?;
+            }
+            Ok(())
+        })
+        .map_err(|e| Failure::other(format!("cannot write {}: {e}", costmap_path.display())))?;
+    let write = |path: &Path, content: &[u8]| {
+        std::fs::write(path, content)
+            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+    };
+    write(&out.join("preview.png"), &map.preview_png)?;
+    write(
+        &out.join("legend.svg"),
+        legend_svg_of(&map.stats, &map.vehicle.name).as_bytes(),
     )?;
-    write_files(&map, &args.out)?;
-    print_summary(&map, [dem_w, dem_h], started, &args.out);
+    let summary = Summary {
+        width: map.width,
+        height: map.height,
+        params: &map.params,
+        vehicle: &map.vehicle,
+        stats: &map.stats,
+        warnings: &map.warnings,
+    };
+    let doc = json!({
+        "vehicle": map.vehicle,
+        "params": map.params,
+        "stats": map.stats,
+        "warnings": map.warnings,
+        "width": map.width,
+        "height": map.height,
+        "crs": map.crs,
+        "layers": kept,
+        "tiles": {
+            "size": map.tile,
+            "halo_surface": map.halos.surface,
+            "halo_inflation": map.halos.inflation,
+        },
+    });
+    write_stats(out, &doc)?;
+    print_summary(&summary, [dem_w, dem_h], started, out, Some(map.tile));
     Ok(())
+}
+
+fn create_dir(dir: &Path) -> Result<(), Failure> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Failure::other(format!("cannot create {}: {e}", dir.display())))
+}
+
+/// stats.json in `out`.
+fn write_stats(out: &Path, doc: &serde_json::Value) -> Result<(), Failure> {
+    let mut text = serde_json::to_string_pretty(doc).map_err(|e| Failure::other(e.to_string()))?;
+    text.push('\n');
+    let path = out.join("stats.json");
+    std::fs::write(&path, text)
+        .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
 }
 
 /// The vehicle: a preset's name, or a file.
@@ -223,7 +491,7 @@ fn read_options(
 
 /// costmap.tif, preview.png, legend.svg, layers/<name>.tif and stats.json
 /// in `out`.
-fn write_files(map: &Costmap, out: &Path) -> Result<(), Failure> {
+fn write_files(map: &planner_core::costmap::Costmap, out: &Path) -> Result<(), Failure> {
     let layers_dir = out.join("layers");
     std::fs::create_dir_all(out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", out.display())))?;
@@ -243,7 +511,10 @@ fn write_files(map: &Costmap, out: &Path) -> Result<(), Failure> {
     written?;
     let preview = preview.map_err(|_| Failure::other("drawing the preview failed"))?;
     write(&out.join("preview.png"), &preview)?;
-    write(&out.join("legend.svg"), legend_svg(map).as_bytes())?;
+    write(
+        &out.join("legend.svg"),
+        legend_svg_of(&map.stats, &map.vehicle.name).as_bytes(),
+    )?;
     let mut kept = Vec::new();
     if !map.layers.is_empty() {
         std::fs::create_dir_all(&layers_dir)
@@ -265,9 +536,7 @@ fn write_files(map: &Costmap, out: &Path) -> Result<(), Failure> {
         "crs": map.crs,
         "layers": kept,
     });
-    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| Failure::other(e.to_string()))?;
-    text.push('\n');
-    write(&out.join("stats.json"), text.as_bytes())
+    write_stats(out, &doc)
 }
 
 /// A GeoTIFF written by `f` straight to its file (a 4000 × 4000 costmap is
@@ -290,9 +559,25 @@ fn write_tiff(
     Ok(kept)
 }
 
+/// What a summary tells of a costmap (whole or tiled).
+struct Summary<'a> {
+    width: usize,
+    height: usize,
+    params: &'a ResolvedParams,
+    vehicle: &'a Vehicle,
+    stats: &'a CostmapStats,
+    warnings: &'a [String],
+}
+
 /// What was built, on stdout; its warnings on stderr.
-fn print_summary(map: &Costmap, [dem_w, dem_h]: [usize; 2], started: Instant, out: &Path) {
-    let s = &map.stats;
+fn print_summary(
+    map: &Summary<'_>,
+    [dem_w, dem_h]: [usize; 2],
+    started: Instant,
+    out: &Path,
+    tile: Option<usize>,
+) {
+    let s = map.stats;
     let f = &s.class_fractions;
     let pct = |x: f64| format!("{:.1} %", x * 100.0);
     println!(
@@ -320,12 +605,13 @@ fn print_summary(map: &Costmap, [dem_w, dem_h]: [usize; 2], started: Instant, ou
         ),
         _ => println!("no traversable cell"),
     }
+    let tiles = tile.map_or(String::new(), |t| format!(" in tiles of {t}"));
     println!(
-        "built in {:.2} s -> {}",
+        "built{tiles} in {:.2} s -> {}",
         started.elapsed().as_secs_f64(),
         out.display()
     );
-    for w in &map.warnings {
+    for w in map.warnings {
         eprintln!("warning: {w}");
     }
 }
