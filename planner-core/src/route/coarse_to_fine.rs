@@ -187,6 +187,9 @@ impl CoarseToFine {
     }
 }
 
+/// Most cells of a map searched coarse to fine.
+pub const MAX_CELLS: u64 = 1 << 32;
+
 /// Relative slack of the optimality test: floating-point rounding only.
 const PROOF_TOLERANCE: f64 = 1e-12;
 
@@ -214,6 +217,15 @@ pub fn coarse_to_fine(
         return Err(RouteError::InvalidOptions(issues).into());
     }
     let (width, height) = (source.width(), source.height());
+    // The corridor search numbers cells with u32.
+    let cells = width as u64 * height as u64;
+    if cells > MAX_CELLS {
+        return Err(CostSourceError::TooLarge {
+            cells,
+            max: MAX_CELLS,
+        }
+        .into());
+    }
     let mut cache = TileCache::new(source, c2f.tile, c2f.cache_tiles);
     for (cell, is_start) in [(start, true), (goal, false)] {
         let (row, col) = cell;

@@ -20,11 +20,9 @@
 //! So min(C, leak) bounds the optimum of the whole grid from below, and
 //! C is optimal for the whole grid when leak ≥ C.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use super::arc_model::ArcModel;
 use super::block_minima::BlockMinima;
+use super::bucket_queue::BucketQueue;
 use super::coarse_bound::{CoarseBound, Octile};
 use super::cost_source::CostSourceError;
 use super::neighbourhood::{DIRECTIONS, opposite};
@@ -73,7 +71,7 @@ struct BlockState {
 /// Bytes of state per touched cell.
 pub(crate) const BYTES_PER_CELL: usize = 4 + 8 + 1;
 /// Bytes per open-list entry.
-pub(crate) const BYTES_PER_OPEN: usize = 24;
+pub(crate) const BYTES_PER_OPEN: usize = 16;
 
 pub(crate) struct CorridorSearch<'c, 'a> {
     pub(crate) cache: &'c mut TileCache<'a>,
@@ -121,24 +119,21 @@ impl CorridorSearch<'_, '_> {
         let h = move |r: usize, c: usize| {
             factor * octile.distance(r.abs_diff(goal.0), c.abs_diff(goal.1))
         };
-        let mut open: BinaryHeap<Reverse<(u64, u32, u64)>> = BinaryHeap::new();
+        let mut open = open_list(self.model, &self.octile, &dx, dy, &diagonal);
+        let mut pushed = 0usize;
+        let mut popped = 0usize;
         let mut open_peak = 0;
         let (slot, local) = self.locate(&mut state, start.0, start.1)?;
         state.blocks[slot].g[local] = 0.0;
         let h0 = h(start.0, start.1);
-        open.push(Reverse((
-            h0.to_bits(),
-            (h0 as f32).to_bits(),
-            id(start, width),
-        )));
+        open.push(entry(h0, h0, id(start, width)));
         let mut leak = f64::INFINITY;
         let mut expanded = 0u64;
         let mut found = None;
-        while let Some(Reverse((_, _, cell))) = open.pop() {
-            let (r, c) = (
-                (cell / width as u64) as usize,
-                (cell % width as u64) as usize,
-            );
+        while let Some(top) = open.pop() {
+            popped += 1;
+            let cell = top as u32 as usize;
+            let (r, c) = (cell / width, cell % width);
             let (slot, local) = self.locate(&mut state, r, c)?;
             if state.blocks[slot].flags[local] & CLOSED != 0 {
                 continue;
@@ -198,12 +193,9 @@ impl CorridorSearch<'_, '_> {
                 v.g[vl] = gv;
                 v.flags[vl] = opposite(d) as u8;
                 let hv = h(vr, vc);
-                open.push(Reverse((
-                    (gv + hv).to_bits(),
-                    (hv as f32).to_bits(),
-                    id((vr, vc), width),
-                )));
-                open_peak = open_peak.max(open.len());
+                open.push(entry(gv + hv, hv, id((vr, vc), width)));
+                pushed += 1;
+                open_peak = open_peak.max(pushed - popped);
             }
         }
         let blocks_touched = state.blocks.len();
@@ -291,9 +283,47 @@ impl CorridorSearch<'_, '_> {
     }
 }
 
+/// Row-major cell number (the caller checked that the map has at most
+/// 2³² cells).
 #[inline]
-fn id((r, c): Cell, width: usize) -> u64 {
-    r as u64 * width as u64 + c as u64
+fn id((r, c): Cell, width: usize) -> u32 {
+    (r * width + c) as u32
+}
+
+/// An open-list entry: f, then the smaller h, then the cell (as A*'s).
+#[inline]
+fn entry(f: f64, h: f64, cell: u32) -> u128 {
+    (u128::from(f.to_bits()) << 64) | (u128::from((h as f32).to_bits()) << 32) | u128::from(cell)
+}
+
+/// The open list, its buckets sized as A*'s (`astar::open_list`): a
+/// sixteenth of the cheapest arc wide, over twice the dearest arc.
+fn open_list(
+    model: &ArcModel,
+    octile: &Octile,
+    dx: &[f64],
+    dy: f64,
+    diagonal: &[f64],
+) -> BucketQueue {
+    const MAX_BUCKETS: f64 = 4094.0;
+    let cheapest = octile.dx_min.min(dy) * model.heuristic_factor();
+    let longest = diagonal
+        .iter()
+        .chain(dx)
+        .copied()
+        .filter(|l| l.is_finite())
+        .fold(dy, f64::max);
+    let spread = 2.0 * longest * model.largest_factor();
+    let mut width = cheapest / 16.0;
+    let mut buckets = (spread / width).ceil();
+    if !(buckets.is_finite() && buckets < MAX_BUCKETS) {
+        buckets = MAX_BUCKETS;
+        width = spread / buckets;
+    }
+    if !(width.is_finite() && width > 0.0) {
+        width = 1.0;
+    }
+    BucketQueue::new(width, buckets as usize + 2)
 }
 
 /// The cell reached from (r, c) by move `d`, `None` outside the grid.

@@ -20,6 +20,8 @@ pub enum CostSourceError {
     RotatedGrid,
     #[error("the costmap is empty ({width} columns × {height} rows)")]
     Empty { width: usize, height: usize },
+    #[error("the costmap has {cells} cells; at most {max} are supported")]
+    TooLarge { cells: u64, max: u64 },
 }
 
 /// A cost raster read a window at a time: finite costs (> 0) are

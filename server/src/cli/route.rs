@@ -11,7 +11,8 @@ use planner_core::export::write_waypoints;
 use planner_core::route::changes::{self, CellChanges, ChangeError, ChangedArea};
 use planner_core::route::{
     ArcCost, BigRouteError, CoarseToFine, CoarseToFineOptions, DStarLite, Endpoint, MapRoute,
-    MapRouteError, Position, RouteMap, RouteOptions, WindowedMap, WindowedRouteError, astar,
+    MapRouteError, Position, RouteError, RouteMap, RouteOptions, WindowedMap, WindowedRouteError,
+    astar,
 };
 use planner_core::terrain::{DemLimits, GeoTiffWindows, RasterWindows};
 use serde_json::{Map, Value, json};
@@ -285,6 +286,9 @@ fn open_windows(args: &RouteArgs, page: usize, band: usize) -> Result<GeoTiffWin
 fn big_failure(e: WindowedRouteError, args: &RouteArgs) -> Failure {
     match e {
         WindowedRouteError::Map(e) => map_failure(e, args),
+        WindowedRouteError::Search(BigRouteError::Route(RouteError::Unreachable)) => {
+            map_failure(MapRouteError::Unreachable, args)
+        }
         WindowedRouteError::Search(BigRouteError::Route(e)) => {
             map_failure(MapRouteError::Search(e), args)
         }
