@@ -674,3 +674,28 @@ fn a_server_stop_ends_an_upload_with_a_failed_event() {
         "{last}"
     );
 }
+
+#[test]
+fn a_client_that_goes_away_cancels_the_vehicles_transfer() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(&dir.path().join("data"), &["--vehicle-links", LINKS]);
+    let survey = stored_survey(&server);
+    // A vehicle that goes quiet when mission item 3 arrives. The engine's
+    // own time-out (10 s × 6 tries) would cancel only after the 30 s the
+    // test waits for the vehicle: a cancel seen comes from the disconnect.
+    let vehicle = pymavlink_vehicle(dir.path(), &["--stall", "mission:3"]);
+    let open = try_open(
+        &server,
+        &survey,
+        &json!({"to": vehicle.address(), "timeout_ms": 10000, "retries": 5}),
+    )
+    .expect("the upload starts");
+    let stalled = vehicle.stored_when(|v| v["stalled"] == true);
+    assert_eq!(stalled["stalled"], true, "{stalled}");
+    // The client goes away mid-transfer: the vehicle is told at once
+    // (MISSION_ACK OPERATION_CANCELLED), not left waiting.
+    drop(open.stream);
+    let told = vehicle.stored_when(|v| v["cancelled_by_gcs"].as_u64() >= Some(1));
+    assert_eq!(told["cancelled_by_gcs"], 1, "{told}");
+    assert_eq!(told["mission"], json!([]), "nothing was stored");
+}

@@ -6,7 +6,7 @@ than the one sent.
 
 usage: mavlink_vehicle.py --port PORT --out OUT_JSON [--seed N]
          [--drop P] [--repeat P] [--nack KIND:RESULT] [--corrupt KIND:SEQ]
-         [--legacy] [--max-seconds S]
+         [--stall KIND:SEQ] [--legacy] [--max-seconds S]
 
 Listens on udp 127.0.0.1:PORT (port 0: any; the port is printed as
 `READY <port>`), answers whoever sent last. --drop loses each incoming
@@ -14,9 +14,13 @@ and outgoing message with probability P, --repeat sends each answer twice
 with probability P (random.Random(seed)). --nack answers MISSION_COUNT of
 KIND (mission, fence, rally) with MISSION_ACK of RESULT (e.g.
 MAV_MISSION_NO_SPACE). --corrupt adds 1 to x of item SEQ as stored.
---legacy asks for items with MISSION_REQUEST. After each completed upload
-OUT_JSON is rewritten: {"mission": [items], "fence": [...], "rally":
-[...], "dropped": n, "repeated": n} with MISSION_ITEM_INT fields.
+--stall stops answering an upload of KIND when item SEQ arrives (no more
+requests, no ACK: a vehicle gone quiet mid-transfer). --legacy asks for
+items with MISSION_REQUEST. After each completed upload (and a stall, and a
+MISSION_ACK OPERATION_CANCELLED from the ground station) OUT_JSON is
+rewritten: {"mission": [items], "fence": [...], "rally": [...], "dropped":
+n, "repeated": n, "stalled": bool, "cancelled_by_gcs": n} with
+MISSION_ITEM_INT fields.
 """
 import argparse
 import json
@@ -48,6 +52,7 @@ def main():
     ap.add_argument("--repeat", type=float, default=0.0)
     ap.add_argument("--nack")
     ap.add_argument("--corrupt")
+    ap.add_argument("--stall")
     ap.add_argument("--legacy", action="store_true")
     ap.add_argument("--max-seconds", type=float, default=60.0)
     a = ap.parse_args()
@@ -56,6 +61,10 @@ def main():
     if a.nack:
         kind, result = a.nack.split(":")
         nack = (KINDS[kind], getattr(ML, result))
+    stall = None
+    if a.stall:
+        kind, seq = a.stall.split(":")
+        stall = (KINDS[kind], int(seq))
     corrupt = None
     if a.corrupt:
         kind, seq = a.corrupt.split(":")
@@ -65,7 +74,7 @@ def main():
                                       source_component=1)
     print(f"READY {conn.port.getsockname()[1]}", flush=True)
     lists = {t: [] for t in KINDS.values()}
-    stats = {"dropped": 0, "repeated": 0}
+    stats = {"dropped": 0, "repeated": 0, "stalled": False, "cancelled_by_gcs": 0}
     receiving = None  # [type, count, items, last_request_time, re_requests]
     completed = None  # (type, count) of the list last received in full
 
@@ -135,6 +144,12 @@ def main():
             # means our request was lost, so ask again (as PX4 does).
             if m.mission_type != mt or m.seq + 1 < len(items):
                 continue
+            if stall == (mt, m.seq):
+                # Gone quiet: this transfer is never answered again.
+                receiving = None
+                stats["stalled"] = True
+                save()
+                continue
             if m.seq == len(items):
                 x, y = m.x, m.y
                 if t == "MISSION_ITEM":
@@ -157,6 +172,11 @@ def main():
             else:
                 receiving[3], receiving[4] = now, 0
                 request(mt, len(items))
+        elif t == "MISSION_ACK" and m.type == ML.MAV_MISSION_OPERATION_CANCELLED:
+            # The ground station gave up a transfer (its client went away).
+            receiving = None
+            stats["cancelled_by_gcs"] += 1
+            save()
         elif t == "MISSION_REQUEST_LIST":
             send(ML.MAVLink_mission_count_message(255, 0, len(lists[m.mission_type]),
                                                   m.mission_type))
