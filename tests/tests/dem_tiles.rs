@@ -219,6 +219,28 @@ fn geotiffs_in_strips_and_tiles_read_back_from_their_tiles_as_gdal_reads_them() 
                 k / w
             );
         }
+        // The download, a tiled GeoTIFF streamed from the tiles: GDAL reads
+        // the same cells and georeferencing.
+        let r = get(&server.url(&format!("/api/v1/dems/{id}/dem.tif")));
+        assert_eq!(r.status, 200, "{what}: {}", r.text());
+        assert_eq!(r.header("content-type"), Some("image/tiff"));
+        let copy = work.path().join(format!("download{i}.tif"));
+        std::fs::write(&copy, &r.body).unwrap();
+        let (cw, ch, back) = gdal_cells(&copy, work.path());
+        assert_eq!((cw, ch), (w, h), "{what}");
+        for (k, (a, b)) in back.iter().zip(&want).enumerate() {
+            assert!(
+                same(*a, *b),
+                "{what}: downloaded cell {k} is {a}, GDAL read {b}"
+            );
+        }
+        let gt = |p: &Path| {
+            let info: Value =
+                serde_json::from_str(&run_tool("gdalinfo", &["-json", p.to_str().unwrap()], None))
+                    .unwrap();
+            info["geoTransform"].clone()
+        };
+        assert_eq!(gt(&copy), gt(&file), "{what}");
         // The stored statistics are the cells'.
         let valid: Vec<f64> = want.iter().copied().filter(|v| !v.is_nan()).collect();
         let min = valid.iter().copied().fold(f64::INFINITY, f64::min);
@@ -400,5 +422,56 @@ fn a_large_geotiff_is_stored_within_bounded_memory() {
             "cell {k}: {a} from the tiles, {} GDAL",
             want[k]
         );
+    }
+}
+
+/// The download of a DEM cut into tiles (a 121 MiB tiled GeoTIFF, from a
+/// 5400 × 5400 Float32 raster) is streamed a tile at a time: the server's
+/// peak grows by a few tiles, not the file; GDAL reads the cells uploaded.
+#[test]
+fn a_large_download_is_streamed() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(dir.path(), &[]);
+    let work = tempfile::tempdir().unwrap();
+    let file = resampled(
+        &shared_data("dems/opengeos_data__elevation_dtm.tif"),
+        &work.path().join("big.tif"),
+        5400,
+        5400,
+        &["-co", "TILED=YES", "-co", "COMPRESS=DEFLATE"],
+    );
+    let r = upload(&server, &file, "EPSG:32618");
+    assert_eq!(r.status, 201, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let pid = server.pid();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let (before, _) = rss(pid);
+    std::fs::write(format!("/proc/{pid}/clear_refs"), "5").unwrap();
+    let r = get(&server.url(&format!("/api/v1/dems/{id}/dem.tif")));
+    let (_, peak) = rss(pid);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let growth = peak.saturating_sub(before);
+    eprintln!(
+        "download of {:.1} MiB: RSS {:.1} MiB before, peak {:.1} MiB (+{:.1} MiB)",
+        r.body.len() as f64 / MIB as f64,
+        before as f64 / MIB as f64,
+        peak as f64 / MIB as f64,
+        growth as f64 / MIB as f64
+    );
+    // 11 × 11 tiles of 1 MiB.
+    assert!(r.body.len() as u64 > 121 * MIB);
+    assert!(
+        growth < 48 * MIB,
+        "the download grew the peak by {growth} bytes"
+    );
+    let copy = work.path().join("download.tif");
+    std::fs::write(&copy, &r.body).unwrap();
+    let (crop, crop2) = (work.path().join("c1.tif"), work.path().join("c2.tif"));
+    translate(&file, &crop, &["-srcwin", "4000", "4700", "700", "700"]);
+    translate(&copy, &crop2, &["-srcwin", "4000", "4700", "700", "700"]);
+    let (_, _, want) = gdal_cells(&crop, work.path());
+    let (_, _, back) = gdal_cells(&crop2, work.path());
+    for (k, (a, b)) in back.iter().zip(&want).enumerate() {
+        assert!(same(*a, *b), "downloaded cell {k}: {a}, GDAL read {b}");
     }
 }

@@ -171,3 +171,11 @@ pub(super) fn directory(crs: &Crs, code: u16) -> Option<(Vec<u16>, Option<String
     dir.extend(keys.iter().flatten());
     Some((dir, ascii))
 }
+
+/// The GeoKeyDirectory (as SHORTs) and GeoAsciiParams declaring `crs`, as
+/// this module's writer writes them, for a GeoTIFF written elsewhere (the
+/// service's streamed tiled download); `None` when its EPSG code does not
+/// fit a GeoKey or its name is too long.
+pub fn geokey_directory(crs: &Crs) -> Option<(Vec<u16>, Option<String>)> {
+    directory(crs, epsg_code(crs)?)
+}

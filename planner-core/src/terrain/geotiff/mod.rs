@@ -48,6 +48,7 @@ mod windows;
 mod write;
 mod write_ifd;
 
+pub use geokeys::geokey_directory;
 pub use ifd::TiffPage;
 pub(super) use ifd::pages;
 pub use raster::{Band, BandData, Page, SampleType};

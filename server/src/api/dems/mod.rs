@@ -2,6 +2,7 @@
 //! or SRTM `.hgt`), list, fetch its metadata, delete, render a hillshade
 //! preview and read heights at WGS84 points.
 
+mod download;
 mod handlers;
 mod header;
 mod model;
@@ -27,5 +28,6 @@ pub fn routes(max_dem_bytes: usize) -> OpenApiRouter<AppState> {
         .routes(routes!(handlers::get_dem, handlers::delete_dem))
         .routes(routes!(handlers::hillshade))
         .routes(routes!(handlers::window))
+        .routes(routes!(download::download_dem))
         .routes(routes!(handlers::elevation, handlers::elevations))
 }
