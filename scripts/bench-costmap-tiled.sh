@@ -1,0 +1,96 @@
+#!/usr/bin/env bash
+# Times the tiled `terraplan costmap` (issue 22 item 2) on a large Float32
+# DEM next to `gdaldem slope` on the same DEM: wall time and peak RSS
+# (/usr/bin/time -v, "Maximum resident set size") of each. The DEM is
+# generated once (kept for later runs) as a tiled, uncompressed GeoTIFF
+# of synthetic ground: 0.1 m cells in UTM 33N, rolling hills, kerbs, walled
+# pockets and nodata holes, written band by band so generating it needs
+# little memory either.
+#
+#   bash scripts/bench-costmap-tiled.sh [--size 20000] [--tile-size 1024] [--dir /tmp]
+#
+# Each run can be wrapped (e.g. to pause other work on a shared machine):
+#   WRAP=/work/notes/quiet.sh bash scripts/bench-costmap-tiled.sh
+# Needs GDAL's command-line tools and Python bindings (gdal-bin,
+# python3-gdal) and /usr/bin/time.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+size=20000
+tile=1024
+dir=/tmp
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --size) size=$2; shift 2;;
+    --tile-size) tile=$2; shift 2;;
+    --dir) dir=$2; shift 2;;
+    *) echo "unknown argument $1" >&2; exit 2;;
+  esac
+done
+wrap=${WRAP:-}
+dem="$dir/terraplan-bench-dem-$size.tif"
+out="$dir/terraplan-bench-costmap-$size"
+cargo build --release --bin terraplan
+
+if [ ! -f "$dem" ]; then
+  echo "generating $dem ($size x $size Float32)..." >&2
+  /usr/bin/python3 - "$dem" "$size" <<'EOF'
+import sys
+import numpy as np
+from osgeo import gdal, osr
+gdal.UseExceptions()
+path, n = sys.argv[1], int(sys.argv[2])
+drv = gdal.GetDriverByName("GTiff")
+ds = drv.Create(path + ".part", n, n, 1, gdal.GDT_Float32,
+                ["TILED=YES", "BLOCKXSIZE=512", "BLOCKYSIZE=512", "BIGTIFF=IF_NEEDED"])
+cell = 0.1
+ds.SetGeoTransform([400000.0, cell, 0.0, 4500000.0 + n * cell, 0.0, -cell])
+srs = osr.SpatialReference()
+srs.ImportFromEPSG(32633)
+ds.SetProjection(srs.ExportToWkt())
+band = ds.GetRasterBand(1)
+band.SetNoDataValue(-9999.0)
+x = np.arange(n, dtype=np.float64) * cell
+rng = np.random.default_rng(22)
+rows = 512
+for r0 in range(0, n, rows):
+    r1 = min(n, r0 + rows)
+    y = (np.arange(r0, r1, dtype=np.float64) * cell)[:, None]
+    z = (100.0 + 0.03 * x[None, :] + 0.02 * y
+         + 1.5 * np.sin(x[None, :] / 37.0) * np.cos(y / 23.0)
+         + 0.4 * np.sin(x[None, :] / 5.3 + y / 7.1))
+    # Kerbs 0.2 m high every 40 m, walls 0.5 m around 3 m pockets every 25 m.
+    z += 0.2 * ((x[None, :] % 40.0) > 20.0)
+    cx, cy = x[None, :] % 25.0, y % 25.0
+    wall = ((np.abs(cx - 10.0) < 0.15) | (np.abs(cx - 13.0) < 0.15)) & (cy > 10.0) & (cy < 13.0)
+    wall |= ((np.abs(cy - 10.0) < 0.15) | (np.abs(cy - 13.0) < 0.15)) & (cx > 10.0) & (cx < 13.0)
+    z += 0.5 * wall
+    z += 0.01 * rng.random(z.shape)
+    z[rng.random(z.shape) < 1e-4] = -9999.0
+    band.WriteArray(z.astype(np.float32), 0, r0)
+band.FlushCache()
+ds = None
+import os
+os.rename(path + ".part", path)
+EOF
+fi
+
+measure() { # label, command...: prints "label seconds peak_MiB"
+  local label=$1; shift
+  local log
+  log=$(mktemp)
+  $wrap /usr/bin/time -v "$@" >/dev/null 2>"$log" || { cat "$log" >&2; exit 1; }
+  local wall rss
+  wall=$(awk -F': ' '/Elapsed \(wall clock\)/ {print $2}' "$log" \
+    | awk -F: '{ if (NF == 3) print $1 * 3600 + $2 * 60 + $3; else print $1 * 60 + $2 }')
+  rss=$(awk -F': ' '/Maximum resident set size/ {printf "%.0f", $2 / 1024}' "$log")
+  rm -f "$log"
+  printf '%-34s %9.1f s %9s MiB\n' "$label" "$wall" "$rss"
+}
+
+rm -rf "$out"
+echo "DEM $dem: ${size} x ${size} Float32, $(du -h "$dem" | cut -f1)"
+measure "terraplan costmap (tiles of $tile)" \
+  target/release/terraplan costmap "$dem" --tile-size "$tile" --out "$out"
+measure "gdaldem slope" gdaldem slope -q "$dem" "$out/gdaldem-slope.tif"
+grep -o '"size": [0-9]*' "$out/stats.json" | head -1 || true
+ls -la "$out" >&2
