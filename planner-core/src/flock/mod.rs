@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 pub use bound::makespan_lower_bound;
 pub use problem::{Flock, FlockJob, FlockUav, Routes, Stop, Visit, count_turns};
 pub use split::{Part, Piece, halve_until};
-pub use tour::{Tour, plan_tour};
+pub use tour::{Tour, plan_tour, plan_tour_in};
 pub use transit::{Endpoint, ObstacleMap, TransitError, polyline_length};
 
 /// How the jobs are shared among the UAVs.

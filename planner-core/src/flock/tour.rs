@@ -105,6 +105,18 @@ pub fn plan_tour(
     free: &MultiPolygon<f64>,
     obstacles: &ObstacleMap,
 ) -> Result<Tour, TransitError> {
+    plan_tour_in(start, plans, cells, &FreeSpace::new(free), obstacles)
+}
+
+/// [`plan_tour`] in a free space already indexed: the survey's angle search
+/// prices a tour per slice angle over the same free space.
+pub fn plan_tour_in(
+    start: Coord<f64>,
+    plans: &[CellPlan],
+    cells: &[Polygon<f64>],
+    free: &FreeSpace,
+    obstacles: &ObstacleMap,
+) -> Result<Tour, TransitError> {
     let finite = |c: Coord<f64>| c.x.is_finite() && c.y.is_finite();
     if !finite(start) {
         return Err(TransitError::NonFinite {
@@ -136,12 +148,10 @@ pub fn plan_tour(
     search.improve(&mut legs);
     crate::cancel::check()?;
 
-    // Indexed once for all re-oriented cells.
-    let free = FreeSpace::new(free);
     let visits: Vec<CellPlan> = search
         .seq
         .iter()
-        .map(|&(j, way)| jobs[j].materialise(way, plans, cells, &free))
+        .map(|&(j, way)| jobs[j].materialise(way, plans, cells, free))
         .collect();
     let mut transits = Vec::with_capacity(visits.len() + 1);
     let mut at = start;

@@ -19,7 +19,7 @@ use super::cells::{Decomposition, angle_gap, bearing_mod_180};
 use super::request::{NO_FLY_POINTER, PlanError, ROI_POINTER, SliceAngle};
 use crate::coverage::{self, CellPlan};
 use crate::decompose;
-use crate::flock::{ObstacleMap, TransitError, plan_tour};
+use crate::flock::{ObstacleMap, TransitError, plan_tour_in};
 use crate::geo::Issue;
 
 /// How many slice angles `auto` tries at most: every 15° plus the bearings
@@ -222,7 +222,7 @@ pub(super) fn decompose_and_cover(
             let judge = Judge {
                 start: *start,
                 obstacles,
-                flyable: free,
+                flyable: &free_space,
                 surveyed,
                 footprint_side_m: *footprint_side_m,
                 spacing,
@@ -278,7 +278,7 @@ struct Judge<'a> {
     start: Coord<f64>,
     obstacles: &'a ObstacleMap,
     /// Where the lanes, links and transits run.
-    flyable: &'a MultiPolygon<f64>,
+    flyable: &'a coverage::FreeSpace,
     /// Where the footprints must cover.
     surveyed: &'a MultiPolygon<f64>,
     footprint_side_m: f64,
@@ -293,7 +293,7 @@ impl Judge<'_> {
         plans: &[CellPlan],
         cells: &[Polygon<f64>],
     ) -> Result<Option<f64>, PlanError> {
-        match plan_tour(self.start, plans, cells, self.flyable, self.obstacles) {
+        match plan_tour_in(self.start, plans, cells, self.flyable, self.obstacles) {
             Ok(tour) => Ok(Some(tour.length_m())),
             Err(TransitError::Cancelled(c)) => Err(PlanError::Cancelled(c)),
             Err(_) => Ok(None),
@@ -404,6 +404,14 @@ fn shortest_whole_plan(
         let Some(length_m) = judge.flown_length(&plans, &laid.cells)? else {
             continue;
         };
+        // Coverage is the dear part of a fare (strips unioned over the
+        // field): a plan no shorter than a best that covers cannot win.
+        if best
+            .as_ref()
+            .is_some_and(|(b, _, _)| b.covers && b.keeps_coverage && length_m >= b.length_m - 1e-6)
+        {
+            continue;
+        }
         let fare = Fare {
             covers: judge.covers(&plans),
             keeps_coverage: judge.strip_coverage(&plans) >= reference_strips - 1e-6,
@@ -492,7 +500,7 @@ mod tests {
         free: &MultiPolygon<f64>,
         obstacles: &ObstacleMap,
     ) -> f64 {
-        plan_tour(start, &d.plans, &d.cells, free, obstacles)
+        crate::flock::plan_tour(start, &d.plans, &d.cells, free, obstacles)
             .unwrap()
             .length_m()
     }
