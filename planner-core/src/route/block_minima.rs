@@ -1,7 +1,7 @@
 //! The coarse level of a big-map search: the least and largest finite
 //! cost of every B × B block of cells, in one pass over the map read in
-//! bands of whole rows (a strip-organised GeoTIFF decodes each strip
-//! once). A block with no traversable cell is lethal.
+//! square windows of about 1024² cells, two at a time on the rayon pool. A
+//! block with no traversable cell is lethal.
 //!
 //! Why the minima bound every fine path from below: both arc rules cost a
 //! step by its length times a factor that depends only on the costs of its
@@ -16,9 +16,10 @@ use rayon::prelude::*;
 
 use super::cost_source::{CostSource, CostSourceError};
 
-/// Cells read per band at most (a band is whole rows: its f32 costs and,
-/// for a raster source, the f64 window it converts from).
-const BAND_CELLS: usize = 1 << 20;
+/// Side in cells of the square windows the pass reads (rounded down to
+/// whole blocks): 1 M cells, 12 MB with the f64 window a raster source
+/// converts from; a tiled GeoTIFF decodes each of its tiles about once.
+const WINDOW: usize = 1024;
 
 /// Block minima and maxima of a cost raster.
 #[derive(Clone, Debug)]
@@ -35,8 +36,7 @@ pub(crate) struct BlockMinima {
 }
 
 impl BlockMinima {
-    /// One pass over `source` in bands of whole block rows, two bands at
-    /// a time on the rayon pool.
+    /// One pass over `source` in square windows of whole blocks.
     pub(crate) fn build(
         source: &dyn CostSource,
         block: usize,
@@ -44,20 +44,21 @@ impl BlockMinima {
         let (width, height) = (source.width(), source.height());
         let across = width.div_ceil(block);
         let down = height.div_ceil(block);
-        let block_rows_per_band = (BAND_CELLS / (width * block)).max(1);
-        let bands: Vec<usize> = (0..down).step_by(block_rows_per_band).collect();
-        let rows: Vec<(Vec<f32>, Vec<f32>)> = bands
-            .par_iter()
-            .map(|&first| {
-                let block_rows = block_rows_per_band.min(down - first);
-                let r0 = first * block;
-                let h = (block_rows * block).min(height - r0);
-                let mut costs = vec![0.0f32; width * h];
-                source.read_costs(r0, 0, width, h, &mut costs)?;
-                let mut min = vec![f32::INFINITY; block_rows * across];
-                let mut max = vec![f32::NEG_INFINITY; block_rows * across];
-                for (r, row) in costs.chunks_exact(width).enumerate() {
-                    let base = (r / block) * across;
+        // Square windows of whole blocks, about WINDOW cells a side.
+        let side = (WINDOW / block).max(1) * block;
+        let (windows_across, windows_down) = (width.div_ceil(side), height.div_ceil(side));
+        let per_window: Vec<(Vec<f32>, Vec<f32>)> = (0..windows_across * windows_down)
+            .into_par_iter()
+            .map(|k| {
+                let (r0, c0) = ((k / windows_across) * side, (k % windows_across) * side);
+                let (h, w) = (side.min(height - r0), side.min(width - c0));
+                let mut costs = vec![0.0f32; w * h];
+                source.read_costs(r0, c0, w, h, &mut costs)?;
+                let cols = w.div_ceil(block);
+                let mut min = vec![f32::INFINITY; h.div_ceil(block) * cols];
+                let mut max = vec![f32::NEG_INFINITY; min.len()];
+                for (r, row) in costs.chunks_exact(w).enumerate() {
+                    let base = (r / block) * cols;
                     for (j, chunk) in row.chunks(block).enumerate() {
                         let (lo, hi) =
                             chunk
@@ -80,12 +81,23 @@ impl BlockMinima {
             block,
             across,
             down,
-            min: Vec::with_capacity(across * down),
-            max: Vec::with_capacity(across * down),
+            min: vec![f32::INFINITY; across * down],
+            max: vec![f32::NEG_INFINITY; across * down],
         };
-        for (min, max) in rows {
-            minima.min.extend(min);
-            minima.max.extend(max);
+        let blocks_per_side = side / block;
+        for (k, (min, max)) in per_window.into_iter().enumerate() {
+            let br0 = (k / windows_across) * blocks_per_side;
+            let bc0 = (k % windows_across) * blocks_per_side;
+            let cols = blocks_per_side.min(across - bc0);
+            for (i, (lo, hi)) in min
+                .chunks_exact(cols)
+                .zip(max.chunks_exact(cols))
+                .enumerate()
+            {
+                let at = (br0 + i) * across + bc0;
+                minima.min[at..at + cols].copy_from_slice(lo);
+                minima.max[at..at + cols].copy_from_slice(hi);
+            }
         }
         for (lo, hi) in minima.min.iter_mut().zip(minima.max.iter_mut()) {
             if *lo > *hi {
@@ -172,26 +184,32 @@ mod tests {
     }
 
     #[test]
-    fn bands_split_tall_maps_without_changing_the_result() {
-        // 2^20 cells per band: a 3000-wide map of 16-blocks reads 21 block
-        // rows per band, so 2000 rows take several bands.
+    fn windows_tile_big_maps_without_changing_the_result() {
+        // 3000 × 2000 cells in windows of 1024²: partial windows and a
+        // partial block (3000 = 187.5 blocks) on the right and bottom.
         let (w, h) = (3000, 2000);
-        let costs = (0..w * h)
+        let costs: Vec<f32> = (0..w * h)
             .map(|i| {
                 if i % 7919 == 0 {
                     f32::NAN
                 } else {
-                    1.0 + (i % 101) as f32
+                    1.0 + ((i * 7) % 101) as f32
                 }
             })
             .collect();
-        let grid = CostGrid::with_cell_size(w, h, costs, 1.0, 1.0).unwrap();
+        let grid = CostGrid::with_cell_size(w, h, costs.clone(), 1.0, 1.0).unwrap();
         let m = BlockMinima::build(&grid, 16).unwrap();
-        assert!((BAND_CELLS / (w * 16)) * 16 < h);
-        let b = m.block_of(1999, 2999);
-        assert_eq!(b, m.min.len() - 1);
-        assert_eq!(m.min[m.block_of(1500, 40)], 1.0);
-        assert_eq!(m.max[m.block_of(1500, 40)], 101.0);
-        assert_eq!(m.cost_range(), Some((1.0, 101.0)));
+        assert!(w > 2 * WINDOW && h > WINDOW);
+        let mut lo = vec![f32::INFINITY; m.min.len()];
+        let mut hi = vec![f32::NEG_INFINITY; m.min.len()];
+        for (i, &c) in costs.iter().enumerate() {
+            let b = m.block_of(i / w, i % w);
+            if c.is_finite() {
+                lo[b] = lo[b].min(c);
+                hi[b] = hi[b].max(c);
+            }
+        }
+        assert_eq!(m.block_of(1999, 2999), 125 * 188 - 1);
+        assert_eq!((m.min, m.max), (lo, hi));
     }
 }
