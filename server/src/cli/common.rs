@@ -55,18 +55,23 @@ pub(super) fn read_dem_file(
     let bytes = read_large_file(file)
         .map_err(|e| Failure::input(format!("cannot read DEM file {path}: {e}")))?;
     let file_name = file.file_name().map(|n| n.to_string_lossy().into_owned());
-    let describe = |e: TerrainError| {
-        Failure::input(match e {
-            TerrainError::UnknownCrs(why) => format!(
-                "{path}: the raster's coordinate reference system cannot be determined ({why}); \
-                 give it with {crs_flag}, e.g. {crs_flag} EPSG:32633"
-            ),
-            TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
-            other => format!("{path}: {other}"),
-        })
-    };
-    let dem = read_dem(&bytes, file_name.as_deref(), crs, &limits).map_err(describe)?;
+    let dem = read_dem(&bytes, file_name.as_deref(), crs, &limits)
+        .map_err(|e| describe_dem_fault(file, crs_flag, e))?;
     Ok((dem, file_name, bytes.len() as u64))
+}
+
+/// A DEM file's fault as the user reads it; `crs_flag` names the option
+/// that gives the CRS.
+pub(super) fn describe_dem_fault(file: &Path, crs_flag: &str, e: TerrainError) -> Failure {
+    let path = file.display();
+    Failure::input(match e {
+        TerrainError::UnknownCrs(why) => format!(
+            "{path}: the raster's coordinate reference system cannot be determined ({why}); \
+             give it with {crs_flag}, e.g. {crs_flag} EPSG:32633"
+        ),
+        TerrainError::Invalid(m) => format!("{path} cannot be read as a DEM: {m}"),
+        other => format!("{path}: {other}"),
+    })
 }
 
 /// The whole file, in a buffer backed by huge pages where the kernel

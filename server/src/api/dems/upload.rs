@@ -24,7 +24,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::geo::Issue;
 use planner_core::terrain::{
-    Dem, DemFormat, DemInfo, GeoTiffWindows, RasterWindows, TerrainError, read_dem,
+    DemFormat, DemInfo, GeoTiffWindows, RasterWindows, TerrainError, read_dem,
 };
 use serde::Deserialize;
 use utoipa::{IntoParams, ToSchema};
@@ -384,9 +384,12 @@ async fn store_geotiff(
         .reserve(need, "cutting the uploaded DEM into tiles")
         .await?;
     let exact = windows.exact_in_f32();
-    let mut info = geometry_info(&windows)?;
+    // Its geometry now (a CRS that PROJ cannot transform is refused before
+    // any tile is stored); its statistics from the cutting.
+    let grid = windows.grid().clone();
+    tiles::windows_info(&grid, DemFormat::GeoTiff, &tiles::CellStats::default())?;
     let stored = tiles::store_tiles(&state.db, &state.planner, id, windows, Some(exact)).await?;
-    fill_stats(&mut info, &stored.stats);
+    let info = tiles::windows_info(&grid, DemFormat::GeoTiff, &stored.stats)?;
     let pixels = (width as u64).saturating_mul(height as u64);
     let row = DemMetaRow {
         id: id.to_string(),
@@ -406,34 +409,6 @@ async fn store_geotiff(
         return Err(e.into());
     }
     Ok((row, info))
-}
-
-/// The info of a raster read a window at a time: its geometry now (the
-/// statistics come from its cells, see [`fill_stats`]).
-fn geometry_info(src: &dyn RasterWindows) -> Result<DemInfo, ApiError> {
-    let g = src.grid();
-    let empty = Dem {
-        width: g.width,
-        height: g.height,
-        values: Vec::new(),
-        nodata: g.nodata,
-        transform: g.transform,
-        crs: g.crs.clone(),
-        format: DemFormat::GeoTiff,
-    };
-    Ok(empty.info()?)
-}
-
-/// The statistics of `info` from the cells' (as `Dem::info` counts them).
-fn fill_stats(info: &mut DemInfo, stats: &tiles::CellStats) {
-    let has_values = stats.nodata < stats.cells;
-    info.min = has_values.then_some(stats.min);
-    info.max = has_values.then_some(stats.max);
-    info.nodata_fraction = if stats.cells == 0 {
-        1.0
-    } else {
-        stats.nodata as f64 / stats.cells as f64
-    };
 }
 
 /// Any other upload (an ESRI ASCII grid, an SRTM `.hgt` tile): read whole

@@ -177,6 +177,50 @@ pub enum CutError {
     Stopped(String),
 }
 
+/// The statistics of `src`'s cells, read a band of 512 rows at a time.
+pub fn cell_stats(src: &dyn RasterWindows) -> Result<CellStats, TerrainError> {
+    let g = src.grid();
+    let mut stats = CellStats::default();
+    let mut band = Vec::new();
+    for row0 in (0..g.height).step_by(TILE_SIDE) {
+        let rows = TILE_SIDE.min(g.height - row0);
+        band.resize(rows * g.width, 0.0);
+        src.read_window(0, row0, g.width, rows, &mut band)?;
+        stats.add(&band);
+    }
+    Ok(stats)
+}
+
+/// The info of a raster of grid `g` read a window at a time (as
+/// [`Dem::info`] gives it for the raster in memory), its cells'
+/// statistics `stats`.
+pub fn windows_info(
+    g: &RasterGrid,
+    format: DemFormat,
+    stats: &CellStats,
+) -> Result<planner_core::terrain::DemInfo, TerrainError> {
+    // Its geometry, from an empty DEM of its size.
+    let empty = Dem {
+        width: g.width,
+        height: g.height,
+        values: Vec::new(),
+        nodata: g.nodata,
+        transform: g.transform,
+        crs: g.crs.clone(),
+        format,
+    };
+    let mut info = empty.info()?;
+    let has_values = stats.nodata < stats.cells;
+    info.min = has_values.then_some(stats.min);
+    info.max = has_values.then_some(stats.max);
+    info.nodata_fraction = if stats.cells == 0 {
+        1.0
+    } else {
+        stats.nodata as f64 / stats.cells as f64
+    };
+    Ok(info)
+}
+
 /// Memory cutting a raster `width` cells wide takes at most, bytes: the
 /// band read, one band per overview level (halving), the tiles in hand.
 pub fn cut_bytes(width: u64) -> u64 {
