@@ -142,7 +142,14 @@ pub(super) fn costmap(args: &CostmapArgs) -> Result<(), Failure> {
         max_pixels: args.max_pixels.unwrap_or(TILED_MAX_PIXELS),
         ..DemLimits::default()
     };
-    let windows = open_geotiff_windows(&args.dem, args.crs.as_deref(), &tiled_limits)?;
+    // Without --tile-size, a GeoTIFF the window reader refuses (e.g. one
+    // strip for a whole large image) is left to the whole-raster reader,
+    // which says what it thinks of it.
+    let windows = match open_geotiff_windows(&args.dem, args.crs.as_deref(), &tiled_limits) {
+        Ok(w) => w,
+        Err(_) if args.tile_size.is_none() => None,
+        Err(e) => return Err(e),
+    };
     let tile = match (&windows, args.tile_size) {
         (_, Some(n)) => Some(n),
         (Some(w), None) => {
