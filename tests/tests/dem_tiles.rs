@@ -475,3 +475,50 @@ fn a_large_download_is_streamed() {
         assert!(same(*a, *b), "downloaded cell {k}: {a}, GDAL read {b}");
     }
 }
+
+/// With `--max-dem-pixels` raised, a DEM larger than the memory budget
+/// can hold whole (9000 × 9000: 648 MB of heights, budget 400 MiB) is
+/// stored by tiles; its preview comes from an overview level, any window
+/// reads, and work that still needs it whole (a costmap) is refused with
+/// a 422 naming the budget instead of allocating.
+#[test]
+fn a_dem_over_the_memory_budget_is_stored_and_served_by_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = Server::start(
+        dir.path(),
+        &["--max-dem-pixels", "900000000", "--memory-budget-mb", "400"],
+    );
+    let work = tempfile::tempdir().unwrap();
+    let file = resampled(
+        &shared_data("dems/opengeos_data__elevation_dtm.tif"),
+        &work.path().join("big.tif"),
+        9000,
+        9000,
+        &["-co", "TILED=YES", "-co", "COMPRESS=DEFLATE"],
+    );
+    let r = upload(&server, &file, "EPSG:32618");
+    assert_eq!(r.status, 201, "{}", r.text());
+    let id = r.json()["id"].as_str().unwrap().to_string();
+
+    let r = get(&server.url(&format!("/api/v1/dems/{id}/hillshade.png?max_side=512")));
+    assert_eq!(r.status, 200, "{}", r.text());
+    let (w, h) = terraplan_e2e::png_size(&r.body);
+    assert!(w.max(h) <= 512 && w.max(h) >= 256, "{w} × {h}");
+
+    let r = get(&server.url(&format!(
+        "/api/v1/dems/{id}/window?col=8990&row=8990&width=10&height=10"
+    )));
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert_eq!(r.body.len(), 800);
+
+    let r = terraplan_e2e::post_json(
+        &server.url("/api/v1/costmaps"),
+        &serde_json::json!({"dem_id": id}),
+    );
+    let p = assert_problem(&r, 422, "memory budget of 400 MiB (--memory-budget-mb)");
+    assert!(
+        p["detail"].as_str().unwrap().contains("9000 × 9000 pixels"),
+        "{p}"
+    );
+    assert_eq!(get(&server.url("/healthz")).status, 200);
+}
