@@ -92,6 +92,8 @@ fn cases() -> Vec<Case> {
         c("GET", "/api/v1/surveys/{id}/cells.geojson", 0, S404, OK, OK),
         c("GET", "/api/v1/dems/{id}", 0, S404, OK, OK),
         c("GET", "/api/v1/dems/{id}/hillshade.png", 0, S404, OK, OK),
+        c("GET", "/api/v1/dems/{id}/dem.tif", 0, S404, OK, OK),
+        c("GET", "/api/v1/dems/{id}/window", 0, S404, OK, OK),
         c("GET", "/api/v1/dems/{id}/elevation", 0, S404, OK, OK),
         c("POST", "/api/v1/dems/{id}/elevation", 0, S404, OK, OK),
         c("GET", "/api/v1/costmaps/{id}", 0, S404, OK, OK),
@@ -414,6 +416,10 @@ impl Fixture {
                 ("", Vec::new())
             }
             ("POST", "/api/v1/dems/{id}/elevation") => json_body(json!({"points": [self.point]})),
+            ("GET", "/api/v1/dems/{id}/window") => {
+                path.push_str("?col=0&row=0&width=1&height=1");
+                ("", Vec::new())
+            }
             ("POST", "/api/v1/surveys") => {
                 let mut req = example_survey_request();
                 req["project_id"] = json!(self.project);
