@@ -552,6 +552,109 @@ mod tests {
         assert_eq!(auto.joined.len(), auto.cells.len());
     }
 
+    /// Property: on random fields (a jittered convex-ish outline with up to
+    /// four rectangular no-fly holes) at random line spacings, the merged
+    /// cells of the whole-plan `auto` tile the free space exactly, and its
+    /// plan never covers less than the fewest-turns plan of unmerged cells:
+    /// lane strips (one spacing wide) at least as much, and footprints at
+    /// least the coverage target whenever the fewest-turns plan reaches it.
+    #[test]
+    fn merged_cells_never_lose_coverage() {
+        let mut rng = crate::test_rng::Lcg(0x5eed_2101);
+        let mut checked = 0;
+        for case in 0..24 {
+            let n = 6 + (rng.next() * 9.0) as usize;
+            let (cx, cy) = (300.0, 250.0);
+            let outline: Vec<Coord<f64>> = (0..n)
+                .map(|k| {
+                    let t = std::f64::consts::TAU * (k as f64 + 0.3 * rng.next()) / n as f64;
+                    let r = 90.0 + 210.0 * rng.next();
+                    Coord {
+                        x: cx + r * t.cos(),
+                        y: cy + r * t.sin(),
+                    }
+                })
+                .collect();
+            let mut holes = Vec::new();
+            for _ in 0..(rng.next() * 40.0) as usize {
+                let (x, y) = (
+                    cx - 150.0 + 300.0 * rng.next(),
+                    cy - 150.0 + 300.0 * rng.next(),
+                );
+                let (w, h) = (2.0 + 8.0 * rng.next(), 2.0 + 8.0 * rng.next());
+                let hole = polygon![(x: x, y: y), (x: x + w, y: y), (x: x + w, y: y + h), (x: x, y: y + h)];
+                if holes
+                    .iter()
+                    .all(|o: &Polygon<f64>| !geo::Intersects::intersects(o, &hole))
+                {
+                    holes.push(hole);
+                }
+            }
+            // Holes may reach past a star-shaped outline: the free space is
+            // the difference, as the survey computes it.
+            let outline = Polygon::new(geo_types::LineString::from(outline), vec![]);
+            let free = geo::BooleanOps::difference(&outline, &MultiPolygon(holes.clone()));
+            let obstacles = ObstacleMap::new(&MultiPolygon(holes.clone()), 0.0);
+            let spacing = 25.0 + 35.0 * rng.next();
+            let footprint = spacing / 0.7;
+            let compare = Compare::WholePlan {
+                start: Coord { x: cx, y: -200.0 },
+                obstacles: &obstacles,
+                free: &free,
+                footprint_side_m: footprint,
+            };
+            let whole = decompose_and_cover(&free, SliceAngle::Auto, spacing, &compare).unwrap();
+            let fewest =
+                decompose_and_cover(&free, SliceAngle::Auto, spacing, &Compare::FewestTurns)
+                    .unwrap();
+            let area: f64 = whole.cells.iter().map(|c| c.unsigned_area()).sum();
+            let total = free.unsigned_area();
+            assert!(
+                (area - total).abs() < 1e-6 * total,
+                "case {case}: {area} of {total}"
+            );
+            let cover =
+                |plans: &[CellPlan], side: f64| super::super::cells::coverage(plans, side, &free).1;
+            let (strips_whole, strips_fewest) =
+                (cover(&whole.plans, spacing), cover(&fewest.plans, spacing));
+            assert!(
+                strips_whole >= strips_fewest - 1e-6,
+                "case {case}: strips {strips_whole} < fewest turns' {strips_fewest}"
+            );
+            if cover(&fewest.plans, footprint) >= COVERAGE_TARGET {
+                assert!(
+                    cover(&whole.plans, footprint) >= COVERAGE_TARGET,
+                    "case {case}: footprints below the target"
+                );
+            }
+            checked += usize::from(whole.joined.iter().any(|&j| j));
+            // At fixed angles too, where cells are joined whatever is
+            // shortest: the joined lanes cover what the split cells' do.
+            for angle in [0.0, 37.0, 90.0, 128.0] {
+                let at = SliceAngle::Degrees(angle);
+                let merged = decompose_and_cover(&free, at, spacing, &compare).unwrap();
+                let split = decompose_and_cover(&free, at, spacing, &Compare::FewestTurns).unwrap();
+                let area: f64 = merged.cells.iter().map(|c| c.unsigned_area()).sum();
+                assert!(
+                    (area - total).abs() < 1e-6 * total,
+                    "case {case} at {angle}°"
+                );
+                let (m, u) = (cover(&merged.plans, spacing), cover(&split.plans, spacing));
+                let (mf, uf) = (
+                    cover(&merged.plans, footprint),
+                    cover(&split.plans, footprint),
+                );
+                assert!(
+                    m >= u - 1e-6 && mf >= uf - 1e-6,
+                    "case {case} at {angle}°: merged strips {m}, footprints {mf}; split {u}, {uf}"
+                );
+                checked += usize::from(merged.joined.iter().any(|&j| j));
+            }
+        }
+        // The property is about joined cells: some cases must have them.
+        assert!(checked >= 3, "only {checked} cases with joined cells");
+    }
+
     /// Fewer turns than the merged plan's, never: a plane's `auto` keeps
     /// the fewest turns.
     #[test]
