@@ -90,15 +90,19 @@ pub(super) struct RouteArgs {
     /// more cells than this.
     #[arg(long, value_name = "CELLS", default_value_t = COARSE_TO_FINE_ABOVE)]
     coarse_to_fine_above: u64,
-    /// Most cells a coarse-to-fine corridor may cover: beyond it the
-    /// route found so far is written with how far from optimal it may be.
-    #[arg(long, value_name = "CELLS")]
-    max_corridor_cells: Option<u64>,
+    /// Most cells a coarse-to-fine corridor may cover (its search holds
+    /// up to 13 bytes a cell: 2.6 GB at the default): beyond it the route
+    /// found so far is written with how far from optimal it may be.
+    #[arg(long, value_name = "CELLS", default_value_t = MAX_CORRIDOR_CELLS)]
+    max_corridor_cells: u64,
 }
 
 /// Costmaps above this many cells (4000 × 4000) are planned coarse to
 /// fine by default: plain A* holds 16 bytes for every cell.
 const COARSE_TO_FINE_ABOVE: u64 = 16_000_000;
+
+/// Most cells of a coarse-to-fine corridor, by default.
+const MAX_CORRIDOR_CELLS: u64 = 200_000_000;
 
 /// Most cells of a costmap read by windows, by default.
 const WINDOWED_MAX_PIXELS: u64 = 4_000_000_000;
@@ -205,7 +209,7 @@ pub(super) fn route(args: &RouteArgs) -> Result<(), Failure> {
     };
     if let Some(cells) = coarse_to_fine_size(args)? {
         let c2f = CoarseToFineOptions {
-            max_corridor_cells: args.max_corridor_cells.unwrap_or(u64::MAX),
+            max_corridor_cells: args.max_corridor_cells,
             ..CoarseToFineOptions::default()
         };
         return route_coarse_to_fine(args, &start, &goal, &options, &c2f, &limits, cells);
