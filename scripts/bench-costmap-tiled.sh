@@ -92,5 +92,30 @@ echo "DEM $dem: ${size} x ${size} Float32, $(du -h "$dem" | cut -f1)"
 measure "terraplan costmap (tiles of $tile)" \
   target/release/terraplan costmap "$dem" --tile-size "$tile" --out "$out"
 measure "gdaldem slope" gdaldem slope -q "$dem" "$out/gdaldem-slope.tif"
-grep -o '"size": [0-9]*' "$out/stats.json" | head -1 || true
-ls -la "$out" >&2
+
+# The check of issue 22: the tiled map equals the whole-raster map of a
+# crop of the DEM on the crop's interior (200 cells from its border: the
+# halos, and pockets the crop's border would open).
+crop=$(( size < 4000 ? size : 4000 ))
+at=$(( (size - crop) / 2 ))
+gdal_translate -q -srcwin "$at" "$at" "$crop" "$crop" "$dem" "$out/crop.tif"
+target/release/terraplan costmap "$out/crop.tif" --out "$out/crop" >/dev/null 2>&1
+/usr/bin/python3 - "$out" "$at" "$crop" <<'EOF'
+import sys
+import numpy as np
+from osgeo import gdal
+gdal.UseExceptions()
+out, at, n = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+m = min(200, n // 4)
+for page in (1, 2):
+    big = gdal.Open(f"GTIFF_DIR:{page}:{out}/costmap.tif")
+    small = gdal.Open(f"GTIFF_DIR:{page}:{out}/crop/costmap.tif")
+    a = big.GetRasterBand(1).ReadAsArray(at + m, at + m, n - 2 * m, n - 2 * m)
+    b = small.GetRasterBand(1).ReadAsArray(m, m, n - 2 * m, n - 2 * m)
+    same = np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+    print(f"page {page}: {a.size} interior cells of a {n}x{n} crop "
+          f"{'equal' if same else 'DIFFER'} to the whole-raster run of the crop")
+    big = small = None
+    if not same:
+        sys.exit(1)
+EOF
