@@ -388,6 +388,7 @@ async fn store_geotiff(
     // any tile is stored); its statistics from the cutting.
     let grid = windows.grid().clone();
     tiles::windows_info(&grid, DemFormat::GeoTiff, &tiles::CellStats::default())?;
+    let guard = TilesGuard::new(state, id);
     let stored = tiles::store_tiles(&state.db, &state.planner, id, windows, Some(exact)).await?;
     let info = tiles::windows_info(&grid, DemFormat::GeoTiff, &stored.stats)?;
     let pixels = (width as u64).saturating_mul(height as u64);
@@ -404,11 +405,49 @@ async fn store_geotiff(
         project_id: Some(project_id),
     };
     drop(spool);
-    if let Err(e) = state.db.insert_dem_tiled(&row, &stored.row, &[]).await {
-        let _ = state.db.delete_dem_tiles(id).await;
-        return Err(e.into());
-    }
+    state.db.insert_dem_tiled(&row, &stored.row, &[]).await?;
+    guard.disarm();
     Ok((row, info))
+}
+
+/// Deletes the tiles stored under an upload's id unless the DEM was
+/// stored: on an error, and when the client goes away mid-upload (the
+/// handler is then dropped at an await, and the cutting stops at its next
+/// tile).
+struct TilesGuard {
+    db: crate::db::Db,
+    id: String,
+    armed: bool,
+}
+
+impl TilesGuard {
+    fn new(state: &AppState, id: &str) -> TilesGuard {
+        TilesGuard {
+            db: state.db.clone(),
+            id: id.to_string(),
+            armed: true,
+        }
+    }
+
+    fn disarm(mut self) {
+        self.armed = false;
+    }
+}
+
+impl Drop for TilesGuard {
+    fn drop(&mut self) {
+        if !self.armed {
+            return;
+        }
+        let (db, id) = (self.db.clone(), std::mem::take(&mut self.id));
+        if let Ok(rt) = tokio::runtime::Handle::try_current() {
+            rt.spawn(async move {
+                if let Err(e) = db.delete_dem_tiles(&id).await {
+                    tracing::warn!(dem_id = id, error = %e, "tiles of a failed upload not deleted");
+                }
+            });
+        }
+    }
 }
 
 /// Any other upload (an ESRI ASCII grid, an SRTM `.hgt` tile): read whole
@@ -433,6 +472,7 @@ async fn store_whole(
         })
         .await??;
     let dem = Arc::new(dem);
+    let guard = TilesGuard::new(state, id);
     let stored = tiles::store_tiles(
         &state.db,
         &state.planner,
@@ -452,10 +492,8 @@ async fn store_whole(
         read_bytes: i64::try_from(need).ok(),
         project_id: Some(project_id),
     };
-    if let Err(e) = state.db.insert_dem_tiled(&row, &stored.row, &data).await {
-        let _ = state.db.delete_dem_tiles(id).await;
-        return Err(e.into());
-    }
+    state.db.insert_dem_tiled(&row, &stored.row, &data).await?;
+    guard.disarm();
     state.dems.cache.insert(&row.id, dem, None);
     Ok((row, info))
 }
