@@ -2,6 +2,7 @@
 //! `terraplan` binary, the shared test data and the validators' venv.
 
 pub mod replicas;
+pub mod vehicles;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -6,108 +6,19 @@
 //! (tests/validators/mavlink_vehicle.py) — and what each vehicle stored
 //! compared here with the files, read independently of the CLI.
 
-use std::io::{BufRead, BufReader};
-use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
+use terraplan_e2e::vehicles::{free_udp_port, mavsdk_vehicle, pymavlink_vehicle};
 use terraplan_e2e::{
-    SurveyArea, SurveyFiles, survey_cli, terraplan_bin, text, venv_python, workspace, write_json,
+    SurveyArea, SurveyFiles, survey_cli, terraplan_bin, text, workspace, write_json,
 };
 
 /// Params 1-4 and z: the files print 6 decimals and MAVLink carries
 /// float32; x/y are the files' degrees ×1e7, rounded.
 const PARAM_TOL: f64 = 5e-6;
-
-/// A vehicle process, killed when dropped.
-struct Vehicle {
-    child: Child,
-    port: u16,
-    out: PathBuf,
-}
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Vehicle {
-    /// What the vehicle stored, once `ready` holds of it: MAVSDK reports
-    /// a received mission from its own thread, after its MISSION_ACK
-    /// (bounded wait, 30 s).
-    fn stored_when(&self, ready: impl Fn(&Value) -> bool) -> Value {
-        let limit = Instant::now() + Duration::from_secs(30);
-        loop {
-            let v = std::fs::read_to_string(&self.out)
-                .ok()
-                .and_then(|t| serde_json::from_str::<Value>(&t).ok());
-            match v {
-                Some(v) if ready(&v) => return v,
-                _ if Instant::now() > limit => return self.stored(),
-                _ => std::thread::sleep(Duration::from_millis(50)),
-            }
-        }
-    }
-
-    fn stored(&self) -> Value {
-        serde_json::from_str(&std::fs::read_to_string(&self.out).expect("vehicle's JSON"))
-            .expect("vehicle's JSON parses")
-    }
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// Start a validator vehicle and wait for its READY line.
-fn start_vehicle(script: &str, args: &[String], port: u16, out: PathBuf) -> Vehicle {
-    let mut child = Command::new(venv_python())
-        .arg(workspace().join("tests/validators").join(script))
-        .args(args)
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("start the vehicle");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .expect("vehicle's READY line");
-    assert!(line.starts_with("READY"), "{script}: {line:?}");
-    let port = line
-        .split_whitespace()
-        .nth(1)
-        .map_or(port, |p| p.parse().unwrap());
-    Vehicle { child, port, out }
-}
-
-fn mavsdk_vehicle(dir: &Path) -> Vehicle {
-    let port = free_udp_port();
-    let out = dir.join(format!("mavsdk-{port}.json"));
-    let args = [port.to_string(), out.display().to_string(), "120".into()];
-    start_vehicle("mavsdk_vehicle.py", &args, port, out)
-}
-
-fn pymavlink_vehicle(dir: &Path, extra: &[&str]) -> Vehicle {
-    let out = dir.join(format!(
-        "vehicle-{}.json",
-        extra.join("_").replace([':', '.'], "-")
-    ));
-    let mut args: Vec<String> = vec![
-        "--port".into(),
-        "0".into(),
-        "--out".into(),
-        out.display().to_string(),
-    ];
-    args.extend(extra.iter().map(|s| s.to_string()));
-    start_vehicle("mavlink_vehicle.py", &args, 0, out)
-}
 
 /// Run `terraplan upload`, killed if it has not ended within 120 s (a
 /// bound on a hang, not a timing check).
@@ -221,10 +132,6 @@ fn summary(o: &Output) -> Value {
     serde_json::from_slice(&o.stdout).expect("upload's JSON summary")
 }
 
-fn addr(v: &Vehicle) -> String {
-    format!("udpout:127.0.0.1:{}", v.port)
-}
-
 #[test]
 fn mavsdk_mission_raw_server_receives_the_waypoints_and_the_plan() {
     let dir = tempfile::tempdir().unwrap();
@@ -232,7 +139,7 @@ fn mavsdk_mission_raw_server_receives_the_waypoints_and_the_plan() {
     let rows = wpl_rows(&out.join("u1.waypoints"));
     assert!(rows.len() > 20, "{}", rows.len());
     let vehicle = mavsdk_vehicle(dir.path());
-    let to = addr(&vehicle);
+    let to = vehicle.address();
     let s = summary(&upload(&[
         out.join("u1.waypoints").to_str().unwrap(),
         "--to",
@@ -281,7 +188,7 @@ fn lossy_vehicle_gets_mission_fence_and_rally_equal_to_the_files() {
         let s = summary(&upload(&[
             out.join("u1.plan").to_str().unwrap(),
             "--to",
-            &addr(&vehicle),
+            &vehicle.address(),
             "--timeout",
             "150ms",
             "--retries",
@@ -337,7 +244,7 @@ fn separate_fence_and_rally_files_and_legacy_requests() {
         "--rally",
         out.join("u1.rally.waypoints").to_str().unwrap(),
         "--to",
-        &addr(&vehicle),
+        &vehicle.address(),
     ]));
     let kinds: Vec<&str> = s["sent"]
         .as_array()
@@ -370,7 +277,7 @@ fn a_refusal_names_the_mission_result() {
     let o = upload(&[
         out.join("u1.plan").to_str().unwrap(),
         "--to",
-        &addr(&vehicle),
+        &vehicle.address(),
     ]);
     assert_eq!(o.status.code(), Some(3), "{}", text(&o.stderr));
     let err = text(&o.stderr);
@@ -390,7 +297,7 @@ fn a_wrong_read_back_is_a_mismatch() {
     let o = upload(&[
         out.join("u1.waypoints").to_str().unwrap(),
         "--to",
-        &addr(&vehicle),
+        &vehicle.address(),
     ]);
     assert_eq!(o.status.code(), Some(3), "{}", text(&o.stderr));
     let err = text(&o.stderr);

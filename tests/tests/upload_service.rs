@@ -9,17 +9,15 @@
 //! (`serve --vehicle-links`), one upload per address, a client that goes
 //! away, the endpoint switched off, and other users' surveys.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{TcpStream, UdpSocket};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::io::{Read, Write};
+use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
+use terraplan_e2e::vehicles::{free_udp_port, mavsdk_vehicle, pymavlink_vehicle};
 use terraplan_e2e::{
     Auth, Reply, Server, assert_invalid_at, assert_problem, example_survey_request, get, get_as,
     last_line, post_json, post_json_as, sse_events, text, unique_user_name, user_command,
-    venv_python, workspace,
 };
 
 /// Params 1-4 and z: the files print 6 decimals and MAVLink carries
@@ -28,96 +26,6 @@ const PARAM_TOL: f64 = 5e-6;
 
 /// The allow-list of the servers here: any UDP port on 127.0.0.1.
 const LINKS: &str = "udpout:127.0.0.1:*";
-
-/// A vehicle process, killed when dropped.
-struct Vehicle {
-    child: Child,
-    port: u16,
-    out: PathBuf,
-}
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Vehicle {
-    /// What the vehicle stored once `ready` holds of it (MAVSDK reports a
-    /// received mission from its own thread, after its MISSION_ACK);
-    /// bounded wait, 30 s.
-    fn stored_when(&self, ready: impl Fn(&Value) -> bool) -> Value {
-        let limit = Instant::now() + Duration::from_secs(30);
-        loop {
-            let v = std::fs::read_to_string(&self.out)
-                .ok()
-                .and_then(|t| serde_json::from_str::<Value>(&t).ok());
-            match v {
-                Some(v) if ready(&v) => return v,
-                Some(v) if Instant::now() > limit => return v,
-                _ if Instant::now() > limit => panic!("{}: nothing stored", self.out.display()),
-                _ => std::thread::sleep(Duration::from_millis(50)),
-            }
-        }
-    }
-
-    fn address(&self) -> String {
-        format!("udpout:127.0.0.1:{}", self.port)
-    }
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// Start a validator vehicle and wait for its READY line.
-fn start_vehicle(script: &str, args: &[String], port: u16, out: PathBuf) -> Vehicle {
-    let mut child = Command::new(venv_python())
-        .arg(workspace().join("tests/validators").join(script))
-        .args(args)
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("start the vehicle");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .expect("vehicle's READY line");
-    assert!(line.starts_with("READY"), "{script}: {line:?}");
-    let port = line
-        .split_whitespace()
-        .nth(1)
-        .map_or(port, |p| p.parse().unwrap());
-    Vehicle { child, port, out }
-}
-
-fn mavsdk_vehicle(dir: &Path) -> Vehicle {
-    let port = free_udp_port();
-    let out = dir.join(format!("mavsdk-{port}.json"));
-    let args = [port.to_string(), out.display().to_string(), "120".into()];
-    start_vehicle("mavsdk_vehicle.py", &args, port, out)
-}
-
-fn pymavlink_vehicle(dir: &Path, extra: &[&str]) -> Vehicle {
-    let out = dir.join(format!(
-        "vehicle-{}.json",
-        extra.join("_").replace([':', '.'], "-")
-    ));
-    let mut args: Vec<String> = vec![
-        "--port".into(),
-        "0".into(),
-        "--out".into(),
-        out.display().to_string(),
-        "--max-seconds".into(),
-        "120".into(),
-    ];
-    args.extend(extra.iter().map(|s| s.to_string()));
-    start_vehicle("mavlink_vehicle.py", &args, 0, out)
-}
 
 /// The example field planned through the API with rally points, for one
 /// UAV: the survey's id.

@@ -1,0 +1,119 @@
+//! Vehicles on 127.0.0.1 for the upload tests (`terraplan upload` and the
+//! service's upload endpoint): MAVSDK's MissionRawServer
+//! (tests/validators/mavsdk_vehicle.py) and a pymavlink vehicle that loses
+//! and repeats messages, refuses or stores a wrong item on demand
+//! (tests/validators/mavlink_vehicle.py). Each writes what it stored to a
+//! JSON file read here.
+
+use std::io::{BufRead, BufReader};
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use crate::{venv_python, workspace};
+
+/// A vehicle process, killed when dropped.
+pub struct Vehicle {
+    child: Child,
+    /// The UDP port it listens on.
+    pub port: u16,
+    out: PathBuf,
+}
+
+impl Drop for Vehicle {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Vehicle {
+    /// What the vehicle stored, once `ready` holds of it: MAVSDK reports
+    /// a received mission from its own thread, after its MISSION_ACK
+    /// (bounded wait, 30 s; then what is stored, whatever it is).
+    pub fn stored_when(&self, ready: impl Fn(&Value) -> bool) -> Value {
+        let limit = Instant::now() + Duration::from_secs(30);
+        loop {
+            let v = std::fs::read_to_string(&self.out)
+                .ok()
+                .and_then(|t| serde_json::from_str::<Value>(&t).ok());
+            match v {
+                Some(v) if ready(&v) => return v,
+                _ if Instant::now() > limit => return self.stored(),
+                _ => std::thread::sleep(Duration::from_millis(50)),
+            }
+        }
+    }
+
+    /// What the vehicle stored now (panics naming the file if nothing).
+    pub fn stored(&self) -> Value {
+        let text = std::fs::read_to_string(&self.out)
+            .unwrap_or_else(|e| panic!("{}: nothing stored ({e})", self.out.display()));
+        serde_json::from_str(&text).expect("vehicle's JSON parses")
+    }
+
+    /// Its address in `terraplan upload --to`'s syntax.
+    pub fn address(&self) -> String {
+        format!("udpout:127.0.0.1:{}", self.port)
+    }
+}
+
+/// A UDP port free on 127.0.0.1 now.
+pub fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Start a validator vehicle and wait for its READY line (which may name
+/// the port it bound).
+fn start_vehicle(script: &str, args: &[String], port: u16, out: PathBuf) -> Vehicle {
+    let mut child = Command::new(venv_python())
+        .arg(workspace().join("tests/validators").join(script))
+        .args(args)
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start the vehicle");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .expect("vehicle's READY line");
+    assert!(line.starts_with("READY"), "{script}: {line:?}");
+    let port = line
+        .split_whitespace()
+        .nth(1)
+        .map_or(port, |p| p.parse().unwrap());
+    Vehicle { child, port, out }
+}
+
+/// MAVSDK's MissionRawServer on a free port, for up to 120 s.
+pub fn mavsdk_vehicle(dir: &Path) -> Vehicle {
+    let port = free_udp_port();
+    let out = dir.join(format!("mavsdk-{port}.json"));
+    let args = [port.to_string(), out.display().to_string(), "120".into()];
+    start_vehicle("mavsdk_vehicle.py", &args, port, out)
+}
+
+/// The pymavlink vehicle on a port of its own choosing, for up to 120 s,
+/// with `extra` arguments (loss, repeats, `--nack`, `--corrupt`, …).
+pub fn pymavlink_vehicle(dir: &Path, extra: &[&str]) -> Vehicle {
+    let out = dir.join(format!(
+        "vehicle-{}.json",
+        extra.join("_").replace([':', '.'], "-")
+    ));
+    let mut args: Vec<String> = vec![
+        "--port".into(),
+        "0".into(),
+        "--out".into(),
+        out.display().to_string(),
+        "--max-seconds".into(),
+        "120".into(),
+    ];
+    args.extend(extra.iter().map(|s| s.to_string()));
+    start_vehicle("mavlink_vehicle.py", &args, 0, out)
+}
