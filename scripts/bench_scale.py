@@ -1,0 +1,490 @@
+"""Measured scale (issue 22 item 5); see bench-scale.sh.
+
+1. Survey throughput through 1, 2 and 3 `terraplan serve` replicas on one
+   PostgreSQL database (a throwaway cluster from scripts/pg-cluster.sh),
+   against one server on the embedded SQLite: N concurrent clients, each
+   POSTing the example survey round-robin over the replicas for a fixed
+   time. Surveys/s, p50/p99 latency, errors, peak RSS per replica.
+2. The CLI costmap of a big Float32 DEM (generated as
+   scripts/bench-costmap-tiled.sh does, and cached under the same name):
+   wall time and peak RSS.
+
+Standard library only; the DEM generator alone (`--generate-dem`, run as
+a child under /usr/bin/python3) needs numpy and GDAL's Python bindings.
+Every process started is stopped at exit (Ctrl-C included) and the
+temporary directory removed.
+"""
+
+import argparse
+import http.client
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+COSTMAP_NOT_SPREAD = (
+    "costmap tiles are not yet spread over replicas or workers: the tile-job "
+    "queue of issue 22 item 2 (its server half) is not built, so a costmap is "
+    "built by one process (here the CLI, tile by tile); the 1, 2, 3 replica "
+    "figures are for the survey service only"
+)
+
+
+# ---------------------------------------------------------------- processes
+
+class Processes:
+    """Every child started, to stop them all at exit."""
+
+    def __init__(self):
+        self.children = []
+
+    def start(self, args, **kw):
+        # A session of its own: Ctrl-C reaches the benchmark only, which then
+        # stops its children in order (SIGTERM, then SIGKILL).
+        p = subprocess.Popen(args, start_new_session=True, **kw)
+        self.children.append(p)
+        return p
+
+    def stop(self, p, grace=10.0):
+        if p.poll() is None:
+            try:
+                p.send_signal(signal.SIGTERM)
+                p.wait(grace)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+            except ProcessLookupError:
+                pass
+        if p in self.children:
+            self.children.remove(p)
+
+    def stop_all(self):
+        for p in list(reversed(self.children)):
+            self.stop(p, grace=5.0)
+
+
+def raise_interrupt(signum, _frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def peak_rss_mib(pid):
+    """VmHWM of a live process, MiB (None when unreadable)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
+def cpu_seconds(pid):
+    """User + system CPU time of a live process so far, seconds."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def machine_cpu():
+    """(busy, total) jiffies of all CPUs so far, from /proc/stat."""
+    values = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    idle = values[3] + (values[4] if len(values) > 4 else 0)
+    return sum(values) - idle, sum(values)
+
+
+def reset_peak_rss(pid):
+    """Reset VmHWM to the current RSS (Linux >= 4.0, needs the right to write
+    /proc/PID/clear_refs), so each run's peak is its own. False if not."""
+    try:
+        Path(f"/proc/{pid}/clear_refs").write_text("5")
+        return True
+    except OSError:
+        return False
+
+
+class Server:
+    """A `terraplan serve` on a port of its own, its log in a file."""
+
+    def __init__(self, procs, binary, name, workdir, env_extra, extra_args):
+        self.name = name
+        data = workdir / f"data-{name}"
+        data.mkdir(parents=True)
+        self.log_path = workdir / f"{name}.log"
+        env = dict(os.environ, NO_COLOR="1", TERRAPLAN_LOG_FORMAT="text", **env_extra)
+        env.pop("TERRAPLAN_PORT", None)
+        self.proc = procs.start(
+            [str(binary), "serve", "--host", "127.0.0.1", "--port", "0",
+             "--data-dir", str(data), *extra_args],
+            stdout=subprocess.PIPE, stderr=open(self.log_path, "wb"), env=env, text=True)
+        first = self.proc.stdout.readline().strip()
+        if not first.startswith("listening on http://"):
+            self.proc.wait(5)
+            tail = self.log_path.read_text(errors="replace")[-2000:]
+            raise SystemExit(f"{name}: did not start (first line {first!r}); log:\n{tail}")
+        hostport = first.removeprefix("listening on http://")
+        self.host, port = hostport.rsplit(":", 1)
+        self.port = int(port)
+        # Keep reading stdout (the first start's admin line, …) so it never blocks.
+        threading.Thread(target=lambda: self.proc.stdout.read(), daemon=True).start()
+
+    @property
+    def pid(self):
+        return self.proc.pid
+
+
+def make_token(binary, env_extra, data_dir=None):
+    args = [str(binary), "user", "create", f"bench-{os.getpid()}"]
+    if data_dir is not None:
+        args += ["--data-dir", str(data_dir)]
+    run = subprocess.run(args, capture_output=True, text=True,
+                         env=dict(os.environ, **env_extra))
+    if run.returncode != 0:
+        raise SystemExit(f"terraplan user create failed: {run.stderr.strip()}")
+    return run.stdout.strip().splitlines()[-1]
+
+
+# ---------------------------------------------------------------- survey load
+
+def survey_body():
+    """The e2e tests' example survey (tests/src/lib.rs example_survey_request):
+    the example field with its no-fly zones, lanes at 0 degrees."""
+    ex = ROOT / "examples"
+    return json.dumps({
+        "name": "bench-scale",
+        "roi": json.loads((ex / "field.geojson").read_text()),
+        "no_fly_zones": [json.loads((ex / "field-nfz.geojson").read_text())],
+        "slice_angle_deg": 0,
+    }).encode()
+
+
+def load(servers, token, clients, seconds, warmup, body):
+    """`clients` threads POST /api/v1/surveys round-robin over `servers` for
+    warmup + seconds; the requests started after the warm-up and answered
+    before its end are counted."""
+    headers = {"Authorization": f"Bearer {token}", "Content-Type": "application/json"}
+    start = time.monotonic()
+    measure_from = start + warmup
+    end = measure_from + seconds
+    lock = threading.Lock()
+    latencies, errors, shown = [], [0], []
+    statuses = {}
+
+    def client(i):
+        conns = [None] * len(servers)
+        k = i
+        while True:
+            began = time.monotonic()
+            if began >= end:
+                break
+            s = k % len(servers)
+            k += 1
+            try:
+                if conns[s] is None:
+                    conns[s] = http.client.HTTPConnection(servers[s].host, servers[s].port,
+                                                          timeout=180)
+                conns[s].request("POST", "/api/v1/surveys", body=body, headers=headers)
+                r = conns[s].getresponse()
+                data = r.read()
+                status, fault = r.status, None
+                if not 200 <= status < 300:
+                    fault = f"{servers[s].name}: HTTP {status} {data[:300]!r}"
+            except (OSError, http.client.HTTPException) as e:
+                if conns[s] is not None:
+                    conns[s].close()
+                conns[s] = None
+                status, fault = "exception", f"{servers[s].name}: {type(e).__name__}: {e}"
+            done = time.monotonic()
+            if began < measure_from or done > end:
+                continue
+            with lock:
+                statuses[status] = statuses.get(status, 0) + 1
+                if fault is None:
+                    latencies.append(done - began)
+                else:
+                    errors[0] += 1
+                    if len(shown) < 5:
+                        shown.append(fault)
+        for c in conns:
+            if c is not None:
+                c.close()
+
+    threads = [threading.Thread(target=client, args=(i,), daemon=True) for i in range(clients)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    latencies.sort()
+
+    def pct(p):
+        if not latencies:
+            return None
+        return latencies[min(len(latencies) - 1, int(p / 100 * len(latencies)))] * 1000
+
+    return {
+        "ok": len(latencies),
+        "surveys_per_s": len(latencies) / seconds,
+        "p50_ms": pct(50),
+        "p99_ms": pct(99),
+        "errors": errors[0],
+        "first_errors": shown,
+        "statuses": {str(k): v for k, v in statuses.items()},
+    }
+
+
+def run_config(label, servers, token, args, body):
+    for s in servers:
+        reset_peak_rss(s.pid)
+    print(f"  {label}: {args.clients} clients for {args.seconds:g} s "
+          f"(+{args.warmup:g} s warm-up)...", file=sys.stderr, flush=True)
+    cpu_before = {s.name: cpu_seconds(s.pid) for s in servers}
+    machine_before = machine_cpu()
+    res = load(servers, token, args.clients, args.seconds, args.warmup, body)
+    busy, total = (a - b for a, b in zip(machine_cpu(), machine_before))
+    # Over warm-up and measured time alike: the whole run's share.
+    res["machine_cpu_busy_pct"] = 100 * busy / total if total else None
+    res["cpu_s_per_replica"] = {
+        s.name: (cpu_seconds(s.pid) - cpu_before[s.name])
+        if cpu_before[s.name] is not None else None for s in servers}
+    res["config"] = label
+    res["replicas"] = len(servers)
+    res["peak_rss_mib"] = {s.name: peak_rss_mib(s.pid) for s in servers}
+    return res
+
+
+def survey_bench(args, procs, workdir, binary):
+    body = survey_body()
+    common = ["--planning-per-minute", "0"]
+    results = []
+
+    # Reference: one process on the embedded SQLite.
+    env = {"TERRAPLAN_LOG": args.log_level}
+    env_sqlite = dict(env)
+    os.environ.pop("DATABASE_URL", None)
+    single = Server(procs, binary, "sqlite", workdir, env_sqlite, common)
+    token = make_token(binary, env_sqlite, data_dir=workdir / "data-sqlite")
+    results.append(run_config("single process (SQLite)", [single], token, args, body))
+    procs.stop(single.proc)
+
+    # Replicas on one PostgreSQL database, added one at a time.
+    pg_dir = workdir / "pg"
+    start = subprocess.run(["bash", str(ROOT / "scripts/pg-cluster.sh"), "start", str(pg_dir)],
+                           capture_output=True, text=True, start_new_session=True)
+    if start.returncode != 0:
+        raise SystemExit(f"pg-cluster.sh start failed: {start.stderr.strip()}")
+    url = start.stdout.strip().splitlines()[-1]
+    env_pg = dict(env, DATABASE_URL=url)
+    replicas = []
+    token = None
+    for n in range(1, args.max_replicas + 1):
+        replicas.append(Server(procs, binary, f"replica{n}", workdir, env_pg, common))
+        if token is None:
+            token = make_token(binary, env_pg)
+        results.append(run_config(f"{n} replica{'s' if n > 1 else ''} (PostgreSQL)",
+                                  list(replicas), token, args, body))
+    for r in replicas:
+        procs.stop(r.proc)
+    return results, url
+
+
+def print_survey_table(results, args):
+    print(f"\nSurveys: POST /api/v1/surveys (examples/field.geojson + field-nfz.geojson), "
+          f"{args.clients} clients round-robin over the replicas, {args.seconds:g} s each")
+    print(f"{'configuration':<26} {'surveys/s':>9} {'speed-up':>8} {'p50 ms':>8} {'p99 ms':>8} "
+          f"{'errors':>6} {'CPU busy':>8}  peak RSS per process (MiB)")
+    base = next((r["surveys_per_s"] for r in results if r["replicas"] == 1
+                 and "PostgreSQL" in r["config"]), None)
+    for r in results:
+        up = (f"{r['surveys_per_s'] / base:7.2f}x" if base and "PostgreSQL" in r["config"]
+              else f"{'':>8}")
+        rss = ", ".join(f"{k} {v:.0f}" if v is not None else f"{k} ?"
+                        for k, v in r["peak_rss_mib"].items())
+        p50 = f"{r['p50_ms']:8.1f}" if r["p50_ms"] is not None else f"{'-':>8}"
+        p99 = f"{r['p99_ms']:8.1f}" if r["p99_ms"] is not None else f"{'-':>8}"
+        busy = r["machine_cpu_busy_pct"]
+        busy = f"{busy:7.0f}%" if busy is not None else f"{'?':>8}"
+        print(f"{r['config']:<26} {r['surveys_per_s']:9.1f} {up} {p50} {p99} "
+              f"{r['errors']:6d} {busy}  {rss}")
+        for e in r["first_errors"]:
+            print(f"    error: {e}")
+
+
+# ---------------------------------------------------------------- costmap
+
+def generate_dem(path, n):
+    """The synthetic DEM of scripts/bench-costmap-tiled.sh (same generator,
+    same seed, same file name, so either script reuses the other's file)."""
+    import numpy as np
+    from osgeo import gdal, osr
+    gdal.UseExceptions()
+    drv = gdal.GetDriverByName("GTiff")
+    ds = drv.Create(path + ".part", n, n, 1, gdal.GDT_Float32,
+                    ["TILED=YES", "BLOCKXSIZE=512", "BLOCKYSIZE=512", "BIGTIFF=IF_NEEDED"])
+    cell = 0.1
+    ds.SetGeoTransform([400000.0, cell, 0.0, 4500000.0 + n * cell, 0.0, -cell])
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(32633)
+    ds.SetProjection(srs.ExportToWkt())
+    band = ds.GetRasterBand(1)
+    band.SetNoDataValue(-9999.0)
+    x = np.arange(n, dtype=np.float64) * cell
+    rng = np.random.default_rng(22)
+    rows = 512
+    for r0 in range(0, n, rows):
+        r1 = min(n, r0 + rows)
+        y = (np.arange(r0, r1, dtype=np.float64) * cell)[:, None]
+        z = (100.0 + 0.03 * x[None, :] + 0.02 * y
+             + 1.5 * np.sin(x[None, :] / 37.0) * np.cos(y / 23.0)
+             + 0.4 * np.sin(x[None, :] / 5.3 + y / 7.1))
+        # Kerbs 0.2 m high every 40 m, walls 0.5 m around 3 m pockets every 25 m.
+        z += 0.2 * ((x[None, :] % 40.0) > 20.0)
+        cx, cy = x[None, :] % 25.0, y % 25.0
+        wall = (((np.abs(cx - 10.0) < 0.15) | (np.abs(cx - 13.0) < 0.15))
+                & (cy > 10.0) & (cy < 13.0))
+        wall |= (((np.abs(cy - 10.0) < 0.15) | (np.abs(cy - 13.0) < 0.15))
+                 & (cx > 10.0) & (cx < 13.0))
+        z += 0.5 * wall
+        z += 0.01 * rng.random(z.shape)
+        z[rng.random(z.shape) < 1e-4] = -9999.0
+        band.WriteArray(z.astype(np.float32), 0, r0)
+    band.FlushCache()
+    ds = None
+    os.rename(path + ".part", path)
+
+
+def costmap_bench(args, procs, workdir, binary):
+    dem = Path(args.dem_dir) / f"terraplan-bench-dem-{args.dem_size}.tif"
+    if not dem.exists():
+        print(f"generating {dem} ({args.dem_size} x {args.dem_size} Float32, kept for "
+              f"later runs)...", file=sys.stderr, flush=True)
+        gen = procs.start(["/usr/bin/python3", str(Path(__file__).resolve()),
+                           "--generate-dem", str(dem), str(args.dem_size)])
+        try:
+            if gen.wait() != 0:
+                raise SystemExit("generating the DEM failed (needs numpy and python3-gdal "
+                                 "for /usr/bin/python3)")
+        finally:
+            procs.stop(gen)
+            Path(str(dem) + ".part").unlink(missing_ok=True)
+    out = workdir / "costmap"
+    print(f"  terraplan costmap {dem.name} --tile-size {args.tile_size}...",
+          file=sys.stderr, flush=True)
+    log = open(workdir / "costmap.log", "wb")
+    began = time.monotonic()
+    p = procs.start([str(binary), "costmap", str(dem), "--tile-size", str(args.tile_size),
+                     "--out", str(out)], stdout=log, stderr=subprocess.STDOUT)
+    # wait4 gives this child's own peak RSS (ru_maxrss, KiB on Linux).
+    _, status, usage = os.wait4(p.pid, 0)
+    wall = time.monotonic() - began
+    p.returncode = os.waitstatus_to_exitcode(status)
+    procs.children.remove(p)
+    if p.returncode != 0:
+        tail = (workdir / "costmap.log").read_text(errors="replace")[-2000:]
+        raise SystemExit(f"terraplan costmap failed ({p.returncode}):\n{tail}")
+    return {
+        "dem": str(dem),
+        "dem_size": args.dem_size,
+        "cells": args.dem_size ** 2,
+        "tile_size": args.tile_size,
+        "seconds": wall,
+        "cpu_seconds": usage.ru_utime + usage.ru_stime,
+        "peak_rss_mib": usage.ru_maxrss / 1024,
+        "processes": 1,
+        "note": COSTMAP_NOT_SPREAD,
+    }
+
+
+def print_costmap(c):
+    print(f"\nCostmap: terraplan costmap --tile-size {c['tile_size']} of a "
+          f"{c['dem_size']} x {c['dem_size']} Float32 DEM ({c['cells'] / 1e6:.0f} M cells)")
+    print(f"{'processes':<10} {'wall s':>8} {'CPU s':>8} {'M cells/s':>9} {'peak RSS MiB':>13}")
+    print(f"{1:<10} {c['seconds']:8.1f} {c['cpu_seconds']:8.1f} "
+          f"{c['cells'] / 1e6 / c['seconds']:9.2f} {c['peak_rss_mib']:13.0f}")
+    print(f"2, 3 workers: not measured: {c['note']}.")
+
+
+# ---------------------------------------------------------------- main
+
+def main():
+    if len(sys.argv) == 4 and sys.argv[1] == "--generate-dem":
+        generate_dem(sys.argv[2], int(sys.argv[3]))
+        return
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=20.0,
+                        help="measured time of each survey configuration (default 20)")
+    parser.add_argument("--warmup", type=float, default=2.0,
+                        help="unmeasured load before each (default 2)")
+    parser.add_argument("--clients", type=int, default=32)
+    parser.add_argument("--max-replicas", type=int, default=3)
+    parser.add_argument("--dem-size", type=int, default=20000,
+                        help="costmap DEM side, cells (default 20000)")
+    parser.add_argument("--tile-size", type=int, default=1024)
+    parser.add_argument("--dem-dir", default="/tmp",
+                        help="where the generated DEM is kept (default /tmp)")
+    parser.add_argument("--no-survey", action="store_true")
+    parser.add_argument("--no-costmap", action="store_true")
+    parser.add_argument("--log-level", default="info,sqlx=warn",
+                        help="TERRAPLAN_LOG of the servers (logs go to the temp dir)")
+    parser.add_argument("--binary", default=str(ROOT / os.environ.get(
+        "CARGO_TARGET_DIR", "target") / "release/terraplan"))
+    parser.add_argument("--out", default=str(ROOT / "target/bench-scale.json"))
+    args = parser.parse_args()
+    if args.clients < 1 or args.seconds <= 0 or args.max_replicas < 1 or args.dem_size < 16:
+        parser.error("--clients, --seconds, --max-replicas must be positive, --dem-size >= 16")
+    binary = Path(args.binary)
+    if not binary.exists():
+        parser.error(f"{binary} is missing: cargo build --release --bin terraplan")
+
+    signal.signal(signal.SIGTERM, raise_interrupt)
+    signal.signal(signal.SIGHUP, raise_interrupt)
+    procs = Processes()
+    workdir = Path(tempfile.mkdtemp(prefix="terraplan-bench-scale-"))
+    workdir.chmod(0o755)  # the PostgreSQL cluster runs as the postgres user
+    report = {
+        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "cpus": os.cpu_count(),
+        "load_average_at_start": os.getloadavg(),
+        "clients": args.clients,
+        "seconds": args.seconds,
+        "warmup_s": args.warmup,
+    }
+    print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
+          f"temp dir {workdir}", file=sys.stderr, flush=True)
+    try:
+        if not args.no_survey:
+            report["surveys"], _ = survey_bench(args, procs, workdir, binary)
+            print_survey_table(report["surveys"], args)
+            print(f"(CPU busy: all {os.cpu_count()} CPUs of the machine during the run, "
+                  f"other users' work included; the clients, the replicas and PostgreSQL "
+                  f"share them, so replicas beyond the cores cannot add throughput)",
+                  flush=True)
+        if not args.no_costmap:
+            report["costmap"] = costmap_bench(args, procs, workdir, binary)
+            print_costmap(report["costmap"])
+        report["load_average_at_end"] = os.getloadavg()
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(report, indent=1))
+        print(f"\nwritten {args.out}")
+    except KeyboardInterrupt:
+        print("\ninterrupted: stopping everything started", file=sys.stderr)
+        sys.exit(130)
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        procs.stop_all()
+        if (workdir / "pg").exists():
+            subprocess.run(["bash", str(ROOT / "scripts/pg-cluster.sh"), "stop",
+                            str(workdir / "pg")], capture_output=True)
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
