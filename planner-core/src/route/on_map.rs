@@ -145,12 +145,67 @@ impl std::fmt::Debug for RouteMap {
     }
 }
 
-fn crs_error(e: impl std::fmt::Display) -> MapRouteError {
+pub(super) fn crs_error(e: impl std::fmt::Display) -> MapRouteError {
     MapRouteError::Crs(format!("coordinate transformation failed: {e}"))
 }
 
-fn proj(from: &str, to: &str) -> Result<Proj, MapRouteError> {
+pub(super) fn proj(from: &str, to: &str) -> Result<Proj, MapRouteError> {
     Proj::new_known_crs(from, to, None).map_err(crs_error)
+}
+
+/// Why `p`'s coordinates are no position at all (not finite, or degrees
+/// beyond the globe), before any transformation.
+pub(super) fn coordinates_fault(p: &Position) -> Option<&'static str> {
+    match *p {
+        Position::LonLat([lon, lat]) => {
+            if !(lon.is_finite() && lat.is_finite()) {
+                Some("coordinates must be finite numbers")
+            } else if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) {
+                Some("[lon, lat] must be within [-180, 180] × [-90, 90] degrees")
+            } else {
+                None
+            }
+        }
+        Position::Utm { utm: [e, n] } => {
+            (!(e.is_finite() && n.is_finite())).then_some("coordinates must be finite numbers")
+        }
+    }
+}
+
+/// [min lon, min lat, max lon, max lat] of the four corners of a
+/// `width` × `height` grid placed by `transform` (corners that do not
+/// transform are left out).
+pub(super) fn corners_extent_lonlat(
+    transform: &GeoTransform,
+    (width, height): (usize, usize),
+    to_lonlat: impl Fn((f64, f64)) -> Result<[f64; 2], MapRouteError>,
+) -> [f64; 4] {
+    let (w, h) = (width as f64, height as f64);
+    let mut e = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for (c, r) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        if let Ok([lon, lat]) = to_lonlat(transform.apply(c, r)) {
+            e = [e[0].min(lon), e[1].min(lat), e[2].max(lon), e[3].max(lat)];
+        }
+    }
+    e
+}
+
+/// What a blocked endpoint is on, from its cell's [`Class`] (`None`
+/// when the class is not known).
+pub(super) fn blocked_on(class: Option<Class>) -> &'static str {
+    match class {
+        Some(Class::Slope) => "an obstacle (a slope steeper than the vehicle can climb)",
+        Some(Class::Step) => "an obstacle (a step higher than the vehicle can climb)",
+        Some(Class::Enclosed) => "an obstacle (an area enclosed by obstacles)",
+        Some(Class::Other) => "an obstacle (lethal land cover or a hazard layer)",
+        Some(Class::Unknown) => "unknown terrain (no height data)",
+        _ => "an obstacle or unknown terrain",
+    }
 }
 
 impl RouteMap {
@@ -366,19 +421,11 @@ impl RouteMap {
 
     /// [min lon, min lat, max lon, max lat] of the map's four corners.
     fn extent_lonlat(&self) -> [f64; 4] {
-        let (w, h) = (self.grid.width() as f64, self.grid.height() as f64);
-        let mut e = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for (c, r) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
-            if let Ok([lon, lat]) = self.to_lonlat(self.transform.apply(c, r)) {
-                e = [e[0].min(lon), e[1].min(lat), e[2].max(lon), e[3].max(lat)];
-            }
-        }
-        e
+        corners_extent_lonlat(
+            &self.transform,
+            (self.grid.width(), self.grid.height()),
+            |xy| self.to_lonlat(xy),
+        )
     }
 
     /// The cell under `p`, checked: valid coordinates, inside the map, and
@@ -389,22 +436,8 @@ impl RouteMap {
             position: *p,
             reason: reason.to_string(),
         };
-        match *p {
-            Position::LonLat([lon, lat]) => {
-                if !(lon.is_finite() && lat.is_finite()) {
-                    return Err(invalid("coordinates must be finite numbers"));
-                }
-                if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) {
-                    return Err(invalid(
-                        "[lon, lat] must be within [-180, 180] × [-90, 90] degrees",
-                    ));
-                }
-            }
-            Position::Utm { utm: [e, n] } => {
-                if !(e.is_finite() && n.is_finite()) {
-                    return Err(invalid("coordinates must be finite numbers"));
-                }
-            }
+        if let Some(reason) = coordinates_fault(p) {
+            return Err(invalid(reason));
         }
         let map_xy = self
             .position_in_map(p)
@@ -435,14 +468,7 @@ impl RouteMap {
         };
         if !self.grid.is_traversable(cell) {
             let i = cell.0 * self.grid.width() + cell.1;
-            let what = match self.classes.as_ref().and_then(|c| Class::from_code(c[i])) {
-                Some(Class::Slope) => "an obstacle (a slope steeper than the vehicle can climb)",
-                Some(Class::Step) => "an obstacle (a step higher than the vehicle can climb)",
-                Some(Class::Enclosed) => "an obstacle (an area enclosed by obstacles)",
-                Some(Class::Other) => "an obstacle (lethal land cover or a hazard layer)",
-                Some(Class::Unknown) => "unknown terrain (no height data)",
-                _ => "an obstacle or unknown terrain",
-            };
+            let what = blocked_on(self.classes.as_ref().and_then(|c| Class::from_code(c[i])));
             return Err(MapRouteError::Blocked {
                 end,
                 lonlat,

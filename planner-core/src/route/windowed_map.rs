@@ -14,7 +14,10 @@ use proj::Proj;
 use super::coarse_to_fine::{BigRouteError, CoarseToFine, CoarseToFineOptions, coarse_to_fine};
 use super::cost_source::{CostSource, CostSourceError, WindowCosts};
 use super::map_route::{MapRoute, RoutePoint};
-use super::on_map::{Endpoint, MapRouteError, Position};
+use super::on_map::{
+    Endpoint, MapRouteError, Position, blocked_on, coordinates_fault, corners_extent_lonlat,
+    crs_error, proj,
+};
 use super::{Cell, RouteOptions, turning_points};
 use crate::costmap::Class;
 use crate::geo::UtmProjection;
@@ -39,14 +42,6 @@ pub struct WindowedMap<'a> {
     wgs84_to_map: Option<Proj>,
     map_to_utm: Proj,
     utm_to_map: Proj,
-}
-
-fn crs_error(e: impl std::fmt::Display) -> MapRouteError {
-    MapRouteError::Crs(format!("coordinate transformation failed: {e}"))
-}
-
-fn proj(from: &str, to: &str) -> Result<Proj, MapRouteError> {
-    Proj::new_known_crs(from, to, None).map_err(crs_error)
 }
 
 fn source_error(e: CostSourceError) -> MapRouteError {
@@ -139,31 +134,20 @@ impl<'a> WindowedMap<'a> {
             position: *p,
             reason: reason.to_string(),
         };
+        if let Some(reason) = coordinates_fault(p) {
+            return Err(invalid(reason));
+        }
         let (x, y) = match *p {
-            Position::LonLat([lon, lat]) => {
-                if !(lon.is_finite() && lat.is_finite()) {
-                    return Err(invalid("coordinates must be finite numbers"));
-                }
-                if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) {
-                    return Err(invalid(
-                        "[lon, lat] must be within [-180, 180] × [-90, 90] degrees",
-                    ));
-                }
-                match &self.wgs84_to_map {
-                    None => (lon, lat),
-                    Some(t) => t
-                        .convert((lon, lat))
-                        .map_err(|_| invalid("it cannot be transformed into the costmap's CRS"))?,
-                }
-            }
-            Position::Utm { utm: [e, n] } => {
-                if !(e.is_finite() && n.is_finite()) {
-                    return Err(invalid("coordinates must be finite numbers"));
-                }
-                self.utm_to_map
-                    .convert((e, n))
-                    .map_err(|_| invalid("it cannot be transformed into the costmap's CRS"))?
-            }
+            Position::LonLat([lon, lat]) => match &self.wgs84_to_map {
+                None => (lon, lat),
+                Some(t) => t
+                    .convert((lon, lat))
+                    .map_err(|_| invalid("it cannot be transformed into the costmap's CRS"))?,
+            },
+            Position::Utm { utm: [e, n] } => self
+                .utm_to_map
+                .convert((e, n))
+                .map_err(|_| invalid("it cannot be transformed into the costmap's CRS"))?,
         };
         if !(x.is_finite() && y.is_finite()) {
             return Err(invalid("it cannot be transformed into the costmap's CRS"));
@@ -180,31 +164,10 @@ impl<'a> WindowedMap<'a> {
             inside.then_some((r as usize, c as usize))
         });
         let Some(cell) = cell else {
-            let mut extent = [
-                f64::INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::NEG_INFINITY,
-            ];
-            for (c, r) in [
-                (0.0, 0.0),
-                (w as f64, 0.0),
-                (0.0, h as f64),
-                (w as f64, h as f64),
-            ] {
-                if let Ok([lon, lat]) = self.to_lonlat(self.transform.apply(c, r)) {
-                    extent = [
-                        extent[0].min(lon),
-                        extent[1].min(lat),
-                        extent[2].max(lon),
-                        extent[3].max(lat),
-                    ];
-                }
-            }
             return Err(MapRouteError::Outside {
                 end,
                 lonlat,
-                extent,
+                extent: corners_extent_lonlat(&self.transform, (w, h), |xy| self.to_lonlat(xy)),
             });
         };
         let mut cost = [0.0f32];
@@ -220,14 +183,7 @@ impl<'a> WindowedMap<'a> {
                     let v = class[0];
                     ((0.0..=255.0).contains(&v) && v.fract() == 0.0).then_some(v as u8)
                 });
-            let what = match code.and_then(Class::from_code) {
-                Some(Class::Slope) => "an obstacle (a slope steeper than the vehicle can climb)",
-                Some(Class::Step) => "an obstacle (a step higher than the vehicle can climb)",
-                Some(Class::Enclosed) => "an obstacle (an area enclosed by obstacles)",
-                Some(Class::Other) => "an obstacle (lethal land cover or a hazard layer)",
-                Some(Class::Unknown) => "unknown terrain (no height data)",
-                _ => "an obstacle or unknown terrain",
-            };
+            let what = blocked_on(code.and_then(Class::from_code));
             return Err(MapRouteError::Blocked {
                 end,
                 lonlat,
