@@ -519,6 +519,27 @@ mod tests {
     /// The coarse route is forced round the walls too, but the first
     /// narrow corridor around a straight coarse route on a map whose
     /// cheap ground lies far to the side must widen.
+    /// 160 × 120 cells: expensive ground (cost 20) between start and goal
+    /// at (50, 2) and (50, 157), a cheap lane (cost 1) along the far bottom
+    /// (rows 100..110) that the fine optimum takes. Single cheap cells
+    /// sprinkled on the expensive ground lower its block minima, so the
+    /// coarse route heads straight across.
+    fn lure_grid() -> CostGrid {
+        let (w, h) = (160, 120);
+        let mut costs = vec![20.0f32; w * h];
+        for r in 100..110 {
+            for c in 0..w {
+                costs[r * w + c] = 1.0;
+            }
+        }
+        for r in (0..100).step_by(4) {
+            for c in (0..w).step_by(4) {
+                costs[r * w + c] = 1.0;
+            }
+        }
+        CostGrid::with_cell_size(w, h, costs, 1.0, 1.0).unwrap()
+    }
+
     #[test]
     fn mazes_and_cheap_detours_outside_the_first_corridor() {
         let (w, h) = (120, 100);
@@ -541,26 +562,9 @@ mod tests {
         );
         agree(&maze, (99, 0), (0, 119), ArcCost::thesis(), &small_blocks());
 
-        // Expensive ground (cost 20) between start and goal, a cheap lane
-        // (cost 1) along the far bottom: the coarse route (block minima)
-        // and the fine optimum both take the lane, but a blocked stretch
-        // of the lane at the coarse level is invisible... the corridor
-        // around the coarse route must still widen until the proof holds.
-        let (w, h) = (160, 120);
-        let mut costs = vec![20.0f32; w * h];
-        for r in 100..110 {
-            for c in 0..w {
-                costs[r * w + c] = 1.0;
-            }
-        }
-        // Single cheap cells sprinkled on the expensive ground lower its
-        // block minima, so the coarse route heads straight across.
-        for r in (0..100).step_by(4) {
-            for c in (0..w).step_by(4) {
-                costs[r * w + c] = 1.0;
-            }
-        }
-        let lure = CostGrid::with_cell_size(w, h, costs, 1.0, 1.0).unwrap();
+        // The coarse route heads straight across the lure's expensive
+        // ground: the corridor around it must widen until the proof holds.
+        let lure = lure_grid();
         let (start, goal) = ((50, 2), (50, 157));
         let a = astar(&lure, start, goal, &RouteOptions::default(), &|| false).unwrap();
         assert!(
@@ -584,19 +588,7 @@ mod tests {
     #[test]
     fn a_limit_reports_the_bound_achieved() {
         // The lure map again, with no widening allowed.
-        let (w, h) = (160, 120);
-        let mut costs = vec![20.0f32; w * h];
-        for r in 100..110 {
-            for c in 0..w {
-                costs[r * w + c] = 1.0;
-            }
-        }
-        for r in (0..100).step_by(4) {
-            for c in (0..w).step_by(4) {
-                costs[r * w + c] = 1.0;
-            }
-        }
-        let grid = CostGrid::with_cell_size(w, h, costs, 1.0, 1.0).unwrap();
+        let grid = lure_grid();
         let c2f = CoarseToFineOptions {
             max_widenings: 0,
             ..small_blocks()
