@@ -351,7 +351,9 @@ pub(crate) fn open_list(hood: &Neighbourhood, model: &ArcModel, epsilon: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::route::testing::{Rng, assert_path_valid, dijkstra, random_endpoints, random_grid};
+    use crate::route::testing::{
+        Rng, assert_path_valid, dijkstra, random_arc, random_endpoints, random_grid,
+    };
     use crate::route::{ArcCost, polyline_cost};
     use std::cell::Cell as Counter;
 
@@ -392,13 +394,7 @@ mod tests {
             let Some((start, goal)) = random_endpoints(&mut rng, &grid) else {
                 continue;
             };
-            let arc = if trial % 3 == 0 {
-                ArcCost::Thesis {
-                    d_max: 1.0 + 15.0 * rng.unit(),
-                }
-            } else {
-                ArcCost::Integrated
-            };
+            let arc = random_arc(&mut rng, trial % 3 == 0);
             let expected = dijkstra(&grid, start, goal, arc);
             match (astar(&grid, start, goal, &opts(arc), &|| false), expected) {
                 (Ok(route), Some(best)) => {

@@ -231,7 +231,7 @@ fn window(
 pub(crate) mod tests {
     use super::*;
     use crate::route::neighbourhood::Neighbourhood;
-    use crate::route::testing::{Rng, random_grid};
+    use crate::route::testing::{Rng, random_arc, random_grid};
     use crate::route::{ArcCost, CostGrid};
 
     /// The exact cost from every cell to `goal` (Dijkstra over reversed
@@ -277,13 +277,7 @@ pub(crate) mod tests {
             let h = 8 + rng.below(70) as usize;
             let density = [0.0, 0.1, 0.3][trial % 3];
             let grid = random_grid(&mut rng, w, h, density, trial % 2 == 0);
-            let arc = if trial % 4 == 3 {
-                ArcCost::Thesis {
-                    d_max: 1.0 + 15.0 * rng.unit(),
-                }
-            } else {
-                ArcCost::Integrated
-            };
+            let arc = random_arc(&mut rng, trial % 4 == 3);
             let model = ArcModel::new(arc, grid.finite_cost_range());
             let goal = (rng.below(h as u64) as usize, rng.below(w as u64) as usize);
             if !grid.is_traversable(goal) {

@@ -436,7 +436,9 @@ pub fn coarse_to_fine_route(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::route::testing::{Rng, assert_path_valid, random_endpoints, random_grid};
+    use crate::route::testing::{
+        Rng, assert_path_valid, random_arc, random_endpoints, random_grid,
+    };
     use crate::route::{ArcCost, astar};
 
     fn small_blocks() -> CoarseToFineOptions {
@@ -494,13 +496,7 @@ mod tests {
             let Some((start, goal)) = random_endpoints(&mut rng, &grid) else {
                 continue;
             };
-            let arc = if trial % 3 == 0 {
-                ArcCost::Thesis {
-                    d_max: 1.0 + 15.0 * rng.unit(),
-                }
-            } else {
-                ArcCost::Integrated
-            };
+            let arc = random_arc(&mut rng, trial % 3 == 0);
             let c2f = CoarseToFineOptions {
                 block: [4, 8, 16][trial % 3],
                 reach: 1 + trial % 4,

@@ -38,6 +38,18 @@ impl Rng {
     }
 }
 
+/// The thesis arc rule with a random d_max in [1, 16) when `thesis`
+/// (drawing one number from `rng`), else the integrated one.
+pub(crate) fn random_arc(rng: &mut Rng, thesis: bool) -> ArcCost {
+    if thesis {
+        ArcCost::Thesis {
+            d_max: 1.0 + 15.0 * rng.unit(),
+        }
+    } else {
+        ArcCost::Integrated
+    }
+}
+
 /// A random w × h grid: costs of several styles (independent per cell,
 /// smooth, a few levels, sub-unit costs), obstacles (scattered and in
 /// blobs) covering about `density`, and with `varied_cells` non-square
