@@ -36,20 +36,10 @@ import sys
 import tempfile
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MCP = os.path.join(ROOT, "tests", "validators", "mcp_route.py")
-
-
-def shared_data(rel):
-    base = os.environ.get("TERRAPLAN_SHARED_DATA", os.path.join(ROOT, "..", "shared", "data"))
-    p = os.path.normpath(os.path.join(base, rel))
-    if not os.path.exists(p):
-        sys.exit(f"shared test data {p} is missing")
-    return p
-
-
-def target_dir():
-    return os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+# The paths, the shared data and the target dir as the route benchmark finds
+# them (bench_route imports numpy only where it uses it, so this process's
+# RSS, the floor of its children's ru_maxrss, stays small).
+from bench_route import MCP, ROOT, shared_data, target_dir
 
 
 def timed(cmd):
