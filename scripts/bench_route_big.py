@@ -36,10 +36,10 @@ import sys
 import tempfile
 import time
 
-# The paths, the shared data and the target dir as the route benchmark finds
+# The validator, the shared data and the target dir as the route benchmark finds
 # them (bench_route imports numpy only where it uses it, so this process's
 # RSS, the floor of its children's ru_maxrss, stays small).
-from bench_route import MCP, ROOT, shared_data, target_dir
+from bench_route import MCP, shared_data, target_dir
 
 
 def timed(cmd):
