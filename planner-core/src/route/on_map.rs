@@ -153,6 +153,54 @@ pub(super) fn proj(from: &str, to: &str) -> Result<Proj, MapRouteError> {
     Proj::new_known_crs(from, to, None).map_err(crs_error)
 }
 
+/// The transformations between a map's CRS, WGS84 lon/lat and the UTM
+/// zone of the map's centre (none to and from lon/lat when the map is in
+/// EPSG:4326 already).
+pub(super) struct MapProjections {
+    pub(super) utm: UtmProjection,
+    pub(super) map_to_utm: Proj,
+    pub(super) utm_to_map: Proj,
+    pub(super) map_to_wgs84: Option<Proj>,
+    pub(super) wgs84_to_map: Option<Proj>,
+}
+
+impl MapProjections {
+    /// For a `width` × `height` grid placed by `transform` in `crs`.
+    pub(super) fn new(
+        crs: &Crs,
+        transform: &GeoTransform,
+        (width, height): (usize, usize),
+    ) -> Result<MapProjections, MapRouteError> {
+        let map_id = crs.proj_id();
+        let (map_to_wgs84, wgs84_to_map) = if crs.epsg == 4326 {
+            (None, None)
+        } else {
+            (
+                Some(proj(&map_id, "EPSG:4326")?),
+                Some(proj("EPSG:4326", &map_id)?),
+            )
+        };
+        let (cx, cy) = transform.apply(width as f64 / 2.0, height as f64 / 2.0);
+        let centre = match &map_to_wgs84 {
+            None => (cx, cy),
+            Some(p) => p.convert((cx, cy)).map_err(crs_error)?,
+        };
+        let utm = UtmProjection::for_lonlat(Coord {
+            x: centre.0,
+            y: centre.1,
+        })
+        .map_err(|e| MapRouteError::Crs(e.to_string()))?;
+        let utm_id = format!("EPSG:{}", utm.epsg());
+        Ok(MapProjections {
+            map_to_utm: proj(&map_id, &utm_id)?,
+            utm_to_map: proj(&utm_id, &map_id)?,
+            utm,
+            map_to_wgs84,
+            wgs84_to_map,
+        })
+    }
+}
+
 /// Why `p`'s coordinates are no position at all (not finite, or degrees
 /// beyond the globe), before any transformation.
 pub(super) fn coordinates_fault(p: &Position) -> Option<&'static str> {
@@ -259,33 +307,20 @@ impl RouteMap {
         let dx = sizes.iter().map(|s| s[0]).collect();
         let grid = CostGrid::new(width, height, costs, dx, dy)?;
 
-        let map_id = crs.proj_id();
-        let (map_to_wgs84, wgs84_to_map) = if crs.epsg == 4326 {
-            (None, None)
-        } else {
-            (
-                Some(proj(&map_id, "EPSG:4326")?),
-                Some(proj("EPSG:4326", &map_id)?),
-            )
-        };
-        let (cx, cy) = transform.apply(width as f64 / 2.0, height as f64 / 2.0);
-        let centre = match &map_to_wgs84 {
-            None => (cx, cy),
-            Some(p) => p.convert((cx, cy)).map_err(crs_error)?,
-        };
-        let utm = UtmProjection::for_lonlat(Coord {
-            x: centre.0,
-            y: centre.1,
-        })
-        .map_err(|e| MapRouteError::Crs(e.to_string()))?;
-        let utm_id = format!("EPSG:{}", utm.epsg());
+        let MapProjections {
+            utm,
+            map_to_utm,
+            utm_to_map,
+            map_to_wgs84,
+            wgs84_to_map,
+        } = MapProjections::new(&crs, &transform, (width, height))?;
         Ok(RouteMap {
             grid,
             transform,
             heights,
             classes,
-            map_to_utm: proj(&map_id, &utm_id)?,
-            utm_to_map: proj(&utm_id, &map_id)?,
+            map_to_utm,
+            utm_to_map,
             crs,
             utm,
             map_to_wgs84,

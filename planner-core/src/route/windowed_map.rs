@@ -8,15 +8,14 @@
 //!
 //! [`RouteMap`]: super::RouteMap
 
-use geo_types::Coord;
 use proj::Proj;
 
 use super::coarse_to_fine::{BigRouteError, CoarseToFine, CoarseToFineOptions, coarse_to_fine};
 use super::cost_source::{CostSource, CostSourceError, WindowCosts};
 use super::map_route::{MapRoute, RoutePoint};
 use super::on_map::{
-    Endpoint, MapRouteError, Position, blocked_on, coordinates_fault, corners_extent_lonlat,
-    crs_error, proj,
+    Endpoint, MapProjections, MapRouteError, Position, blocked_on, coordinates_fault,
+    corners_extent_lonlat, crs_error,
 };
 use super::{Cell, RouteOptions, turning_points};
 use crate::costmap::Class;
@@ -69,32 +68,19 @@ impl<'a> WindowedMap<'a> {
             ));
         }
         let transform = grid.transform;
-        let map_id = grid.crs.proj_id();
-        let (map_to_wgs84, wgs84_to_map) = if grid.crs.epsg == 4326 {
-            (None, None)
-        } else {
-            (
-                Some(proj(&map_id, "EPSG:4326")?),
-                Some(proj("EPSG:4326", &map_id)?),
-            )
-        };
-        let (cx, cy) = transform.apply(grid.width as f64 / 2.0, grid.height as f64 / 2.0);
-        let centre = match &map_to_wgs84 {
-            None => (cx, cy),
-            Some(p) => p.convert((cx, cy)).map_err(crs_error)?,
-        };
-        let utm = UtmProjection::for_lonlat(Coord {
-            x: centre.0,
-            y: centre.1,
-        })
-        .map_err(|e| MapRouteError::Crs(e.to_string()))?;
-        let utm_id = format!("EPSG:{}", utm.epsg());
+        let MapProjections {
+            utm,
+            map_to_utm,
+            utm_to_map,
+            map_to_wgs84,
+            wgs84_to_map,
+        } = MapProjections::new(&grid.crs, &transform, (grid.width, grid.height))?;
         Ok(WindowedMap {
             costs: WindowCosts::new(costs).map_err(source_error)?,
             classes,
             transform,
-            map_to_utm: proj(&map_id, &utm_id)?,
-            utm_to_map: proj(&utm_id, &map_id)?,
+            map_to_utm,
+            utm_to_map,
             utm,
             map_to_wgs84,
             wgs84_to_map,
