@@ -1,17 +1,21 @@
 //! `POST /api/v1/dems`: upload an elevation raster (GeoTIFF, ESRI ASCII
 //! grid or SRTM `.hgt`).
 //!
-//! The uploaded file is stored as it came (with the CRS the uploader gave,
-//! if any) and parsed again on demand; parsed rasters are kept in the
-//! state's small cache ([`crate::state::DemLoader`]).
+//! A GeoTIFF is read from its spool file a band of rows at a time and
+//! stored as tiles with overviews (`state::dem_store::tiles`), never held
+//! whole; an ESRI ASCII grid or `.hgt` tile is read whole and stored both
+//! as its file and as tiles. The CRS the uploader gave, if any, is kept;
+//! parsed rasters are kept in the state's small cache
+//! ([`crate::state::DemLoader`]).
 //!
 //! An upload is written to a spool file in the data directory as it
 //! arrives (a slow or large upload holds no more than a buffer of
 //! memory), its header is read for the raster's declared size, and only
-//! then, with room for it in the memory budget, is it read; a raster
-//! whose reading alone needs more than the budget (a small compressed
-//! file declaring huge pixel counts) is refused before anything of that
-//! size is allocated. It is stored a chunk at a time.
+//! then, with room in the memory budget for what its reading holds (a
+//! band of tiles for a GeoTIFF, the whole raster otherwise), is it read;
+//! a raster whose reading alone needs more than the budget (a small
+//! compressed file declaring huge pixel counts) is refused before
+//! anything of that size is allocated.
 
 use std::io::Write;
 use std::path::{Path as FsPath, PathBuf};
