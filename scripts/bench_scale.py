@@ -254,6 +254,10 @@ def run_config(label, servers, token, args, body):
     res["cpu_s_per_replica"] = {
         s.name: (cpu_seconds(s.pid) - cpu_before[s.name])
         if cpu_before[s.name] is not None else None for s in servers}
+    cores = sum(v for v in res["cpu_s_per_replica"].values() if v is not None)
+    res["replica_cores_used"] = cores / (args.warmup + args.seconds)
+    res["surveys_per_s_per_replica_core"] = (
+        res["surveys_per_s"] / res["replica_cores_used"] if cores else None)
     res["config"] = label
     res["replicas"] = len(servers)
     res["peak_rss_mib"] = {s.name: peak_rss_mib(s.pid) for s in servers}
@@ -299,7 +303,7 @@ def print_survey_table(results, args):
     print(f"\nSurveys: POST /api/v1/surveys (examples/field.geojson + field-nfz.geojson), "
           f"{args.clients} clients round-robin over the replicas, {args.seconds:g} s each")
     print(f"{'configuration':<26} {'surveys/s':>9} {'speed-up':>8} {'p50 ms':>8} {'p99 ms':>8} "
-          f"{'errors':>6} {'CPU busy':>8}  peak RSS per process (MiB)")
+          f"{'errors':>6} {'CPU busy':>8} {'cores':>5} {'/s/core':>7}  peak RSS per process (MiB)")
     base = next((r["surveys_per_s"] for r in results if r["replicas"] == 1
                  and "PostgreSQL" in r["config"]), None)
     for r in results:
@@ -311,8 +315,10 @@ def print_survey_table(results, args):
         p99 = f"{r['p99_ms']:8.1f}" if r["p99_ms"] is not None else f"{'-':>8}"
         busy = r["machine_cpu_busy_pct"]
         busy = f"{busy:7.0f}%" if busy is not None else f"{'?':>8}"
+        per_core = r["surveys_per_s_per_replica_core"]
+        per_core = f"{per_core:7.1f}" if per_core is not None else f"{'?':>7}"
         print(f"{r['config']:<26} {r['surveys_per_s']:9.1f} {up} {p50} {p99} "
-              f"{r['errors']:6d} {busy}  {rss}")
+              f"{r['errors']:6d} {busy} {r['replica_cores_used']:5.2f} {per_core}  {rss}")
         for e in r["first_errors"]:
             print(f"    error: {e}")
 
@@ -462,10 +468,12 @@ def main():
         if not args.no_survey:
             report["surveys"], _ = survey_bench(args, procs, workdir, binary)
             print_survey_table(report["surveys"], args)
-            print(f"(CPU busy: all {os.cpu_count()} CPUs of the machine during the run, "
-                  f"other users' work included; the clients, the replicas and PostgreSQL "
-                  f"share them, so replicas beyond the cores cannot add throughput)",
-                  flush=True)
+            print(f"CPU busy: all {os.cpu_count()} CPUs of the machine during the run, other "
+                  f"work included; cores: CPU time the server processes used (sum over "
+                  f"replicas, warm-up included) per second; /s/core: surveys/s per such core. "
+                  f"The clients, the replicas and PostgreSQL share the {os.cpu_count()} CPUs: "
+                  f"replicas beyond the cores add throughput only by taking a larger share "
+                  f"of a busy machine, not by more cores.", flush=True)
         if not args.no_costmap:
             report["costmap"] = costmap_bench(args, procs, workdir, binary)
             print_costmap(report["costmap"])
