@@ -367,15 +367,7 @@ fn costmap_tiled(
             Ok(())
         })
         .map_err(|e| Failure::other(format!("cannot write {}: {e}", costmap_path.display())))?;
-    let write = |path: &Path, content: &[u8]| {
-        std::fs::write(path, content)
-            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
-    };
-    write(&out.join("preview.png"), &map.preview_png)?;
-    write(
-        &out.join("legend.svg"),
-        legend_svg_of(&map.stats, &map.vehicle.name).as_bytes(),
-    )?;
+    write_preview_and_legend(out, &map.preview_png, &map.stats, &map.vehicle.name)?;
     let summary = Summary {
         width: map.width,
         height: map.height,
@@ -407,6 +399,24 @@ fn costmap_tiled(
 fn create_dir(dir: &Path) -> Result<(), Failure> {
     std::fs::create_dir_all(dir)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", dir.display())))
+}
+
+/// preview.png (as drawn) and legend.svg (of `stats`) in `out`.
+fn write_preview_and_legend(
+    out: &Path,
+    preview_png: &[u8],
+    stats: &CostmapStats,
+    vehicle_name: &str,
+) -> Result<(), Failure> {
+    let write = |path: &Path, content: &[u8]| {
+        std::fs::write(path, content)
+            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
+    };
+    write(&out.join("preview.png"), preview_png)?;
+    write(
+        &out.join("legend.svg"),
+        legend_svg_of(stats, vehicle_name).as_bytes(),
+    )
 }
 
 /// stats.json in `out`.
@@ -502,10 +512,6 @@ fn write_files(map: &planner_core::costmap::Costmap, out: &Path) -> Result<(), F
     let layers_dir = out.join("layers");
     std::fs::create_dir_all(out)
         .map_err(|e| Failure::other(format!("cannot create {}: {e}", out.display())))?;
-    let write = |path: &Path, content: &[u8]| {
-        std::fs::write(path, content)
-            .map_err(|e| Failure::other(format!("cannot write {}: {e}", path.display())))
-    };
     // The GeoTIFF is mostly writing, the preview mostly arithmetic: both
     // at once.
     let (written, preview) = std::thread::scope(|scope| {
@@ -517,11 +523,7 @@ fn write_files(map: &planner_core::costmap::Costmap, out: &Path) -> Result<(), F
     });
     written?;
     let preview = preview.map_err(|_| Failure::other("drawing the preview failed"))?;
-    write(&out.join("preview.png"), &preview)?;
-    write(
-        &out.join("legend.svg"),
-        legend_svg_of(&map.stats, &map.vehicle.name).as_bytes(),
-    )?;
+    write_preview_and_legend(out, &preview, &map.stats, &map.vehicle.name)?;
     let mut kept = Vec::new();
     if !map.layers.is_empty() {
         std::fs::create_dir_all(&layers_dir)
