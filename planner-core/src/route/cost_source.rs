@@ -174,7 +174,20 @@ impl CostSource for WindowCosts<'_> {
 mod tests {
     use super::*;
     use crate::terrain::test_support::{dem, north_up};
-    use crate::terrain::{Crs, DemWindows};
+    use crate::terrain::{Crs, Dem, DemWindows};
+
+    /// A north-up raster in UTM 18N with cells `dx` × `dy` metres.
+    fn utm_dem(w: usize, h: usize, values: Vec<f64>, [dx, dy]: [f64; 2]) -> Dem {
+        let mut d = dem(
+            w,
+            h,
+            values,
+            north_up(500_000.0, 4_000_000.0, dx, dy),
+            false,
+        );
+        d.crs = Crs::from_epsg(32618).unwrap();
+        d
+    }
 
     #[test]
     fn window_costs_read_the_band_as_f32_with_metre_cells() {
@@ -182,14 +195,7 @@ mod tests {
         let values = (0..w * h)
             .map(|i| if i == 7 { f64::NAN } else { 1.0 + i as f64 })
             .collect();
-        let mut d = dem(
-            w,
-            h,
-            values,
-            north_up(500_000.0, 4_000_000.0, 2.0, 3.0),
-            false,
-        );
-        d.crs = Crs::from_epsg(32618).unwrap();
+        let d = utm_dem(w, h, values, [2.0, 3.0]);
         let windows = DemWindows::new(&d);
         let src = WindowCosts::new(&windows).unwrap();
         assert_eq!((src.width(), src.height(), src.dy()), (6, 4, 3.0));
@@ -204,14 +210,7 @@ mod tests {
     #[test]
     fn a_non_positive_cost_is_named_and_a_bad_window_is_an_error() {
         let values = vec![1.0, 2.0, 0.0, 4.0];
-        let mut d = dem(
-            2,
-            2,
-            values,
-            north_up(500_000.0, 4_000_000.0, 1.0, 1.0),
-            false,
-        );
-        d.crs = Crs::from_epsg(32618).unwrap();
+        let d = utm_dem(2, 2, values, [1.0, 1.0]);
         let windows = DemWindows::new(&d);
         let src = WindowCosts::new(&windows).unwrap();
         let mut out = vec![0.0f32; 4];
