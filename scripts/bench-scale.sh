@@ -21,5 +21,12 @@ cd "$(dirname "$0")/.."
 for a in "$@"; do
   case "$a" in -h|--help) exec /usr/bin/python3 scripts/bench_scale.py --help;; esac
 done
-cargo build --release --bin terraplan
+# The build in a process group of its own, so Ctrl-C, SIGTERM or SIGHUP to
+# this script stops cargo and its rustc children alike (cargo leaves them
+# running when signalled alone).
+setsid cargo build --release --bin terraplan &
+build=$!
+trap 'kill -TERM -- "-$build" 2>/dev/null; wait "$build" 2>/dev/null; exit 143' TERM HUP INT
+wait "$build"
+trap - TERM HUP INT
 exec /usr/bin/python3 scripts/bench_scale.py "$@"

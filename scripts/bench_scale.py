@@ -449,6 +449,8 @@ def main():
     if not binary.exists():
         parser.error(f"{binary} is missing: cargo build --release --bin terraplan")
 
+    # Explicitly also SIGINT: a shell starts background jobs with it ignored.
+    signal.signal(signal.SIGINT, raise_interrupt)
     signal.signal(signal.SIGTERM, raise_interrupt)
     signal.signal(signal.SIGHUP, raise_interrupt)
     procs = Processes()
