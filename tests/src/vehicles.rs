@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
+use serde_json::{Value, json};
 
 use crate::{venv_python, workspace};
 
@@ -116,4 +116,66 @@ pub fn pymavlink_vehicle(dir: &Path, extra: &[&str]) -> Vehicle {
     ];
     args.extend(extra.iter().map(|s| s.to_string()));
     start_vehicle("mavlink_vehicle.py", &args, 0, out)
+}
+
+/// Params 1-4 and z: the files print 6 decimals and MAVLink carries
+/// float32; x/y are the files' degrees ×1e7, rounded.
+pub const PARAM_TOL: f64 = 5e-6;
+
+/// The rows of a QGC WPL 110 file's text as MISSION_ITEM_INT fields.
+pub fn wpl_items(text: &str) -> Vec<Value> {
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("QGC WPL 110"));
+    lines
+        .map(|l| {
+            let c: Vec<&str> = l.split('\t').collect();
+            let f = |k: usize| c[k].parse::<f64>().unwrap();
+            json!({"frame": f(2), "command": f(3), "params": [f(4), f(5), f(6), f(7)],
+                   "x": (f(8) * 1e7).round(), "y": (f(9) * 1e7).round(), "z": f(10),
+                   "autocontinue": f(11)})
+        })
+        .collect()
+}
+
+/// The vehicle's items equal the file's rows (NaN stored as null); x/y
+/// within `xy_tol` (degrees ×1e7): 0 for items sent from the same file, 1
+/// for a `.plan`'s items against the `.waypoints`, which prints lat/lon to
+/// 1e-8° so that a value at a half may round to the neighbouring 1e-7.
+pub fn assert_items_equal(what: &str, got: &[Value], want: &[Value], xy_tol: f64) {
+    assert_eq!(got.len(), want.len(), "{what}: item count");
+    let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        for key in ["frame", "command", "autocontinue"] {
+            assert_eq!(
+                num(&g[key]),
+                num(&w[key]),
+                "{what} item {k} {key}: {g} vs {w}"
+            );
+        }
+        for key in ["x", "y"] {
+            let d = (num(&g[key]) - num(&w[key])).abs();
+            assert!(d <= xy_tol, "{what} item {k} {key}: {g} vs {w}");
+        }
+        assert_eq!(g["seq"].as_u64(), Some(k as u64), "{what} item {k}");
+        for (p, want_p) in w["params"].as_array().unwrap().iter().enumerate() {
+            let (a, b) = (num(&g[format!("param{}", p + 1).as_str()]), num(want_p));
+            assert!(
+                (a.is_nan() && b.is_nan()) || (a - b).abs() <= PARAM_TOL * b.abs().max(1.0),
+                "{what} item {k} param{}: {a} vs {b}",
+                p + 1
+            );
+        }
+        let (a, b) = (num(&g["z"]), num(&w["z"]));
+        assert!(
+            (a - b).abs() <= PARAM_TOL * b.abs().max(1.0),
+            "{what} item {k} z: {a} vs {b}"
+        );
+    }
+}
+
+/// A list the vehicle stored (panics naming it if it is not a list).
+pub fn items(v: &Value) -> Vec<Value> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not a list: {v}"))
+        .clone()
 }

@@ -14,15 +14,13 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
-use terraplan_e2e::vehicles::{free_udp_port, mavsdk_vehicle, pymavlink_vehicle};
+use terraplan_e2e::vehicles::{
+    assert_items_equal, free_udp_port, items, mavsdk_vehicle, pymavlink_vehicle, wpl_items,
+};
 use terraplan_e2e::{
     Auth, Reply, Server, assert_invalid_at, assert_problem, example_survey_request, get, get_as,
     last_line, post_json, post_json_as, sse_events, text, unique_user_name, user_command,
 };
-
-/// Params 1-4 and z: the files print 6 decimals and MAVLink carries
-/// float32; x/y are the files' degrees ×1e7, rounded.
-const PARAM_TOL: f64 = 5e-6;
 
 /// The allow-list of the servers here: any UDP port on 127.0.0.1.
 const LINKS: &str = "udpout:127.0.0.1:*";
@@ -44,60 +42,7 @@ fn stored_survey(server: &Server) -> String {
 fn wpl_rows(server: &Server, survey: &str, file: &str) -> Vec<Value> {
     let r = get(&server.url(&format!("/api/v1/surveys/{survey}/uavs/u1/{file}")));
     assert_eq!(r.status, 200, "{file}: {}", r.text());
-    let body = r.text();
-    let mut lines = body.lines();
-    assert_eq!(lines.next(), Some("QGC WPL 110"));
-    lines
-        .map(|l| {
-            let c: Vec<&str> = l.split('\t').collect();
-            let f = |k: usize| c[k].parse::<f64>().unwrap();
-            json!({"frame": f(2), "command": f(3), "params": [f(4), f(5), f(6), f(7)],
-                   "x": (f(8) * 1e7).round(), "y": (f(9) * 1e7).round(), "z": f(10),
-                   "autocontinue": f(11)})
-        })
-        .collect()
-}
-
-/// The vehicle's items equal the file's rows (NaN stored as null); x/y
-/// within `xy_tol` (degrees ×1e7): 0 for the mission, sent from the
-/// `.waypoints`; 1 for the fence and rally points, sent from the `.plan`,
-/// whose full-precision coordinates the `.waypoints` prints to 1e-8°.
-fn assert_items_equal(what: &str, got: &[Value], want: &[Value], xy_tol: f64) {
-    assert_eq!(got.len(), want.len(), "{what}: item count");
-    let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        for key in ["frame", "command", "autocontinue"] {
-            assert_eq!(
-                num(&g[key]),
-                num(&w[key]),
-                "{what} item {k} {key}: {g} vs {w}"
-            );
-        }
-        for key in ["x", "y"] {
-            let d = (num(&g[key]) - num(&w[key])).abs();
-            assert!(d <= xy_tol, "{what} item {k} {key}: {g} vs {w}");
-        }
-        assert_eq!(g["seq"].as_u64(), Some(k as u64), "{what} item {k}");
-        for (p, want_p) in w["params"].as_array().unwrap().iter().enumerate() {
-            let (a, b) = (num(&g[format!("param{}", p + 1).as_str()]), num(want_p));
-            assert!(
-                (a.is_nan() && b.is_nan()) || (a - b).abs() <= PARAM_TOL * b.abs().max(1.0),
-                "{what} item {k} param{}: {a} vs {b}",
-                p + 1
-            );
-        }
-        let (a, b) = (num(&g["z"]), num(&w["z"]));
-        assert!(
-            (a - b).abs() <= PARAM_TOL * b.abs().max(1.0),
-            "{what} item {k} z: {a} vs {b}"
-        );
-    }
-}
-
-fn items(v: &Value) -> Vec<Value> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("not a list: {v}"))
-        .clone()
+    wpl_items(&r.text())
 }
 
 fn upload_url(server: &Server, survey: &str, uav: &str) -> String {
