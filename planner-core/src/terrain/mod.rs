@@ -8,6 +8,7 @@
 //! in [`Dem::values`] and every sample that touches one is `None`.
 
 mod asc;
+mod cell_cache;
 mod cell_size;
 mod common;
 mod crs;
@@ -21,6 +22,7 @@ mod read;
 mod sample;
 mod windows;
 
+pub use cell_cache::CellCache;
 pub(crate) use cell_size::cell_size_m;
 pub use crs::Crs;
 pub use dilate::dilate;

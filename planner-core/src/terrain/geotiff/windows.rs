@@ -5,7 +5,6 @@
 //! chunks so that reading a strip-organised file tile by tile decodes
 //! each strip once. Neither the file nor the raster is held in memory.
 
-use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{self, BufReader, Read, Seek, SeekFrom};
 use std::os::unix::fs::FileExt;
@@ -19,8 +18,8 @@ use super::ifd::tiff_pieces;
 use super::read::{put_chunk, tiff_error, width_entry};
 use super::tags::type_size;
 use super::{invalid, is_tiff, unsupported};
-use crate::terrain::check_window;
 use crate::terrain::common::resolve_crs;
+use crate::terrain::{CellCache, check_window};
 use crate::terrain::{Crs, DemLimits, GeoTransform, RasterGrid, RasterWindows, TerrainError};
 
 /// The largest decoded chunk (a strip or tile, all its samples) read:
@@ -63,7 +62,7 @@ pub struct GeoTiffWindows {
     /// (see `read::decode`).
     width_patch: Option<Arc<(u64, Vec<u8>)>>,
     decoders: Mutex<Vec<Decoder<BufReader<FileReader>>>>,
-    cache: Mutex<ChunkCache>,
+    cache: Mutex<CellCache<u64>>,
 }
 
 impl GeoTiffWindows {
@@ -147,7 +146,7 @@ impl GeoTiffWindows {
             grid,
             width_patch,
             decoders: Mutex::new(Vec::new()),
-            cache: Mutex::new(ChunkCache::default()),
+            cache: Mutex::new(CellCache::new(CACHE_BYTES)),
         };
         // The decoder reads the IFD itself: it must agree with ours.
         let dec = windows.new_decoder()?;
@@ -610,47 +609,6 @@ impl Seek for FileReader {
         self.pos = next
             .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "seek before the start"))?;
         Ok(self.pos)
-    }
-}
-
-/// Decoded chunks by index, least recently used dropped first once they
-/// take more than [`CACHE_BYTES`] (the newest is always kept).
-#[derive(Default)]
-struct ChunkCache {
-    by_chunk: HashMap<u64, (u64, Arc<Vec<f64>>)>,
-    by_use: BTreeMap<u64, u64>,
-    tick: u64,
-    bytes: usize,
-}
-
-impl ChunkCache {
-    fn get(&mut self, chunk: u64) -> Option<Arc<Vec<f64>>> {
-        self.tick += 1;
-        let tick = self.tick;
-        let (used, cells) = self.by_chunk.get_mut(&chunk)?;
-        self.by_use.remove(used);
-        *used = tick;
-        self.by_use.insert(tick, chunk);
-        Some(Arc::clone(cells))
-    }
-
-    fn put(&mut self, chunk: u64, cells: Arc<Vec<f64>>) {
-        self.tick += 1;
-        let size = cells.len() * 8;
-        if let Some((used, old)) = self.by_chunk.insert(chunk, (self.tick, cells)) {
-            self.by_use.remove(&used);
-            self.bytes -= old.len() * 8;
-        }
-        self.by_use.insert(self.tick, chunk);
-        self.bytes += size;
-        while self.bytes > CACHE_BYTES && self.by_use.len() > 1 {
-            let Some((_, oldest)) = self.by_use.pop_first() else {
-                break;
-            };
-            if let Some((_, old)) = self.by_chunk.remove(&oldest) {
-                self.bytes -= old.len() * 8;
-            }
-        }
     }
 }
 

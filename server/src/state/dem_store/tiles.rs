@@ -9,12 +9,11 @@
 //! the bands pass (each level keeps at most one band of its rows): memory
 //! is a few bands of the raster's width, whatever its height.
 
-use std::collections::{BTreeMap, HashMap};
 use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
 
 use planner_core::terrain::{
-    Dem, DemFormat, GeoTransform, RasterGrid, RasterWindows, TerrainError, check_window,
+    CellCache, Dem, DemFormat, GeoTransform, RasterGrid, RasterWindows, TerrainError, check_window,
 };
 
 use crate::db::{Db, DemTileRow, DemTileSetRow};
@@ -627,7 +626,7 @@ pub struct StoredTiles {
     set: TileSet,
     level: usize,
     grid: RasterGrid,
-    cache: Mutex<TileCache>,
+    cache: Mutex<CellCache<(usize, usize)>>,
 }
 
 impl StoredTiles {
@@ -647,7 +646,7 @@ impl StoredTiles {
             set,
             level,
             grid: level_grid(grid, &set, level),
-            cache: Mutex::new(TileCache::default()),
+            cache: Mutex::new(CellCache::new(TILE_CACHE_BYTES)),
         }
     }
 
@@ -761,53 +760,10 @@ impl RasterWindows for StoredTiles {
     }
 }
 
-/// When a tile was last used, and its cells.
-type Used = (u64, Arc<Vec<f64>>);
-
-/// Decoded tiles by (col, row), least recently used dropped first once
-/// over [`TILE_CACHE_BYTES`].
-#[derive(Default)]
-struct TileCache {
-    /// (last use, cells) by (col, row).
-    by_tile: HashMap<(usize, usize), Used>,
-    by_use: BTreeMap<u64, (usize, usize)>,
-    tick: u64,
-    bytes: usize,
-}
-
-impl TileCache {
-    fn get(&mut self, key: (usize, usize)) -> Option<Arc<Vec<f64>>> {
-        self.tick += 1;
-        let tick = self.tick;
-        let (used, cells) = self.by_tile.get_mut(&key)?;
-        self.by_use.remove(used);
-        *used = tick;
-        self.by_use.insert(tick, key);
-        Some(Arc::clone(cells))
-    }
-
-    fn put(&mut self, key: (usize, usize), cells: Arc<Vec<f64>>) {
-        self.tick += 1;
-        let size = cells.len() * 8;
-        if let Some((used, old)) = self.by_tile.insert(key, (self.tick, cells)) {
-            self.by_use.remove(&used);
-            self.bytes -= old.len() * 8;
-        }
-        self.by_use.insert(self.tick, key);
-        self.bytes += size;
-        while self.bytes > TILE_CACHE_BYTES && self.by_use.len() > 1 {
-            let Some((_, oldest)) = self.by_use.pop_first() else {
-                break;
-            };
-            if let Some((_, old)) = self.by_tile.remove(&oldest) {
-                self.bytes -= old.len() * 8;
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use std::collections::HashMap;
+
     use planner_core::terrain::{Crs, DemWindows};
 
     use super::*;

@@ -563,16 +563,16 @@ fn geographic_crs_needs_degrees_and_pages_loop() {
 
 #[test]
 fn the_cache_keeps_at_most_its_budget_and_the_newest_chunk() {
-    let mut c = ChunkCache::default();
+    let mut c = CellCache::new(CACHE_BYTES);
     let chunk = CACHE_BYTES / 8 / 4;
     for i in 0..10 {
         c.put(i, Arc::new(vec![i as f64; chunk]));
     }
-    assert!(c.bytes <= CACHE_BYTES);
-    assert_eq!(c.by_chunk.len(), 4);
+    assert_eq!(c.bytes(), 4 * chunk * 8);
     assert!(c.get(9).is_some() && c.get(6).is_some() && c.get(5).is_none());
     // A chunk larger than the budget is still kept, alone.
     c.put(100, Arc::new(vec![0.0; CACHE_BYTES / 8 + 1]));
-    assert_eq!(c.by_chunk.len(), 1);
+    assert_eq!(c.bytes(), (CACHE_BYTES / 8 + 1) * 8);
+    assert!(c.get(9).is_none());
     assert!(c.get(100).is_some());
 }
