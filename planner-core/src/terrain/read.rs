@@ -2,7 +2,7 @@
 //! the checks every DEM passes (its corners in degrees when geographic).
 
 use super::geotiff::TiffPage;
-use super::{Dem, DemLimits, TerrainError, asc, geotiff, hgt};
+use super::{Crs, Dem, DemLimits, GeoTransform, TerrainError, asc, geotiff, hgt};
 
 /// Read a DEM from the bytes of a file. The format is detected from the
 /// content (TIFF magic, ASCII grid header); `file_name` is used for SRTM
@@ -106,17 +106,23 @@ fn check_tiff(bytes: &[u8]) -> Result<(), TerrainError> {
 /// A geographic CRS whose coordinates are not degrees (e.g. a UTM raster
 /// uploaded with `crs=EPSG:4326`) would put the DEM somewhere absurd.
 fn check_degrees(dem: &Dem) -> Result<(), TerrainError> {
-    if !dem.crs.geographic {
+    check_corners_in_degrees(&dem.transform, &dem.crs, dem.width, dem.height)
+}
+
+/// [`check_degrees`] from a raster's header alone (for readers that never
+/// hold the raster, e.g. [`super::geotiff::GeoTiffWindows`]).
+pub(crate) fn check_corners_in_degrees(
+    t: &GeoTransform,
+    crs: &Crs,
+    width: usize,
+    height: usize,
+) -> Result<(), TerrainError> {
+    if !crs.geographic {
         return Ok(());
     }
-    let corners = [
-        (0.0, 0.0),
-        (dem.width as f64, 0.0),
-        (0.0, dem.height as f64),
-        (dem.width as f64, dem.height as f64),
-    ];
-    for (c, r) in corners {
-        let (x, y) = dem.transform.apply(c, r);
+    let (w, h) = (width as f64, height as f64);
+    for (c, r) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        let (x, y) = t.apply(c, r);
         // Half-pixel borders may reach a little past the poles or ±180°.
         if !(x.is_finite()
             && y.is_finite()
@@ -126,7 +132,7 @@ fn check_degrees(dem: &Dem) -> Result<(), TerrainError> {
             return Err(TerrainError::Crs(format!(
                 "the raster's corner ({x}, {y}) is not a longitude/latitude in degrees, yet \
                  its CRS EPSG:{} is geographic: check the crs",
-                dem.crs.epsg
+                crs.epsg
             )));
         }
     }
@@ -172,7 +178,7 @@ fn read_any(
 }
 
 /// The first bytes of a file, for an error message.
-fn describe_start(bytes: &[u8]) -> String {
+pub(crate) fn describe_start(bytes: &[u8]) -> String {
     let head = bytes.get(..bytes.len().min(8)).unwrap_or(&[]);
     if head
         .iter()

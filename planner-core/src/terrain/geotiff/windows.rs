@@ -19,8 +19,9 @@ use super::read::{put_chunk, tiff_error, width_entry};
 use super::tags::type_size;
 use super::{invalid, is_tiff, unsupported};
 use crate::terrain::common::resolve_crs;
+use crate::terrain::read::{check_corners_in_degrees, describe_start};
 use crate::terrain::{CellCache, check_window};
-use crate::terrain::{Crs, DemLimits, GeoTransform, RasterGrid, RasterWindows, TerrainError};
+use crate::terrain::{DemLimits, RasterGrid, RasterWindows, TerrainError};
 
 /// The largest decoded chunk (a strip or tile, all its samples) read:
 /// a file in bigger chunks (e.g. one strip for a whole large image) has
@@ -118,7 +119,7 @@ impl GeoTiffWindows {
         let crs = resolve_crs(header.crs_code.clone(), crs)?;
         let width = usize::try_from(header.width).map_err(|_| invalid("the TIFF is too wide"))?;
         let height = usize::try_from(header.height).map_err(|_| invalid("the TIFF is too high"))?;
-        check_degrees(&header.transform, &crs, width, height)?;
+        check_corners_in_degrees(&header.transform, &crs, width, height)?;
         let padded_width = if header.grid.tiled {
             header.grid.across * header.grid.cw
         } else {
@@ -521,50 +522,6 @@ fn read_header_pieces(
         pieces.push((at, read_piece(file, at, bytes, len)?));
     }
     Ok(pieces)
-}
-
-/// The first bytes of a file, for an error message (as `read_dem` says
-/// them).
-fn describe_start(bytes: &[u8]) -> String {
-    let head = bytes.get(..bytes.len().min(8)).unwrap_or(&[]);
-    if head
-        .iter()
-        .all(|&b| b.is_ascii_graphic() || b == b' ' || b == b'\t' || b == b'\n' || b == b'\r')
-    {
-        format!("{:?}", String::from_utf8_lossy(head))
-    } else {
-        let hex: Vec<String> = head.iter().map(|b| format!("{b:02x}")).collect();
-        format!("bytes {}", hex.join(" "))
-    }
-}
-
-/// A geographic CRS whose coordinates are not degrees would put the
-/// raster somewhere absurd (as `read_dem` checks).
-fn check_degrees(
-    t: &GeoTransform,
-    crs: &Crs,
-    width: usize,
-    height: usize,
-) -> Result<(), TerrainError> {
-    if !crs.geographic {
-        return Ok(());
-    }
-    let (w, h) = (width as f64, height as f64);
-    for (c, r) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
-        let (x, y) = t.apply(c, r);
-        if !(x.is_finite()
-            && y.is_finite()
-            && (-181.0..=361.0).contains(&x)
-            && (-91.0..=91.0).contains(&y))
-        {
-            return Err(TerrainError::Crs(format!(
-                "the raster's corner ({x}, {y}) is not a longitude/latitude in degrees, yet \
-                 its CRS EPSG:{} is geographic: check the crs",
-                crs.epsg
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// The file as the decoder reads it: positioned reads at its own
