@@ -665,8 +665,19 @@ mod tests {
                 created_at: now_millis(),
                 file_name: Some("ramp.asc".into()),
                 crs_override: Some(32633),
-                // What loading it needs of the info: its size.
-                info: r#"{"width": 40, "height": 40}"#.into(),
+                // The info an upload stores (loading reads its size and
+                // format).
+                info: serde_json::to_string(
+                    &planner_core::terrain::read_dem(
+                        asc.as_bytes(),
+                        Some("ramp.asc"),
+                        Some(32633),
+                        &planner_core::terrain::DemLimits::default(),
+                    )
+                    .and_then(|d| d.info())
+                    .unwrap(),
+                )
+                .unwrap(),
                 size_bytes: asc.len() as i64,
                 read_bytes: None,
                 project_id: None,
