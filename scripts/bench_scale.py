@@ -325,54 +325,13 @@ def print_survey_table(results, args):
 
 # ---------------------------------------------------------------- costmap
 
-def generate_dem(path, n):
-    """The synthetic DEM of scripts/bench-costmap-tiled.sh (same generator,
-    same seed, same file name, so either script reuses the other's file)."""
-    import numpy as np
-    from osgeo import gdal, osr
-    gdal.UseExceptions()
-    drv = gdal.GetDriverByName("GTiff")
-    ds = drv.Create(path + ".part", n, n, 1, gdal.GDT_Float32,
-                    ["TILED=YES", "BLOCKXSIZE=512", "BLOCKYSIZE=512", "BIGTIFF=IF_NEEDED"])
-    cell = 0.1
-    ds.SetGeoTransform([400000.0, cell, 0.0, 4500000.0 + n * cell, 0.0, -cell])
-    srs = osr.SpatialReference()
-    srs.ImportFromEPSG(32633)
-    ds.SetProjection(srs.ExportToWkt())
-    band = ds.GetRasterBand(1)
-    band.SetNoDataValue(-9999.0)
-    x = np.arange(n, dtype=np.float64) * cell
-    rng = np.random.default_rng(22)
-    rows = 512
-    for r0 in range(0, n, rows):
-        r1 = min(n, r0 + rows)
-        y = (np.arange(r0, r1, dtype=np.float64) * cell)[:, None]
-        z = (100.0 + 0.03 * x[None, :] + 0.02 * y
-             + 1.5 * np.sin(x[None, :] / 37.0) * np.cos(y / 23.0)
-             + 0.4 * np.sin(x[None, :] / 5.3 + y / 7.1))
-        # Kerbs 0.2 m high every 40 m, walls 0.5 m around 3 m pockets every 25 m.
-        z += 0.2 * ((x[None, :] % 40.0) > 20.0)
-        cx, cy = x[None, :] % 25.0, y % 25.0
-        wall = (((np.abs(cx - 10.0) < 0.15) | (np.abs(cx - 13.0) < 0.15))
-                & (cy > 10.0) & (cy < 13.0))
-        wall |= (((np.abs(cy - 10.0) < 0.15) | (np.abs(cy - 13.0) < 0.15))
-                 & (cx > 10.0) & (cx < 13.0))
-        z += 0.5 * wall
-        z += 0.01 * rng.random(z.shape)
-        z[rng.random(z.shape) < 1e-4] = -9999.0
-        band.WriteArray(z.astype(np.float32), 0, r0)
-    band.FlushCache()
-    ds = None
-    os.rename(path + ".part", path)
-
-
 def costmap_bench(args, procs, workdir, binary):
     dem = Path(args.dem_dir) / f"terraplan-bench-dem-{args.dem_size}.tif"
     if not dem.exists():
         print(f"generating {dem} ({args.dem_size} x {args.dem_size} Float32, kept for "
               f"later runs)...", file=sys.stderr, flush=True)
-        gen = procs.start(["/usr/bin/python3", str(Path(__file__).resolve()),
-                           "--generate-dem", str(dem), str(args.dem_size)])
+        gen = procs.start(["/usr/bin/python3", str(Path(__file__).resolve().parent / "bench_dem.py"),
+                           str(dem), str(args.dem_size)])
         try:
             if gen.wait() != 0:
                 raise SystemExit("generating the DEM failed (needs numpy and python3-gdal "
@@ -420,9 +379,6 @@ def print_costmap(c):
 # ---------------------------------------------------------------- main
 
 def main():
-    if len(sys.argv) == 4 and sys.argv[1] == "--generate-dem":
-        generate_dem(sys.argv[2], int(sys.argv[3]))
-        return
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=20.0,
                         help="measured time of each survey configuration (default 20)")
