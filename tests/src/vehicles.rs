@@ -179,3 +179,29 @@ pub fn items(v: &Value) -> Vec<Value> {
         .unwrap_or_else(|| panic!("not a list: {v}"))
         .clone()
 }
+
+/// A fence sent from a `.plan` as the vehicle stored it: the fence file's
+/// items, then the breach return point (MAV_CMD_NAV_FENCE_RETURN_POINT) at
+/// the first rally point (x/y within 1, degrees ×1e7); and the rally points
+/// stored equal to the rally file's.
+pub fn assert_fence_and_rally(what: &str, stored: &Value, fence: &[Value], rally: &[Value]) {
+    let got_fence = items(&stored["fence"]);
+    assert_eq!(got_fence.len(), fence.len() + 1, "{what}");
+    assert_items_equal(
+        &format!("{what} fence"),
+        &got_fence[..fence.len()],
+        fence,
+        1.0,
+    );
+    let ret = &got_fence[fence.len()];
+    assert_eq!(ret["command"], 5000, "{ret}");
+    let num = |v: &Value| v.as_f64().unwrap();
+    assert!((num(&ret["x"]) - num(&rally[0]["x"])).abs() <= 1.0, "{ret}");
+    assert!((num(&ret["y"]) - num(&rally[0]["y"])).abs() <= 1.0, "{ret}");
+    assert_items_equal(
+        &format!("{what} rally"),
+        &items(&stored["rally"]),
+        rally,
+        1.0,
+    );
+}

@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use terraplan_e2e::vehicles::{
-    assert_items_equal, free_udp_port, items, mavsdk_vehicle, pymavlink_vehicle, wpl_items,
+    assert_fence_and_rally, assert_items_equal, free_udp_port, items, mavsdk_vehicle,
+    pymavlink_vehicle, wpl_items,
 };
 use terraplan_e2e::{
     Auth, Reply, Server, assert_invalid_at, assert_problem, example_survey_request, get, get_as,
@@ -186,27 +187,8 @@ fn lossy_vehicle_gets_the_mission_fence_and_rally_points_of_the_stored_plan() {
             &rows,
             0.0,
         );
-        // The .plan's fence: the fence file's items, then the breach
-        // return point (the first rally point).
-        let got_fence = items(&stored["fence"]);
-        assert_eq!(got_fence.len(), fence.len() + 1, "seed {seed}");
-        assert_items_equal(
-            &format!("seed {seed} fence"),
-            &got_fence[..fence.len()],
-            &fence,
-            1.0,
-        );
-        let ret = &got_fence[fence.len()];
-        assert_eq!(ret["command"], 5000, "{ret}");
-        let num = |v: &Value| v.as_f64().unwrap();
-        assert!((num(&ret["x"]) - num(&rally[0]["x"])).abs() <= 1.0, "{ret}");
-        assert!((num(&ret["y"]) - num(&rally[0]["y"])).abs() <= 1.0, "{ret}");
-        assert_items_equal(
-            &format!("seed {seed} rally"),
-            &items(&stored["rally"]),
-            &rally,
-            1.0,
-        );
+        // The .plan's fence, with its breach return point, and the rally points.
+        assert_fence_and_rally(&format!("seed {seed}"), &stored, &fence, &rally);
     }
 }
 
