@@ -27,7 +27,7 @@ pub(crate) use cell_size::cell_size_m;
 pub use crs::Crs;
 pub use dilate::dilate;
 pub use follow::{HeightRule, Point3, TerrainModel, length_3d};
-pub use geotiff::{GeoTiffWindows, TiffPage};
+pub use geotiff::{GeoTiffWindows, ReadAt, TiffPage};
 pub use hillshade::hillshade_png;
 pub use info::raster_bounds;
 pub use read::{geotiff_pages, read_dem, read_geotiff_band, read_geotiff_page_band};

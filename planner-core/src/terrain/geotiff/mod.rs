@@ -53,7 +53,7 @@ pub use ifd::TiffPage;
 pub(super) use ifd::pages;
 pub use raster::{Band, BandData, Page, SampleType};
 pub(super) use read::{read, read_band};
-pub use windows::{GeoTiffWindows, MAX_CHUNK_BYTES};
+pub use windows::{GeoTiffWindows, MAX_CHUNK_BYTES, ReadAt};
 pub use write::{TiledGeoTiffWriter, write_geotiff};
 
 use super::TerrainError;

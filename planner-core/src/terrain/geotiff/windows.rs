@@ -1,4 +1,5 @@
-//! A GeoTIFF on disk read a window at a time ([`GeoTiffWindows`]): the
+//! A GeoTIFF read a window at a time ([`GeoTiffWindows`]), from a file on
+//! disk or any other source of positioned reads ([`ReadAt`]): the
 //! header, IFDs and tag values read with bounded positioned reads, then
 //! only the strips or tiles a window touches decoded (by the `tiff` crate,
 //! as the in-memory reader decodes them), with a small LRU of decoded
@@ -7,7 +8,6 @@
 
 use std::fs::File;
 use std::io::{self, BufReader, Read, Seek, SeekFrom};
-use std::os::unix::fs::FileExt;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::{Arc, Mutex};
 
@@ -22,6 +22,9 @@ use crate::terrain::common::resolve_crs;
 use crate::terrain::read::{check_corners_in_degrees, describe_start};
 use crate::terrain::{CellCache, check_window};
 use crate::terrain::{DemLimits, RasterGrid, RasterWindows, TerrainError};
+
+mod read_at;
+pub use read_at::ReadAt;
 
 /// The largest decoded chunk (a strip or tile, all its samples) read:
 /// a file in bigger chunks (e.g. one strip for a whole large image) has
@@ -48,11 +51,12 @@ const CHUNK_SLACK: u64 = 4096;
 /// so a small header is one read.
 const FIRST_READ: u64 = 64 * 1024;
 
-/// One band of one page of a GeoTIFF file, read a window at a time. Reads
-/// from several threads at once (positioned reads on one file; each
-/// thread decodes with a decoder of its own, kept for the next read).
-pub struct GeoTiffWindows {
-    file: Arc<File>,
+/// One band of one page of a GeoTIFF file (by default on disk; any
+/// [`ReadAt`] source), read a window at a time. Reads from several threads
+/// at once (positioned reads on one source; each thread decodes with a
+/// decoder of its own, kept for the next read).
+pub struct GeoTiffWindows<R: ReadAt = File> {
+    file: Arc<R>,
     len: u64,
     page: usize,
     header: Header,
@@ -62,11 +66,11 @@ pub struct GeoTiffWindows {
     /// for tiled images whose width is not a multiple of the tile width
     /// (see `read::decode`).
     width_patch: Option<Arc<(u64, Vec<u8>)>>,
-    decoders: Mutex<Vec<Decoder<BufReader<FileReader>>>>,
+    decoders: Mutex<Vec<Decoder<BufReader<FileReader<R>>>>>,
     cache: Mutex<CellCache<u64>>,
 }
 
-impl GeoTiffWindows {
+impl<R: ReadAt> GeoTiffWindows<R> {
     /// Open a single-band GeoTIFF as a DEM (its first page), as
     /// [`crate::terrain::read_dem`] reads it: `crs` overrides or supplies
     /// the CRS, `limits` are checked from the header.
@@ -77,7 +81,7 @@ impl GeoTiffWindows {
     /// header, a header too large to read, a chunk decoding to more than
     /// [`MAX_CHUNK_BYTES`], and a chunk byte count larger than its decoded
     /// size allows.
-    pub fn open(file: File, crs: Option<u32>, limits: &DemLimits) -> Result<Self, TerrainError> {
+    pub fn open(file: R, crs: Option<u32>, limits: &DemLimits) -> Result<Self, TerrainError> {
         Self::open_page_band(file, 0, None, crs, limits)
     }
 
@@ -89,7 +93,7 @@ impl GeoTiffWindows {
     /// As [`GeoTiffWindows::open`], and for a page or band that does not
     /// exist.
     pub fn open_band(
-        file: File,
+        file: R,
         page: usize,
         band: usize,
         crs: Option<u32>,
@@ -102,16 +106,15 @@ impl GeoTiffWindows {
     }
 
     fn open_page_band(
-        file: File,
+        file: R,
         page: usize,
         band: Option<usize>,
         crs: Option<u32>,
         limits: &DemLimits,
     ) -> Result<Self, TerrainError> {
         let len = file
-            .metadata()
-            .map_err(|e| invalid(format!("the TIFF file cannot be read: {e}")))?
-            .len();
+            .size()
+            .map_err(|e| invalid(format!("the TIFF file cannot be read: {e}")))?;
         let pieces = read_header_pieces(&file, len, page)?;
         let header = parse_header_of(tiff_pieces(&pieces, len)?, limits, page, band)?;
         drop(pieces);
@@ -189,7 +192,7 @@ impl GeoTiffWindows {
         )
     }
 
-    fn new_decoder(&self) -> Result<Decoder<BufReader<FileReader>>, TerrainError> {
+    fn new_decoder(&self) -> Result<Decoder<BufReader<FileReader<R>>>, TerrainError> {
         let h = &self.header;
         let reader = FileReader {
             file: Arc::clone(&self.file),
@@ -243,7 +246,7 @@ impl GeoTiffWindows {
         })
     }
 
-    fn take_decoder(&self) -> Result<Decoder<BufReader<FileReader>>, TerrainError> {
+    fn take_decoder(&self) -> Result<Decoder<BufReader<FileReader<R>>>, TerrainError> {
         let kept = self.decoders.lock().ok().and_then(|mut d| d.pop());
         match kept {
             Some(d) => Ok(d),
@@ -251,7 +254,7 @@ impl GeoTiffWindows {
         }
     }
 
-    fn put_decoder(&self, dec: Decoder<BufReader<FileReader>>) {
+    fn put_decoder(&self, dec: Decoder<BufReader<FileReader<R>>>) {
         if let Ok(mut d) = self.decoders.lock() {
             // One per thread that reads at once is enough.
             if d.len() < 64 {
@@ -327,7 +330,7 @@ impl GeoTiffWindows {
     }
 }
 
-impl RasterWindows for GeoTiffWindows {
+impl<R: ReadAt> RasterWindows for GeoTiffWindows<R> {
     fn grid(&self) -> &RasterGrid {
         &self.grid
     }
@@ -417,13 +420,18 @@ fn check_chunks(h: &Header) -> Result<(), TerrainError> {
 }
 
 /// Reads `len` bytes at `at` (fewer at the end of the file).
-fn read_piece(file: &File, at: u64, len: u64, file_len: u64) -> Result<Vec<u8>, TerrainError> {
+fn read_piece(
+    file: &impl ReadAt,
+    at: u64,
+    len: u64,
+    file_len: u64,
+) -> Result<Vec<u8>, TerrainError> {
     let len = len.min(file_len.saturating_sub(at));
     let len = usize::try_from(len).map_err(|_| invalid("the TIFF's header is too large"))?;
     let mut buf = vec![0u8; len];
     let mut done = 0;
     while done < len {
-        match file.read_at(&mut buf[done..], at + done as u64) {
+        match file.read_at(at + done as u64, &mut buf[done..]) {
             Ok(0) => break,
             Ok(n) => done += n,
             Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
@@ -439,7 +447,7 @@ fn read_piece(file: &File, at: u64, len: u64, file_len: u64) -> Result<Vec<u8>, 
 /// that do not fit inside them (each at most [`MAX_TAG_BYTES`]; larger
 /// ones are left out, and refused if the header needs them).
 fn read_header_pieces(
-    file: &File,
+    file: &impl ReadAt,
     len: u64,
     page: usize,
 ) -> Result<Vec<(u64, Vec<u8>)>, TerrainError> {
@@ -527,21 +535,21 @@ fn read_header_pieces(
 /// The file as the decoder reads it: positioned reads at its own
 /// position (so readers on several threads share one file), with the
 /// widened ImageWidth entry laid over the original.
-struct FileReader {
-    file: Arc<File>,
+struct FileReader<R> {
+    file: Arc<R>,
     len: u64,
     pos: u64,
     patch: Option<Arc<(u64, Vec<u8>)>>,
 }
 
-impl Read for FileReader {
+impl<R: ReadAt> Read for FileReader<R> {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
         let left = self.len.saturating_sub(self.pos);
         let want = buf.len().min(usize::try_from(left).unwrap_or(usize::MAX));
         if want == 0 {
             return Ok(0);
         }
-        let n = self.file.read_at(&mut buf[..want], self.pos)?;
+        let n = self.file.read_at(self.pos, &mut buf[..want])?;
         if let Some(patch) = &self.patch {
             let (at, bytes) = (patch.0, &patch.1);
             let (a, b) = (self.pos, self.pos + n as u64);
@@ -556,7 +564,7 @@ impl Read for FileReader {
     }
 }
 
-impl Seek for FileReader {
+impl<R> Seek for FileReader<R> {
     fn seek(&mut self, to: SeekFrom) -> io::Result<u64> {
         let next = match to {
             SeekFrom::Start(p) => Some(p),

@@ -60,7 +60,7 @@ fn same(a: f64, b: f64) -> bool {
 
 /// Random windows (and the whole raster, and single cells at the
 /// corners) of `w` equal the cells of `dem`.
-fn assert_windows_equal(w: &GeoTiffWindows, dem: &Dem, windows: usize, what: &str) {
+fn assert_windows_equal<R: ReadAt>(w: &GeoTiffWindows<R>, dem: &Dem, windows: usize, what: &str) {
     let g = w.grid();
     assert_eq!((g.width, g.height), (dem.width, dem.height), "{what}");
     assert_eq!(g.transform, dem.transform, "{what}");
@@ -101,6 +101,23 @@ fn assert_windows_equal(w: &GeoTiffWindows, dem: &Dem, windows: usize, what: &st
     }
 }
 
+/// Bytes in memory read at most `most` at a time.
+struct ShortReads {
+    bytes: Vec<u8>,
+    most: usize,
+}
+
+impl ReadAt for ShortReads {
+    fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<usize> {
+        let n = buf.len().min(self.most);
+        self.bytes.read_at(offset, &mut buf[..n])
+    }
+
+    fn size(&self) -> io::Result<u64> {
+        self.bytes.size()
+    }
+}
+
 #[test]
 fn every_shared_dem_reads_as_read_dem_reads_it() {
     let dir = shared_dems();
@@ -123,6 +140,13 @@ fn every_shared_dem_reads_as_read_dem_reads_it() {
         let w = GeoTiffWindows::open(file, crs, &DemLimits::default())
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         assert_windows_equal(&w, &dem, 40, &path.display().to_string());
+        // The same bytes from another source of positioned reads, one
+        // that answers a few bytes at a time (as a reader over stored
+        // chunks stops at a chunk's end).
+        let short = ShortReads { bytes, most: 4093 };
+        let w = GeoTiffWindows::open(short, crs, &DemLimits::default())
+            .unwrap_or_else(|e| panic!("{} by short reads: {e}", path.display()));
+        assert_windows_equal(&w, &dem, 10, &format!("{} by short reads", path.display()));
         tested += 1;
     }
     assert!(
