@@ -316,10 +316,12 @@ impl Db {
     }
 
     /// Unfinished jobs nobody holds: no owner, or a lease ended before
-    /// `expired_before`; oldest first.
+    /// `expired_before`; oldest first. Costmaps built as tiles are not
+    /// among them: their tile jobs have leases of their own.
     pub async fn orphaned_costmaps(&self, expired_before: i64) -> Result<Vec<String>, sqlx::Error> {
         const SQL: &str = "SELECT id FROM costmaps WHERE status IN ('queued', 'running') \
-                           AND (owner IS NULL OR lease_until < $1) ORDER BY created_at, id";
+                           AND tiled = 0 AND (owner IS NULL OR lease_until < $1) \
+                           ORDER BY created_at, id";
         on_pool!(self, pool => sqlx::query_as::<_, (String,)>(SQL)
             .bind(expired_before)
             .fetch_all(pool)
@@ -339,7 +341,7 @@ impl Db {
     ) -> Result<bool, sqlx::Error> {
         const SQL: &str = "UPDATE costmaps SET owner = $2, lease_until = $5, status = 'queued', \
                            progress = 0, stage = NULL, updated_at = $4 \
-                           WHERE id = $1 AND status IN ('queued', 'running') \
+                           WHERE id = $1 AND status IN ('queued', 'running') AND tiled = 0 \
                            AND (owner IS NULL OR lease_until < $3)";
         on_pool!(self, pool => sqlx::query(SQL)
             .bind(id)
