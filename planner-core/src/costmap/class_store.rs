@@ -8,7 +8,11 @@
 use std::fs::{File, OpenOptions};
 use std::io::{self, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::tile_stages::ClassWindows;
+use super::tiled::TiledError;
 
 /// The bit set on cells without a height (class `Unknown` either way):
 /// inflation grows from those, not from the border ring's unknown cells.
@@ -16,7 +20,8 @@ pub const HOLE_BIT: u8 = 0x80;
 
 /// A `width`×`height` grid of bytes in a scratch file.
 pub struct ClassStore {
-    file: File,
+    /// Locked for a read, so windows are read from several threads.
+    file: Mutex<File>,
     path: PathBuf,
     /// Still to remove on drop (not unlinked at creation).
     remove_on_drop: bool,
@@ -43,8 +48,9 @@ impl ClassStore {
             .checked_mul(height as u64)
             .ok_or_else(|| io::Error::other("the class store's size overflows"))?;
         let remove_now = cfg!(unix);
+        file.set_len(len)?;
         let store = ClassStore {
-            file,
+            file: Mutex::new(file),
             path: path.clone(),
             remove_on_drop: !remove_now,
             width,
@@ -53,18 +59,29 @@ impl ClassStore {
         if remove_now {
             std::fs::remove_file(&path)?;
         }
-        store.file.set_len(len)?;
         Ok(store)
     }
 
-    fn check(&self, col0: usize, row0: usize, w: usize, h: usize, len: usize) -> io::Result<()> {
-        if col0 + w > self.width || row0 + h > self.height || w * h != len {
+    /// Fails unless the window lies inside the store and `len` (when
+    /// given) is its size; checked before anything is allocated.
+    fn check(
+        &self,
+        col0: usize,
+        row0: usize,
+        w: usize,
+        h: usize,
+        len: Option<usize>,
+    ) -> io::Result<()> {
+        let inside = col0.checked_add(w).is_some_and(|c| c <= self.width)
+            && row0.checked_add(h).is_some_and(|r| r <= self.height);
+        if !inside || len.is_some_and(|n| n != w * h) {
             return Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
                 format!(
-                    "window {w}×{h} at ({col0}, {row0}) with {len} values is not inside the \
-                     {}×{} class store",
-                    self.width, self.height
+                    "window {w}×{h} at ({col0}, {row0}){} is not inside the {}×{} class store",
+                    len.map_or(String::new(), |n| format!(" with {n} values")),
+                    self.width,
+                    self.height
                 ),
             ));
         }
@@ -80,11 +97,12 @@ impl ClassStore {
         h: usize,
         data: &[u8],
     ) -> io::Result<()> {
-        self.check(col0, row0, w, h, data.len())?;
+        self.check(col0, row0, w, h, Some(data.len()))?;
+        let file = self.file.get_mut().unwrap_or_else(|p| p.into_inner());
         for (r, row) in data.chunks(w.max(1)).enumerate().take(h) {
             let at = ((row0 + r) * self.width + col0) as u64;
-            self.file.seek(SeekFrom::Start(at))?;
-            self.file.write_all(row)?;
+            file.seek(SeekFrom::Start(at))?;
+            file.write_all(row)?;
         }
         Ok(())
     }
@@ -92,21 +110,36 @@ impl ClassStore {
     /// Reads the `w`×`h` block with its top-left at (`col0`, `row0`) into
     /// `out` (resized to it).
     pub fn read(
-        &mut self,
+        &self,
         col0: usize,
         row0: usize,
         w: usize,
         h: usize,
         out: &mut Vec<u8>,
     ) -> io::Result<()> {
+        self.check(col0, row0, w, h, None)?;
         out.resize(w * h, 0);
-        self.check(col0, row0, w, h, out.len())?;
+        let mut file = self.file.lock().unwrap_or_else(|p| p.into_inner());
         for (r, row) in out.chunks_mut(w.max(1)).enumerate().take(h) {
             let at = ((row0 + r) * self.width + col0) as u64;
-            self.file.seek(SeekFrom::Start(at))?;
-            self.file.read_exact(row)?;
+            file.seek(SeekFrom::Start(at))?;
+            file.read_exact(row)?;
         }
         Ok(())
+    }
+}
+
+impl ClassWindows for ClassStore {
+    fn read_classes(
+        &self,
+        col0: usize,
+        row0: usize,
+        width: usize,
+        height: usize,
+        out: &mut Vec<u8>,
+    ) -> Result<(), TiledError> {
+        self.read(col0, row0, width, height, out)
+            .map_err(TiledError::Scratch)
     }
 }
 

@@ -35,18 +35,29 @@ pub mod regions;
 pub mod smooth;
 pub mod stats;
 pub mod steps;
+pub mod tile_bytes;
+pub mod tile_stages;
 pub mod tiled;
 pub mod tiled_tiff;
 pub mod vehicle;
 
 pub use distance::distance_transform;
+pub use halo::{Halos, TileLayout, TileWindow};
 pub use pipeline::build_costmap;
 pub use preview::{legend_svg, legend_svg_of, preview_png};
+pub use preview_tiles::PreviewPart;
 pub use progress::{Progress, Stage};
+pub use region_join::{JoinError, RegionFill, RegionJoin, TileEdges, TileFill};
+pub use stats::TallyPart;
 pub use stats::{CostHistogram, CostmapStats};
-pub use tiled::{
-    CostmapTile, TileSink, TiledCostmap, TiledError, TiledOptions, build_costmap_tiled,
+pub use tile_bytes::PieceError;
+pub use tile_stages::{
+    ClassTiles, ClassWindows, Classified, CostTile, DEFAULT_PREVIEW_MAX_SIDE, FinishMerge, TilePlan,
 };
+pub use tiled::{
+    CostmapTile, MapHeader, TileSink, TiledCostmap, TiledError, TiledOptions, build_costmap_tiled,
+};
+pub use tiled_tiff::TiledTiffFiles;
 pub use vehicle::{Vehicle, VehiclePreset, VehicleSpec};
 
 use serde::{Deserialize, Serialize};

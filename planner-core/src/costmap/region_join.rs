@@ -12,6 +12,7 @@
 
 use super::Class;
 use super::halo::{TileLayout, TileWindow};
+use super::tile_bytes::{ByteReader, ByteWriter, PieceError};
 
 /// The traversable regions of one tile's core.
 pub struct TileLabels {
@@ -112,39 +113,333 @@ pub fn label_tile(
     TileLabels { labels, size, open }
 }
 
-/// One tile's edge labels and the global ids of the labels on them.
-struct TileEdges {
+/// One tile's edge facts for the join: the labels along its four edges
+/// and the cells and openness of each label found on them (what a tile
+/// tells the join; never a label per cell).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TileEdges {
+    width: usize,
+    height: usize,
     top: Vec<u32>,
     bottom: Vec<u32>,
     left: Vec<u32>,
     right: Vec<u32>,
-    /// The local labels found on the edges, ascending; the i-th has the
-    /// global id `first + i`.
+    /// The labels found on the edges, ascending, and per label its cells
+    /// in the tile and whether it is open there.
     on_edge: Vec<u32>,
-    first: u32,
+    size: Vec<u64>,
+    open: Vec<bool>,
+}
+
+/// The labels on the four edges of a `w`×`h` core, ascending, without 0.
+fn edge_labels(top: &[u32], bottom: &[u32], left: &[u32], right: &[u32]) -> Vec<u32> {
+    let mut on_edge: Vec<u32> = top
+        .iter()
+        .chain(bottom)
+        .chain(left)
+        .chain(right)
+        .copied()
+        .filter(|&x| x != 0)
+        .collect();
+    on_edge.sort_unstable();
+    on_edge.dedup();
+    on_edge
+}
+
+/// The labels on the edges of a tile's core, ascending.
+fn labels_on_edges(labels: &[u32], w: usize, h: usize) -> Vec<u32> {
+    let top = &labels[..w];
+    let bottom = &labels[(h - 1) * w..];
+    let left: Vec<u32> = (0..h).map(|r| labels[r * w]).collect();
+    let right: Vec<u32> = (0..h).map(|r| labels[r * w + w - 1]).collect();
+    edge_labels(top, bottom, &left, &right)
 }
 
 impl TileEdges {
-    fn global(&self, label: u32) -> Option<u32> {
-        self.on_edge
-            .binary_search(&label)
-            .ok()
-            .map(|i| self.first + i as u32)
+    /// The edges of `tile`'s core, labelled as `labels`.
+    pub fn of(tile: &TileWindow, labels: &TileLabels) -> TileEdges {
+        let (w, h) = (tile.width, tile.height);
+        let l = &labels.labels;
+        let top = l[..w].to_vec();
+        let bottom = l[(h - 1) * w..].to_vec();
+        let left: Vec<u32> = (0..h).map(|r| l[r * w]).collect();
+        let right: Vec<u32> = (0..h).map(|r| l[r * w + w - 1]).collect();
+        let on_edge = edge_labels(&top, &bottom, &left, &right);
+        let size = on_edge.iter().map(|&x| labels.size[x as usize]).collect();
+        let open = on_edge.iter().map(|&x| labels.open[x as usize]).collect();
+        TileEdges {
+            width: w,
+            height: h,
+            top,
+            bottom,
+            left,
+            right,
+            on_edge,
+            size,
+            open,
+        }
+    }
+
+    /// The core's [width, height].
+    pub fn size(&self) -> [usize; 2] {
+        [self.width, self.height]
+    }
+
+    /// The index of a local label among the labels on the edges.
+    fn index(&self, label: u32) -> Option<usize> {
+        self.on_edge.binary_search(&label).ok()
+    }
+
+    /// Kind byte of the byte form.
+    const KIND: u8 = b'E';
+    const WHAT: &'static str = "tile edges";
+
+    /// The byte form: the core's size, the four edges' labels, then each
+    /// edge label's cells and openness.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = ByteWriter::new(Self::KIND);
+        b.len32(self.width);
+        b.len32(self.height);
+        for edge in [&self.top, &self.bottom, &self.left, &self.right] {
+            b.u32s(edge);
+        }
+        b.len32(self.on_edge.len());
+        for (&size, &open) in self.size.iter().zip(&self.open) {
+            b.u64(size);
+            b.u8(u8::from(open));
+        }
+        b.finish()
+    }
+
+    /// Reads [`TileEdges::to_bytes`], checking that the edges agree at
+    /// the corners and that the facts are those of the edges' labels.
+    pub fn from_bytes(bytes: &[u8]) -> Result<TileEdges, PieceError> {
+        let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
+        let width = r.u32()? as usize;
+        let height = r.u32()? as usize;
+        if width == 0 || height == 0 {
+            return Err(r.fault(format!("an empty {width}×{height} core")));
+        }
+        let cells = (width as u64) * (height as u64);
+        r.expect_items(2 * (width + height), 4)?;
+        let top = r.u32s(width)?;
+        let bottom = r.u32s(width)?;
+        let left = r.u32s(height)?;
+        let right = r.u32s(height)?;
+        let corners = [
+            (top[0], left[0]),
+            (top[width - 1], right[0]),
+            (bottom[0], left[height - 1]),
+            (bottom[width - 1], right[height - 1]),
+        ];
+        if corners.iter().any(|(a, b)| a != b)
+            || (height == 1 && top != bottom)
+            || (width == 1 && left != right)
+        {
+            return Err(r.fault("the edges disagree where they meet".to_string()));
+        }
+        if [&top, &bottom, &left, &right]
+            .iter()
+            .any(|e| e.iter().any(|&x| u64::from(x) > cells))
+        {
+            return Err(r.fault(format!("a label beyond the {cells} cells of the core")));
+        }
+        let on_edge = edge_labels(&top, &bottom, &left, &right);
+        let n = r.u32()? as usize;
+        if n != on_edge.len() {
+            return Err(r.fault(format!(
+                "facts of {n} labels, but {} labels are on the edges",
+                on_edge.len()
+            )));
+        }
+        r.expect_items(n, 9)?;
+        let mut size = Vec::with_capacity(n);
+        let mut open = Vec::with_capacity(n);
+        let mut total = 0u64;
+        for _ in 0..n {
+            let s = r.u64()?;
+            total = total.saturating_add(s);
+            if s == 0 || total > cells {
+                return Err(r.fault(format!(
+                    "regions of more cells than the {cells} of the core"
+                )));
+            }
+            size.push(s);
+            open.push(r.bool()?);
+        }
+        r.end()?;
+        Ok(TileEdges {
+            width,
+            height,
+            top,
+            bottom,
+            left,
+            right,
+            on_edge,
+            size,
+            open,
+        })
     }
 }
 
-/// The regions crossing tile borders, gathered tile by tile, then joined.
+/// Which of one tile's regions on its edges are filled, as the join
+/// decided; the regions inside the tile are decided from the tile alone.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TileFill {
+    /// How many labels the tile had on its edges (checked when applied:
+    /// the labels must be those the join saw).
+    edge_labels: u32,
+    /// The local labels on the edges that are filled, ascending.
+    filled: Vec<u32>,
+}
+
+impl TileFill {
+    const KIND: u8 = b'F';
+    const WHAT: &'static str = "tile fill";
+
+    /// Fills the tile's enclosed regions in `core` (its classes, labelled
+    /// as `labels` by [`label_tile`] from the same classes the join's
+    /// edges came from): the edge regions the join chose, and the regions
+    /// inside the tile that are closed and smaller than `min_cells`.
+    /// Returns the cells filled; an error when the labels are not those
+    /// the join saw.
+    pub fn apply(
+        &self,
+        tile: &TileWindow,
+        labels: &TileLabels,
+        min_cells: f64,
+        core: &mut [u8],
+    ) -> Result<usize, JoinError> {
+        let on_edge = labels_on_edges(&labels.labels, tile.width, tile.height);
+        if on_edge.len() != self.edge_labels as usize
+            || self
+                .filled
+                .iter()
+                .any(|l| on_edge.binary_search(l).is_err())
+        {
+            return Err(JoinError::Labels {
+                tx: tile.tx,
+                ty: tile.ty,
+            });
+        }
+        let decide: Vec<bool> = (0..labels.size.len())
+            .map(|l| {
+                let l32 = l as u32;
+                if l == 0 {
+                    false
+                } else if on_edge.binary_search(&l32).is_ok() {
+                    self.filled.binary_search(&l32).is_ok()
+                } else {
+                    !labels.open[l] && (labels.size[l] as f64) < min_cells
+                }
+            })
+            .collect();
+        let mut filled = 0;
+        for (c, &l) in core.iter_mut().zip(&labels.labels) {
+            if decide[l as usize] {
+                *c = Class::Enclosed as u8;
+                filled += 1;
+            }
+        }
+        Ok(filled)
+    }
+
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = ByteWriter::new(Self::KIND);
+        b.u32(self.edge_labels);
+        b.len32(self.filled.len());
+        b.u32s(&self.filled);
+        b.finish()
+    }
+
+    pub fn from_bytes(bytes: &[u8]) -> Result<TileFill, PieceError> {
+        let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
+        let edge_labels = r.u32()?;
+        let n = r.u32()? as usize;
+        if n > edge_labels as usize {
+            return Err(r.fault(format!("{n} filled regions of {edge_labels} on the edges")));
+        }
+        let filled = r.u32s(n)?;
+        if filled.windows(2).any(|p| p[0] >= p[1]) || filled.first() == Some(&0) {
+            return Err(r.fault("the filled labels are not ascending labels".to_string()));
+        }
+        r.end()?;
+        Ok(TileFill {
+            edge_labels,
+            filled,
+        })
+    }
+}
+
+/// The join's decision for every tile, in tile order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RegionFill {
+    tiles: Vec<TileFill>,
+}
+
+impl RegionFill {
+    const KIND: u8 = b'R';
+    const WHAT: &'static str = "region fill";
+
+    /// Tile `k`'s part.
+    pub fn tile(&self, k: usize) -> Option<&TileFill> {
+        self.tiles.get(k)
+    }
+
+    /// The parts, in tile order (e.g. to store one per tile).
+    pub fn into_tiles(self) -> Vec<TileFill> {
+        self.tiles
+    }
+
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// The byte form: the tile count, then each tile's part's bytes after
+    /// their length.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = ByteWriter::new(Self::KIND);
+        b.len32(self.tiles.len());
+        for t in &self.tiles {
+            let bytes = t.to_bytes();
+            b.len32(bytes.len());
+            b.bytes(&bytes);
+        }
+        b.finish()
+    }
+
+    pub fn from_bytes(bytes: &[u8]) -> Result<RegionFill, PieceError> {
+        let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
+        let n = r.u32()? as usize;
+        // Each part takes at least its length and 10 bytes.
+        r.expect_items(n, 14)?;
+        let mut tiles = Vec::with_capacity(n);
+        for _ in 0..n {
+            let len = r.u32()? as usize;
+            tiles.push(TileFill::from_bytes(r.take(len)?)?);
+        }
+        r.end()?;
+        Ok(RegionFill { tiles })
+    }
+}
+
+/// The regions crossing tile borders, gathered tile by tile (in any
+/// order), then joined.
 pub struct RegionJoin {
     layout: TileLayout,
     min_cells: f64,
     tiles: Vec<Option<TileEdges>>,
+    /// Per tile: the global id of its first edge label.
+    first: Vec<u32>,
     /// Per global id: union–find parent, cells and openness (summed into
     /// the roots by [`RegionJoin::join`]).
     parent: Vec<u32>,
     size: Vec<u64>,
     open: Vec<bool>,
-    /// Per global id, after the join: the region is filled.
-    fill: Vec<bool>,
 }
 
 /// Why the labels of the tiles could not be joined.
@@ -152,8 +447,23 @@ pub struct RegionJoin {
 pub enum JoinError {
     #[error("tile {0} was not labelled before the join")]
     Missing(usize),
+    #[error("tile {0} was given to the join twice")]
+    Twice(usize),
+    #[error("tile {k} is not one of the {count} tiles")]
+    NoSuchTile { k: usize, count: usize },
+    #[error("the edges given for tile {k} are of a {got:?} core, the tile is {want:?}")]
+    WrongSize {
+        k: usize,
+        got: [usize; 2],
+        want: [usize; 2],
+    },
     #[error("more regions cross tile borders than 2^32")]
     TooMany,
+    #[error(
+        "tile ({tx}, {ty}) is not labelled as when its edges were joined (its classes before \
+         the fill changed, or the fill is another tile's)"
+    )]
+    Labels { tx: usize, ty: usize },
 }
 
 impl RegionJoin {
@@ -163,47 +473,40 @@ impl RegionJoin {
             layout,
             min_cells,
             tiles: (0..layout.count()).map(|_| None).collect(),
+            first: vec![0; layout.count()],
             parent: Vec::new(),
             size: Vec::new(),
             open: Vec::new(),
-            fill: Vec::new(),
         }
     }
 
     /// Keeps tile `k`'s edges and the facts of their labels.
-    pub fn add(&mut self, k: usize, labels: &TileLabels) -> Result<(), JoinError> {
-        let t = self.layout.tile(k);
-        let (w, h) = (t.width, t.height);
-        let l = &labels.labels;
-        let top = l[..w].to_vec();
-        let bottom = l[(h - 1) * w..].to_vec();
-        let left: Vec<u32> = (0..h).map(|r| l[r * w]).collect();
-        let right: Vec<u32> = (0..h).map(|r| l[r * w + w - 1]).collect();
-        let mut on_edge: Vec<u32> = top
-            .iter()
-            .chain(&bottom)
-            .chain(&left)
-            .chain(&right)
-            .copied()
-            .filter(|&x| x != 0)
-            .collect();
-        on_edge.sort_unstable();
-        on_edge.dedup();
-        let first = u32::try_from(self.parent.len()).map_err(|_| JoinError::TooMany)?;
-        u32::try_from(self.parent.len() + on_edge.len()).map_err(|_| JoinError::TooMany)?;
-        for (i, &label) in on_edge.iter().enumerate() {
-            self.parent.push(first + i as u32);
-            self.size.push(labels.size[label as usize]);
-            self.open.push(labels.open[label as usize]);
+    pub fn add(&mut self, k: usize, edges: TileEdges) -> Result<(), JoinError> {
+        let count = self.tiles.len();
+        let slot = self
+            .tiles
+            .get(k)
+            .ok_or(JoinError::NoSuchTile { k, count })?;
+        if slot.is_some() {
+            return Err(JoinError::Twice(k));
         }
-        self.tiles[k] = Some(TileEdges {
-            top,
-            bottom,
-            left,
-            right,
-            on_edge,
-            first,
-        });
+        let t = self.layout.tile(k);
+        if edges.size() != [t.width, t.height] {
+            return Err(JoinError::WrongSize {
+                k,
+                got: edges.size(),
+                want: [t.width, t.height],
+            });
+        }
+        let first = u32::try_from(self.parent.len()).map_err(|_| JoinError::TooMany)?;
+        u32::try_from(self.parent.len() + edges.on_edge.len()).map_err(|_| JoinError::TooMany)?;
+        for i in 0..edges.on_edge.len() {
+            self.parent.push(first + i as u32);
+        }
+        self.size.extend_from_slice(&edges.size);
+        self.open.extend_from_slice(&edges.open);
+        self.first[k] = first;
+        self.tiles[k] = Some(edges);
         Ok(())
     }
 
@@ -224,9 +527,15 @@ impl RegionJoin {
         }
     }
 
+    /// The global id of tile `k`'s edge label `label`.
+    fn global(&self, k: usize, label: u32) -> Option<u32> {
+        let edges = self.tiles[k].as_ref()?;
+        edges.index(label).map(|i| self.first[k] + i as u32)
+    }
+
     /// Joins the regions across every tile border and decides which are
-    /// filled; the edges are dropped.
-    pub fn join(&mut self) -> Result<(), JoinError> {
+    /// filled: the same decisions whatever order the tiles came in.
+    pub fn join(mut self) -> Result<RegionFill, JoinError> {
         let [nx, ny] = self.layout.tiles();
         if let Some(k) = self.tiles.iter().position(Option::is_none) {
             return Err(JoinError::Missing(k));
@@ -242,7 +551,7 @@ impl RegionJoin {
                     let east = self.tiles[k + 1].as_ref().expect("checked above");
                     for (&a, &b) in here.right.iter().zip(&east.left) {
                         if a != 0 && b != 0 {
-                            pairs.push((here.global(a), east.global(b)));
+                            pairs.push((self.global(k, a), self.global(k + 1, b)));
                         }
                     }
                 }
@@ -250,7 +559,7 @@ impl RegionJoin {
                     let south = self.tiles[k + nx].as_ref().expect("checked above");
                     for (&a, &b) in here.bottom.iter().zip(&south.top) {
                         if a != 0 && b != 0 {
-                            pairs.push((here.global(a), south.global(b)));
+                            pairs.push((self.global(k, a), self.global(k + nx, b)));
                         }
                     }
                 }
@@ -271,50 +580,22 @@ impl RegionJoin {
                 self.open[root as usize] |= o;
             }
         }
-        self.fill = (0..n as u32)
-            .map(|i| {
-                let root = self.find(i) as usize;
-                !self.open[root] && (self.size[root] as f64) < self.min_cells
-            })
-            .collect();
-        for t in self.tiles.iter_mut().flatten() {
-            t.top = Vec::new();
-            t.bottom = Vec::new();
-            t.left = Vec::new();
-            t.right = Vec::new();
-        }
-        self.parent = Vec::new();
-        self.size = Vec::new();
-        self.open = Vec::new();
-        Ok(())
-    }
-
-    /// Fills tile `k`'s enclosed regions in `core` (its classes, labelled
-    /// as `labels` by [`label_tile`] after [`RegionJoin::join`]); returns
-    /// the cells filled.
-    pub fn apply(&self, k: usize, labels: &TileLabels, core: &mut [u8]) -> usize {
-        let Some(edges) = self.tiles.get(k).and_then(Option::as_ref) else {
-            return 0;
-        };
-        let decide: Vec<bool> = (0..labels.size.len())
-            .map(|l| {
-                if l == 0 {
-                    return false;
+        let mut tiles = Vec::with_capacity(self.tiles.len());
+        for k in 0..self.tiles.len() {
+            let edges = self.tiles[k].take().expect("checked above");
+            let mut filled = Vec::new();
+            for (i, &label) in edges.on_edge.iter().enumerate() {
+                let root = self.find(self.first[k] + i as u32) as usize;
+                if !self.open[root] && (self.size[root] as f64) < self.min_cells {
+                    filled.push(label);
                 }
-                match edges.global(l as u32) {
-                    Some(g) => self.fill[g as usize],
-                    None => !labels.open[l] && (labels.size[l] as f64) < self.min_cells,
-                }
-            })
-            .collect();
-        let mut filled = 0;
-        for (c, &l) in core.iter_mut().zip(&labels.labels) {
-            if decide[l as usize] {
-                *c = Class::Enclosed as u8;
-                filled += 1;
             }
+            tiles.push(TileFill {
+                edge_labels: edges.on_edge.len() as u32,
+                filled,
+            });
         }
-        filled
+        Ok(RegionFill { tiles })
     }
 }
 
@@ -339,10 +620,14 @@ mod tests {
         for k in 0..layout.count() {
             let t = layout.tile(k);
             let (win, p) = window_of(&t);
-            join.add(k, &label_tile(&win, p.width, [p.dx, p.dy], &t, [w, h]))
-                .unwrap();
+            let labels = label_tile(&win, p.width, [p.dx, p.dy], &t, [w, h]);
+            let edges = TileEdges::of(&t, &labels);
+            // Through the byte form, as between processes.
+            let edges = TileEdges::from_bytes(&edges.to_bytes()).unwrap();
+            join.add(k, edges).unwrap();
         }
-        join.join().unwrap();
+        let fill = join.join().unwrap();
+        let fill = RegionFill::from_bytes(&fill.to_bytes()).unwrap();
         let mut out = class.to_vec();
         for k in 0..layout.count() {
             let t = layout.tile(k);
@@ -350,7 +635,8 @@ mod tests {
             let labels = label_tile(&win, p.width, [p.dx, p.dy], &t, [w, h]);
             let mut core = Vec::new();
             crate::costmap::halo::crop(&win, p.width, [p.dx, p.dy], [t.width, t.height], &mut core);
-            join.apply(k, &labels, &mut core);
+            let part = TileFill::from_bytes(&fill.tile(k).unwrap().to_bytes()).unwrap();
+            part.apply(&t, &labels, min_cells, &mut core).unwrap();
             for r in 0..t.height {
                 out[(t.row0 + r) * w + t.col0..(t.row0 + r) * w + t.col0 + t.width]
                     .copy_from_slice(&core[r * t.width..(r + 1) * t.width]);

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use rayon::prelude::*;
 
 use super::Class;
+use super::tile_bytes::{ByteReader, ByteWriter, PieceError};
 
 /// Cells per parallel task of the statistics pass.
 const CHUNK: usize = 1 << 16;
@@ -141,6 +142,13 @@ pub struct StatsTally {
     tally: Tally,
 }
 
+/// The tally of one piece of a map (a tile), to be merged into the
+/// map's by [`StatsTally::merge`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct TallyPart {
+    tally: Tally,
+}
+
 impl StatsTally {
     pub fn new(cost_range: [f64; 2]) -> StatsTally {
         StatsTally {
@@ -154,6 +162,17 @@ impl StatsTally {
         self.bins.add(&mut self.tally, cost, class);
     }
 
+    /// What was added, as a part to merge elsewhere.
+    pub fn into_part(self) -> TallyPart {
+        TallyPart { tally: self.tally }
+    }
+
+    /// Adds a part tallied over the same cost range. Parts merged in the
+    /// same order give the same statistics, bit for bit.
+    pub fn merge(&mut self, part: &TallyPart) {
+        self.tally = merge(self.tally, part.tally);
+    }
+
     pub fn finish(
         self,
         width: usize,
@@ -162,6 +181,67 @@ impl StatsTally {
         cost_range: [f64; 2],
     ) -> CostmapStats {
         finish(self.tally, width, height, cell_area_m2, cost_range)
+    }
+}
+
+impl TallyPart {
+    const KIND: u8 = b'T';
+    const WHAT: &'static str = "stats tally";
+
+    /// The cells tallied.
+    pub fn cells(&self) -> u64 {
+        self.tally.0.iter().sum()
+    }
+
+    /// The byte form: class counts, histogram counts, min, max, sum and
+    /// count of the traversable costs.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let (counts, bins, min, max, sum, n) = &self.tally;
+        let mut b = ByteWriter::new(Self::KIND);
+        counts.iter().chain(bins).for_each(|&c| b.u64(c));
+        [*min, *max, *sum].into_iter().for_each(|v| b.f64(v));
+        b.u64(*n);
+        b.finish()
+    }
+
+    /// Reads [`TallyPart::to_bytes`], checking that the counts agree.
+    pub fn from_bytes(bytes: &[u8]) -> Result<TallyPart, PieceError> {
+        let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
+        let mut counts = [0u64; 6];
+        for c in &mut counts {
+            *c = r.u64()?;
+        }
+        let mut bins = [0u64; HISTOGRAM_BINS];
+        for c in &mut bins {
+            *c = r.u64()?;
+        }
+        let (min, max, sum) = (r.f64()?, r.f64()?, r.f64()?);
+        let n = r.u64()?;
+        r.end()?;
+        let fault = |why: &str| PieceError {
+            what: Self::WHAT,
+            why: why.to_string(),
+        };
+        let checked_sum = |c: &[u64]| c.iter().try_fold(0u64, |a, &x| a.checked_add(x));
+        if checked_sum(&counts).is_none() {
+            return Err(fault("the class counts overflow"));
+        }
+        if checked_sum(&bins) != Some(n) || n > counts[Class::Traversable as usize] {
+            return Err(fault(
+                "the histogram, the costs' count and the traversable cells disagree",
+            ));
+        }
+        let consistent = if n == 0 {
+            min == f64::INFINITY && max == f64::NEG_INFINITY && sum == 0.0
+        } else {
+            min.is_finite() && max.is_finite() && sum.is_finite() && min <= max
+        };
+        if !consistent {
+            return Err(fault("the costs' extremes and sum are not those of costs"));
+        }
+        Ok(TallyPart {
+            tally: (counts, bins, min, max, sum, n),
+        })
     }
 }
 
@@ -238,5 +318,56 @@ mod tests {
         assert_eq!(s.cost_max, Some(20.0));
         assert_eq!(s.traversable_area_m2, 6.0);
         assert_eq!(s.histogram.edges.len(), HISTOGRAM_BINS + 1);
+    }
+
+    #[test]
+    fn parts_merged_in_order_are_the_whole_tally_and_damaged_bytes_are_refused() {
+        let class = [1u8, 1, 0, 1, 2, 1, 4, 1, 1];
+        let cost = [
+            1.5f32,
+            3.25,
+            f32::NAN,
+            7.0,
+            f32::NAN,
+            19.5,
+            f32::NAN,
+            2.0,
+            11.0,
+        ];
+        let range = [1.0, 20.0];
+        let mut whole = StatsTally::new(range);
+        whole.add(&cost, &class);
+        let mut merged = StatsTally::new(range);
+        for (c, k) in cost.chunks(4).zip(class.chunks(4)) {
+            let mut t = StatsTally::new(range);
+            t.add(c, k);
+            let part = t.into_part();
+            let bytes = part.to_bytes();
+            let back = TallyPart::from_bytes(&bytes).unwrap();
+            assert_eq!(back, part);
+            crate::costmap::tile_bytes::testing::assert_refuses_damage(
+                &bytes,
+                TallyPart::from_bytes,
+                7,
+            );
+            merged.merge(&back);
+        }
+        let (a, b) = (
+            whole.finish(3, 3, 1.0, range),
+            merged.finish(3, 3, 1.0, range),
+        );
+        assert_eq!(a, b);
+        // Sums of these costs are exact, so even the mean is the same.
+        assert_eq!(
+            a.cost_mean,
+            Some((1.5 + 3.25 + 7.0 + 19.5 + 2.0 + 11.0) / 6.0)
+        );
+        // An empty part reads back; a part whose counts disagree does not.
+        let empty = StatsTally::new(range).into_part();
+        assert_eq!(TallyPart::from_bytes(&empty.to_bytes()).unwrap(), empty);
+        let mut bad = empty.to_bytes();
+        bad[2 + 8] = 1; // a traversable cell
+        bad[2 + 6 * 8] = 1; // in the first bin, without a cost counted
+        assert!(TallyPart::from_bytes(&bad).is_err());
     }
 }

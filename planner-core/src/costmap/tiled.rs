@@ -5,20 +5,20 @@
 //! Every neighbourhood operation reaches a bounded distance ([`Halos`]),
 //! so each tile is read with a halo that wide and its core comes out as
 //! the whole-grid run's ([`super::build_costmap`]), bit for bit. The
-//! enclosed-pocket fill is global, so the run makes three passes over the
-//! tiles:
+//! enclosed-pocket fill is global, so the run is the stages of
+//! [`super::tile_stages`] one after the other, in one process:
 //!
 //! 1. per tile, the surface (resampling, steps, normals, optional
 //!    obstacle layers) and the classes before the fill, written to a
-//!    scratch file ([`ClassStore`], a byte per cell); the tile's
-//!    traversable regions are labelled and the labels on its edges kept
-//!    ([`RegionJoin`]); then the edges are joined (union–find);
+//!    scratch file ([`ClassStore`], a byte per cell), and the edges of
+//!    the tile's traversable regions; then the edges are joined
+//!    (union–find, [`super::region_join`]);
 //! 2. per tile, the labels again, and the pockets to fill are filled in
 //!    the scratch file;
 //! 3. per tile, the surface again (cheaper than keeping it on disk), the
 //!    inflation from the final classes of the tile and its inflation halo,
 //!    the costs; the tile goes to a [`TileSink`] (e.g. a tiled GeoTIFF)
-//!    and into the statistics and the preview.
+//!    and its parts of the statistics and the preview are merged.
 //!
 //! Resampling is tiled exactly (a working cell is a whole block of DEM
 //! cells), geographic DEMs too (each row's cell size is the whole grid's);
@@ -28,26 +28,16 @@ use std::io;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::bands::Surface;
-use super::class_store::{ClassStore, HOLE_BIT};
-use super::grid::{WorkGeometry, average_blocks, work_geometry};
-use super::halo::{Halos, Padded, TileLayout, TileWindow, crop, halos};
-use super::inflate::inflation;
-use super::landcover::landcover_costs_window;
-use super::params::resolve;
-use super::pipeline::{
-    CellLayers, Heights, add_layer_obstacles, check_request, cost_range, costs, layer_rasters,
-    negative_steps_of, resample_warnings, surface_of,
-};
-use super::preview_tiles::PreviewTiles;
+use super::class_store::ClassStore;
+use super::halo::Halos;
 use super::progress::Monotone;
-use super::region_join::{JoinError, RegionJoin, TileLabels, label_tile};
-use super::stats::StatsTally;
+use super::region_join::JoinError;
+use super::tile_bytes::PieceError;
+use super::tile_stages::TilePlan;
 use super::{
-    Class, CostmapError, CostmapOptions, CostmapStats, Layer, Progress, ResolvedParams, Stage,
-    Vehicle,
+    CostmapError, CostmapOptions, CostmapStats, Layer, Progress, ResolvedParams, Stage, Vehicle,
 };
-use crate::terrain::{Crs, Dem, DemFormat, GeoTransform, RasterWindows, TerrainError};
+use crate::terrain::{Crs, Dem, GeoTransform, RasterWindows, TerrainError};
 
 /// How a tiled run cuts and where it keeps its scratch file.
 #[derive(Clone, Debug)]
@@ -114,7 +104,7 @@ pub struct TiledCostmap {
     pub halos: Halos,
 }
 
-/// Why a tiled run failed.
+/// Why a tiled run (or one of its stages) failed.
 #[derive(Debug, thiserror::Error)]
 pub enum TiledError {
     #[error(transparent)]
@@ -127,140 +117,37 @@ pub enum TiledError {
     Scratch(#[source] io::Error),
     #[error("joining regions across tiles: {0}")]
     Join(#[from] JoinError),
+    /// A stage's piece (edges, fill, tally, preview) whose bytes are
+    /// damaged.
+    #[error("a tile's piece is damaged: {0}")]
+    Piece(#[from] PieceError),
+    /// A tile index beyond the plan's tiles.
+    #[error("tile {k} is not one of the costmap's {count} tiles")]
+    NoSuchTile { k: usize, count: usize },
+    /// Inputs of a stage that do not fit the plan (a DEM of another size,
+    /// a class window or a part of another tile, parts out of order).
+    #[error("a stage's input does not fit the costmap's plan: {0}")]
+    Mismatch(String),
+    /// Reading stored classes failed (a [`super::ClassWindows`] of the
+    /// caller's).
+    #[error("reading stored classes: {0}")]
+    Stored(#[source] Box<dyn std::error::Error + Send + Sync>),
 }
 
-/// The grid's size and georeferencing as a [`Dem`] without heights: what
-/// the checks and the parameters read.
-fn shell_dem(src: &dyn RasterWindows) -> Dem {
-    let g = src.grid();
-    Dem {
-        width: g.width,
-        height: g.height,
-        values: Vec::new(),
-        nodata: g.nodata,
-        transform: g.transform,
-        crs: g.crs.clone(),
-        format: DemFormat::GeoTiff,
-    }
-}
-
-/// A progress that only passes on cancellation: the stages run per tile
-/// report nothing, the run reports its tiles.
-struct Silent<'a>(&'a AtomicBool);
-
-impl Progress for Silent<'_> {
-    fn report(&self, _: Stage, _: f64) -> bool {
-        !self.0.load(Ordering::Relaxed)
-    }
-}
-
-/// Everything a tile's computation reads.
-struct Run<'a> {
-    src: &'a dyn RasterWindows,
-    vehicle: &'a Vehicle,
-    options: &'a CostmapOptions,
-    landcover: Option<&'a Dem>,
-    params: ResolvedParams,
-    geometry: WorkGeometry,
-    centre_m: [f64; 2],
-    epsg: u32,
-    cancel: AtomicBool,
-}
-
-/// A window's surface: classes before the fill (with the optional
-/// obstacle layers), and the per-cell grids the costs are made of.
-struct WindowSurface {
-    class: Vec<u8>,
-    layers: CellLayers,
-    holes: Vec<bool>,
-}
-
-impl Run<'_> {
-    /// The working heights of window `p`.
-    fn heights(&self, p: &Padded) -> Result<Vec<f64>, TiledError> {
-        let [fx, fy] = self.params.resample_factor;
-        let mut dem = vec![0.0; p.width * fx * p.height * fy];
-        self.src.read_window(
-            p.col0 * fx,
-            p.row0 * fy,
-            p.width * fx,
-            p.height * fy,
-            &mut dem,
-        )?;
-        if [fx, fy] == [1, 1] {
-            return Ok(dem);
-        }
-        Ok(average_blocks(
-            &dem,
-            p.width * fx,
-            p.width,
-            p.height,
-            [fx, fy],
-        ))
-    }
-
-    fn surface(&self, p: &Padded) -> Result<WindowSurface, TiledError> {
-        let z = self.heights(p)?;
-        let heights = Heights {
-            z: &z,
-            width: p.width,
-            height: p.height,
-            row_size_m: &self.geometry.row_size_m[p.row0..p.row0 + p.height],
-            centre_m: self.centre_m,
-        };
-        let silent = Silent(&self.cancel);
-        let Surface {
-            zcomp,
-            roughness,
-            step,
-            mut class,
-            holes,
-        } = surface_of(&heights, self.vehicle, self.options, &self.params, &silent)?;
-        let negative = negative_steps_of(&heights, self.vehicle, self.options, &silent)?;
-        let landcover_cost = match (&self.options.landcover, self.landcover) {
-            (Some(table), Some(raster)) => Some(landcover_costs_window(
-                raster,
-                table,
-                [p.col0, p.row0],
-                p.width,
-                p.height,
-                &self.geometry.transform,
-                self.epsg,
-            )?),
-            _ => None,
-        };
-        let layers = CellLayers {
-            step,
-            negative,
-            zcomp,
-            roughness,
-            landcover_cost,
-        };
-        add_layer_obstacles(&mut class, &layers);
-        let mut hole_cells = vec![false; p.width * p.height];
-        for (r, row) in hole_cells.chunks_mut(p.width.max(1)).enumerate() {
-            holes.row_into(r, row);
-        }
-        Ok(WindowSurface {
-            class,
-            layers,
-            holes: hole_cells,
-        })
-    }
-
-    fn cancelled(&self) -> Result<(), TiledError> {
-        if self.cancel.load(Ordering::Relaxed) {
-            Err(CostmapError::Cancelled.into())
-        } else {
-            Ok(())
-        }
+impl TiledCostmap {
+    /// The legend of its preview (as [`super::legend_svg`] draws a whole
+    /// costmap's).
+    pub fn legend_svg(&self) -> String {
+        super::legend_svg_of(&self.stats, &self.vehicle.name)
     }
 }
 
 /// Builds the costmap of the DEM `src` tile by tile, giving each finished
 /// tile to `sink` in row-major tile order; the same costs, classes and
 /// layers as [`super::build_costmap`] of the whole DEM, and the same
-/// statistics but for the order the mean's sum is added in.
+/// statistics but for the order the mean's sum is added in. The stages
+/// of [`TilePlan`] in one process, so bit for bit what they give run as
+/// jobs anywhere.
 pub fn build_costmap_tiled(
     src: &dyn RasterWindows,
     vehicle: &Vehicle,
@@ -271,258 +158,65 @@ pub fn build_costmap_tiled(
     sink: &mut dyn TileSink,
 ) -> Result<TiledCostmap, TiledError> {
     let progress = &Monotone::new(progress);
-    let shell = shell_dem(src);
-    check_request(&shell, vehicle, options, landcover)?;
-    let params = resolve(&shell, vehicle, options);
-    let geometry = work_geometry(&shell, params.resample_factor);
-    let (w, h) = (geometry.width, geometry.height);
-    let centre_m = geometry.row_size_m[h / 2];
-    let mut warnings = Vec::new();
-    resample_warnings(vehicle, options, &params, centre_m, &mut warnings);
-    let halos = halos(&params, options, vehicle, &geometry.row_size_m, centre_m);
-    let layout = TileLayout::new(w, h, tiled.tile);
-    let run = Run {
-        src,
-        vehicle,
-        options,
-        landcover,
-        params: params.clone(),
-        epsg: shell.crs.epsg,
-        geometry,
-        centre_m,
-        cancel: AtomicBool::new(false),
-    };
+    let plan = TilePlan::new(src.grid(), vehicle, options, landcover, tiled.tile)?
+        .with_preview_max_side(tiled.preview_max_side);
+    let cancel = AtomicBool::new(false);
+    // Reports each tile as it begins; a refusal stops the run there.
     let report = |stage: Stage, done: f64| {
         if !progress.report(stage, done) {
-            run.cancel.store(true, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        }
+        if cancel.load(Ordering::Relaxed) {
+            Err(TiledError::Costmap(CostmapError::Cancelled))
+        } else {
+            Ok(())
         }
     };
-    let n = layout.count();
-    let mut store = ClassStore::create(&tiled.scratch_dir, w, h).map_err(TiledError::Scratch)?;
-    // The surface's halo, plus the ring of cells beside the core whose
-    // classes say whether a region is open.
-    let ring_halo = halos.surface.map(|v| v + 1);
-    let min_cells = params.min_region_area_m2 / (centre_m[0] * centre_m[1]);
-    let mut join = RegionJoin::new(layout, min_cells);
-
-    // Pass 1: classes before the fill, the regions' edges.
-    let mut buf = Vec::new();
-    for k in 0..n {
-        report(Stage::Normals, 0.5 * k as f64 / n as f64);
-        run.cancelled()?;
-        let t = layout.tile(k);
-        let p = t.padded(ring_halo, w, h);
-        let s = run.surface(&p)?;
-        let ring = t.padded([1, 1], w, h);
-        let offset = [ring.col0 - p.col0, ring.row0 - p.row0];
-        crop(
-            &s.class,
-            p.width,
-            offset,
-            [ring.width, ring.height],
-            &mut buf,
-        );
-        join.add(
-            k,
-            &label_tile(&buf, ring.width, [ring.dx, ring.dy], &t, [w, h]),
-        )?;
-        let mut core = Vec::new();
-        crop(
-            &s.class,
-            p.width,
-            [p.dx, p.dy],
-            [t.width, t.height],
-            &mut core,
-        );
-        let mut holes = Vec::new();
-        crop(
-            &s.holes,
-            p.width,
-            [p.dx, p.dy],
-            [t.width, t.height],
-            &mut holes,
-        );
-        for (c, &hole) in core.iter_mut().zip(&holes) {
-            if hole {
-                *c |= HOLE_BIT;
-            }
-        }
-        write_core(&mut store, &t, &core)?;
-    }
-    join.join()?;
-
-    // Pass 2: the pockets filled.
-    let mut raw = Vec::new();
-    for k in 0..n {
-        report(Stage::Regions, 0.5 + 0.1 * k as f64 / n as f64);
-        run.cancelled()?;
-        let t = layout.tile(k);
-        let ring = t.padded([1, 1], w, h);
-        let labels = labelled(&mut store, &t, &ring, [w, h], &mut raw)?;
-        let mut core = Vec::new();
-        crop(
-            &raw,
-            ring.width,
-            [ring.dx, ring.dy],
-            [t.width, t.height],
-            &mut core,
-        );
-        let mut plain: Vec<u8> = core.iter().map(|&c| c & !HOLE_BIT).collect();
-        if join.apply(k, &labels, &mut plain) > 0 {
-            for (c, p) in core.iter_mut().zip(&plain) {
-                *c = (*c & HOLE_BIT) | p;
-            }
-            write_core(&mut store, &t, &core)?;
-        }
-    }
-    drop(join);
-
-    // Pass 3: inflation and costs.
-    sink.begin(&MapHeader {
-        width: w,
-        height: h,
-        transform: run.geometry.transform,
-        crs: shell.crs.clone(),
-        tile: layout.tile,
-        layers: Layer::ALL
-            .into_iter()
-            .filter(|l| options.layers.contains(l))
-            .collect(),
-    })
-    .map_err(TiledError::Write)?;
-    let range = cost_range(vehicle, options);
-    let mut tally = StatsTally::new(range);
-    let mut preview = PreviewTiles::new(w, h, tiled.preview_max_side);
-    for k in 0..n {
-        report(Stage::Cost, 0.6 + 0.4 * k as f64 / n as f64);
-        run.cancelled()?;
-        let t = layout.tile(k);
-        let p = t.padded(halos.surface, w, h);
-        let s = run.surface(&p)?;
-        let core_of = |v: &[f32]| {
-            let mut out = Vec::new();
-            crop(v, p.width, [p.dx, p.dy], [t.width, t.height], &mut out);
-            out
-        };
-        let layers = CellLayers {
-            step: s.layers.step.as_deref().map(core_of),
-            negative: s.layers.negative.as_ref().map(|(d, m)| (core_of(d), *m)),
-            zcomp: core_of(&s.layers.zcomp),
-            roughness: s.layers.roughness.as_deref().map(core_of),
-            landcover_cost: s.layers.landcover_cost.as_deref().map(core_of),
-        };
-        drop(s);
-        let inflated = inflate_tile(&run, &mut store, &t, halos.inflation, [w, h], &mut raw)?;
-        let pi = t.padded(halos.inflation, w, h);
-        let mut class = Vec::new();
-        crop(
-            &raw,
-            pi.width,
-            [pi.dx, pi.dy],
-            [t.width, t.height],
-            &mut class,
-        );
-        class.iter_mut().for_each(|c| *c &= !HOLE_BIT);
-        let silent = Silent(&run.cancel);
-        let (cost, inflation_layer) = costs(inflated, &class, &layers, vehicle, options, &silent)?;
-        let layer_out = layer_rasters(&layers, inflation_layer, options);
-        tally.add(&cost, &class);
-        preview.add(t.col0, t.row0, t.width, &cost, &class);
-        sink.tile(&CostmapTile {
-            tx: t.tx,
-            ty: t.ty,
-            col0: t.col0,
-            row0: t.row0,
-            width: t.width,
-            height: t.height,
-            cost: &cost,
-            class: &class,
-            layers: &layer_out,
-        })
-        .map_err(TiledError::Write)?;
-    }
-    report(Stage::Cost, 1.0);
-    run.cancelled()?;
-    let stats = tally.finish(w, h, centre_m[0] * centre_m[1], range);
-    if stats.class_fractions.traversable == 0.0 {
-        warnings.push(
-            "no cell is traversable for this vehicle: every cell is an obstacle or unknown"
-                .to_string(),
-        );
-    }
-    Ok(TiledCostmap {
-        width: w,
-        height: h,
-        transform: run.geometry.transform,
-        crs: shell.crs,
-        vehicle: vehicle.clone(),
-        params,
-        stats,
-        warnings,
-        preview_png: preview.finish(range),
-        tile: layout.tile,
-        halos,
-    })
-}
-
-fn write_core(store: &mut ClassStore, t: &TileWindow, core: &[u8]) -> Result<(), TiledError> {
-    store
-        .write(t.col0, t.row0, t.width, t.height, core)
-        .map_err(TiledError::Scratch)
-}
-
-/// Tile `t`'s regions, labelled from the stored classes of its core and
-/// the ring around it (`ring`), which are left in `raw`.
-fn labelled(
-    store: &mut ClassStore,
-    t: &TileWindow,
-    ring: &Padded,
-    grid: [usize; 2],
-    raw: &mut Vec<u8>,
-) -> Result<TileLabels, TiledError> {
-    store
-        .read(ring.col0, ring.row0, ring.width, ring.height, raw)
+    let n = plan.tile_count();
+    let header = plan.header();
+    let mut store = ClassStore::create(&tiled.scratch_dir, header.width, header.height)
         .map_err(TiledError::Scratch)?;
-    let plain: Vec<u8> = raw.iter().map(|&c| c & !HOLE_BIT).collect();
-    Ok(label_tile(&plain, ring.width, [ring.dx, ring.dy], t, grid))
-}
 
-/// The inflation of tile `t`'s core, from the final classes (and holes)
-/// of the tile and its inflation halo, which are left in `raw`.
-fn inflate_tile(
-    run: &Run<'_>,
-    store: &mut ClassStore,
-    t: &TileWindow,
-    halo: [usize; 2],
-    [w, h]: [usize; 2],
-    raw: &mut Vec<u8>,
-) -> Result<Vec<f32>, TiledError> {
-    let pi = t.padded(halo, w, h);
-    store
-        .read(pi.col0, pi.row0, pi.width, pi.height, raw)
-        .map_err(TiledError::Scratch)?;
-    // As the whole-grid run: obstacles and cells without a height.
-    let obstacle: Vec<bool> = raw
-        .iter()
-        .map(|&c| c & HOLE_BIT != 0 || Class::from_code(c).is_some_and(Class::is_obstacle))
-        .collect();
-    let window = inflation(
-        &obstacle,
-        pi.width,
-        pi.height,
-        run.centre_m,
-        run.params.inflation_sigma_m,
-        run.params.inflation,
-    );
-    let mut core = Vec::new();
-    crop(
-        &window,
-        pi.width,
-        [pi.dx, pi.dy],
-        [t.width, t.height],
-        &mut core,
-    );
-    Ok(core)
+    // Stage 1: classes before the fill, the regions' edges; stage 2, the
+    // join.
+    let mut join = plan.edge_join();
+    for k in 0..n {
+        report(Stage::Normals, 0.5 * k as f64 / n as f64)?;
+        let c = plan.classify(src, landcover, k, &cancel)?;
+        let t = plan.tile(k)?;
+        store
+            .write(t.col0, t.row0, t.width, t.height, &c.core)
+            .map_err(TiledError::Scratch)?;
+        join.add(k, c.edges)?;
+    }
+    let fill = join.join()?;
+
+    // Stage 3: the pockets filled, in place: tile k reads the ring of
+    // tiles already filled, which labels the same (see
+    // [`TilePlan::fill`]).
+    for k in 0..n {
+        report(Stage::Regions, 0.5 + 0.1 * k as f64 / n as f64)?;
+        let part = fill.tile(k).ok_or(JoinError::Missing(k))?;
+        let core = plan.fill(k, &store, part)?;
+        let t = plan.tile(k)?;
+        store
+            .write(t.col0, t.row0, t.width, t.height, &core)
+            .map_err(TiledError::Scratch)?;
+    }
+    drop(fill);
+
+    // Stage 4: inflation and costs, the tiles out in order; stage 5, the
+    // parts merged in the same order.
+    sink.begin(&header).map_err(TiledError::Write)?;
+    let mut merge = plan.merge();
+    for k in 0..n {
+        report(Stage::Cost, 0.6 + 0.4 * k as f64 / n as f64)?;
+        let tile = plan.cost(src, landcover, &store, k, &cancel)?;
+        sink.tile(&tile.view()).map_err(TiledError::Write)?;
+        merge.add(k, &tile.tally, &tile.preview)?;
+    }
+    report(Stage::Cost, 1.0)?;
+    merge.finish()
 }
 
 #[cfg(test)]
