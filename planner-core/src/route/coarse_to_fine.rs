@@ -104,6 +104,41 @@ impl CoarseToFineOptions {
     }
 }
 
+impl CoarseToFineOptions {
+    /// Bytes of search state for each corridor cell, as estimated ahead:
+    /// the corridor search's 13 and an open list of about half an entry
+    /// (16 bytes) per cell (the 4000² benchmark's last corridor: 0.2).
+    pub const CORRIDOR_BYTES_PER_CELL: u64 = (BYTES_PER_CELL + BYTES_PER_OPEN / 2) as u64;
+
+    /// An estimate of the peak memory of a search on a `width` × `height`
+    /// map, ahead of it (a reservation): the coarse level (minima and
+    /// maxima, the bound, the coarse A* and the corridor marks: 40 bytes a
+    /// block), the coarse pass's windows (two at a time, f32 costs and
+    /// their f64 reads), the tile cache, and the largest corridor allowed
+    /// ([`CORRIDOR_BYTES_PER_CELL`](Self::CORRIDOR_BYTES_PER_CELL) a cell,
+    /// at most the map's cells). What the cost source holds is its own.
+    pub fn estimated_bytes(&self, width: usize, height: usize) -> u64 {
+        let block = self.block.max(1) as u64;
+        let (w, h) = (width as u64, height as u64);
+        let blocks = w.div_ceil(block).saturating_mul(h.div_ceil(block));
+        let side = ((1024 / block).max(1) * block).min(w.max(1)) as u64;
+        let coarse_windows = 2 * side * side * (4 + 8);
+        let tile = self.tile as u64;
+        let cache = (self.cache_tiles as u64)
+            .saturating_mul(tile * tile * 4)
+            .saturating_add(tile * tile * 8);
+        let corridor = self
+            .max_corridor_cells
+            .min(w.saturating_mul(h))
+            .saturating_mul(Self::CORRIDOR_BYTES_PER_CELL);
+        blocks
+            .saturating_mul(40)
+            .saturating_add(coarse_windows)
+            .saturating_add(cache)
+            .saturating_add(corridor)
+    }
+}
+
 /// Why a coarse-to-fine search gave no route.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum BigRouteError {
@@ -132,7 +167,8 @@ impl From<SearchFault> for BigRouteError {
 }
 
 /// How the search went: the figures behind its memory and time.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CoarseToFineStats {
     pub block: usize,
     pub blocks_across: usize,
@@ -482,6 +518,50 @@ mod tests {
             (Err(RouteError::Unreachable), Err(BigRouteError::Route(RouteError::Unreachable))) => {}
             (a, b) => panic!("A* {a:?}, coarse-to-fine {b:?}"),
         }
+    }
+
+    /// The estimate made ahead covers what the searches held at their
+    /// peak, on open and obstacle-strewn maps, the corridor capped or not.
+    #[test]
+    fn the_memory_estimate_covers_the_peak() {
+        let mut rng = Rng::new(5);
+        for trial in 0..40 {
+            let (w, h) = (200 + rng.below(300) as usize, 150 + rng.below(300) as usize);
+            let grid = random_grid(&mut rng, w, h, [0.0, 0.2][trial % 2], true);
+            let Some((start, goal)) = random_endpoints(&mut rng, &grid) else {
+                continue;
+            };
+            let c2f = CoarseToFineOptions {
+                block: 8,
+                tile: 64,
+                max_corridor_cells: [u64::MAX, 20_000][trial % 2],
+                ..CoarseToFineOptions::default()
+            };
+            let opts = opts(ArcCost::Integrated);
+            match coarse_to_fine(&grid, start, goal, &opts, &c2f, &|| false) {
+                Ok(found) => {
+                    let estimate = c2f.estimated_bytes(w, h);
+                    assert!(
+                        found.stats.peak_bytes <= estimate,
+                        "{w}×{h}: peak {} > estimate {estimate}",
+                        found.stats.peak_bytes
+                    );
+                }
+                Err(BigRouteError::Route(RouteError::Unreachable))
+                | Err(BigRouteError::CorridorLimit { .. }) => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+        // The corridor term grows with the cap, up to the map's cells.
+        let c2f = CoarseToFineOptions {
+            max_corridor_cells: 1000,
+            ..CoarseToFineOptions::default()
+        };
+        let uncapped = CoarseToFineOptions::default();
+        assert_eq!(
+            uncapped.estimated_bytes(100, 100) - c2f.estimated_bytes(100, 100),
+            9000 * CoarseToFineOptions::CORRIDOR_BYTES_PER_CELL
+        );
     }
 
     #[test]

@@ -35,6 +35,18 @@ impl ReadAt for File {
     }
 }
 
+/// One source shared, e.g. by the windows of several pages of a file.
+impl<T: ReadAt + ?Sized> ReadAt for std::sync::Arc<T> {
+    #[inline]
+    fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<usize> {
+        (**self).read_at(offset, buf)
+    }
+
+    fn size(&self) -> io::Result<u64> {
+        (**self).size()
+    }
+}
+
 impl ReadAt for Vec<u8> {
     fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<usize> {
         let start = usize::try_from(offset)
@@ -89,6 +101,7 @@ mod tests {
         std::fs::remove_file(&path).unwrap();
         reads_like_the_bytes(&file, &bytes);
         reads_like_the_bytes(&bytes.clone(), &bytes);
+        reads_like_the_bytes(&std::sync::Arc::new(file), &bytes);
         reads_like_the_bytes(&Vec::new(), &[]);
     }
 }
