@@ -121,7 +121,7 @@ impl CoarseToFineOptions {
         let block = self.block.max(1) as u64;
         let (w, h) = (width as u64, height as u64);
         let blocks = w.div_ceil(block).saturating_mul(h.div_ceil(block));
-        let side = ((1024 / block).max(1) * block).min(w.max(1)) as u64;
+        let side = ((1024 / block).max(1) * block).min(w.max(1));
         let coarse_windows = 2 * side * side * (4 + 8);
         let tile = self.tile as u64;
         let cache = (self.cache_tiles as u64)
