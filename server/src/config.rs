@@ -69,10 +69,27 @@ pub struct ServeConfig {
     /// renewal. Renewed five times per lease.
     #[arg(long, env = "TERRAPLAN_JOB_LEASE_S", default_value_t = crate::jobs::DEFAULT_LEASE.as_secs_f64(), value_parser = parse_job_lease)]
     pub job_lease_s: f64,
+    /// Costmaps of more working cells than this are built as tiles by every
+    /// `terraplan serve` replica and `terraplan worker` on the database at
+    /// once, each tile a job in the database's queue (run in the
+    /// `--costmap-jobs` slots); smaller ones are built whole by one process.
+    #[arg(long, env = "TERRAPLAN_COSTMAP_TILE_CELLS", default_value_t = 64_000_000, value_parser = clap::value_parser!(u64).range(1..))]
+    pub costmap_tile_cells: u64,
+    /// The side of a tiled costmap's tiles, working cells: a multiple of 16
+    /// from 16 to 8192 (the tiles of its GeoTIFFs too).
+    #[arg(long, env = "TERRAPLAN_COSTMAP_TILE_SIDE", default_value_t = 512, value_parser = parse_tile_side)]
+    pub costmap_tile_side: usize,
     /// Longest a route search may take, seconds (fractions allowed); a
     /// search still running then is stopped and answered with a 503.
     #[arg(long, env = "TERRAPLAN_ROUTE_TIMEOUT_S", default_value_t = 120.0, value_parser = parse_planning_timeout)]
     pub route_timeout_s: f64,
+    /// Costmaps with more cells than this are routed coarse to fine (A* on
+    /// 16 × 16 block minima, then A* in a corridor around that route,
+    /// widened until proven optimal), the costmap read a window at a time;
+    /// so are smaller ones whose plain A* would not fit the memory budget.
+    /// Plain A* holds 16 bytes for every cell of the map.
+    #[arg(long, env = "TERRAPLAN_ROUTE_COARSE_CELLS", default_value_t = crate::state::route_store::COARSE_CELLS)]
+    pub route_coarse_cells: u64,
     /// Longest a survey may plan, seconds (fractions allowed); a survey
     /// still planning then is stopped and answered with a 503.
     #[arg(long, env = "TERRAPLAN_SURVEY_TIMEOUT_S", default_value_t = SURVEY_TIMEOUT.as_secs_f64(), value_parser = parse_planning_timeout)]
@@ -206,6 +223,21 @@ fn parse_read_timeout(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--costmap-tile-side`: a multiple of 16 in [16, 8192].
+fn parse_tile_side(s: &str) -> Result<usize, String> {
+    let v: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of cells"))?;
+    if (16..=8192).contains(&v) && v.is_multiple_of(16) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{s}: tiles are a multiple of 16 cells, from 16 to 8192"
+        ))
+    }
+}
+
 /// `--job-lease-s`: seconds in [1, 3600].
 fn parse_job_lease(s: &str) -> Result<f64, String> {
     let v: f64 = s
@@ -244,6 +276,14 @@ impl ServeConfig {
     /// `--job-lease-s`.
     pub fn job_lease(&self) -> std::time::Duration {
         std::time::Duration::from_secs_f64(self.job_lease_s)
+    }
+
+    /// `--costmap-tile-cells` and `--costmap-tile-side`.
+    pub fn tile_settings(&self) -> crate::jobs::TileSettings {
+        crate::jobs::TileSettings {
+            cells: self.costmap_tile_cells,
+            side: self.costmap_tile_side,
+        }
     }
 
     /// `--route-cache-mb` in bytes.

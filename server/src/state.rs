@@ -71,7 +71,12 @@ impl AppState {
             limits: config.limits(),
             planner,
             dems,
-            costmaps: Arc::new(CostmapJobs::new(jobs, loader, config.job_lease())),
+            costmaps: Arc::new(CostmapJobs::new(
+                jobs,
+                loader,
+                config.job_lease(),
+                config.tile_settings(),
+            )),
             routes: Arc::new(RouteStore::from_config(config)),
             web: Arc::new(WebUi::new(&config.web_dir)),
             memory,

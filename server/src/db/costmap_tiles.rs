@@ -233,6 +233,18 @@ impl Db {
         })
     }
 
+    /// The tile side of costmap `id` while it is being built as tiles;
+    /// `None` once it is not (done, failed, deleted, or built whole).
+    pub async fn costmap_tile_side(&self, id: &str) -> Result<Option<i64>, sqlx::Error> {
+        const SQL: &str =
+            "SELECT tiled FROM costmaps WHERE id = $1 AND status = 'running' AND tiled > 0";
+        let row: Option<(i64,)> = on_pool!(self, pool => sqlx::query_as(SQL)
+            .bind(id)
+            .fetch_optional(pool)
+            .await)?;
+        Ok(row.map(|(t,)| t))
+    }
+
     /// Claim the next claimable tile job for `owner` until `lease_until`
     /// (see the module's doc). A job that would start its run number
     /// `max_attempts + 1` is not run: its costmap is failed instead, saying

@@ -48,8 +48,6 @@ macro_rules! visible_to_member {
 // After `on_pool!` and `visible_to_member!`: a macro is only visible to
 // modules declared below it.
 mod accounts;
-// The tile runner (jobs::tiles) is being built on it.
-#[allow(dead_code, unused_imports)]
 mod costmap_tiles;
 mod costmaps;
 mod dems;
@@ -59,7 +57,6 @@ mod routes;
 mod surveys;
 
 pub use accounts::{SessionRow, TokenRow, UserRow};
-#[allow(unused_imports)]
 pub use costmap_tiles::{
     TileClaim, TileJob, TileJobKey, TileOutput, TileProgress, TileStage, WrittenFile,
     partial_file_name,

@@ -5,7 +5,8 @@ use std::io::Cursor;
 use std::sync::Arc;
 
 use planner_core::costmap::{
-    Costmap, CostmapError, CostmapOptions, Stage, Vehicle, build_costmap, legend_svg, preview_png,
+    Costmap, CostmapError, CostmapOptions, Stage, TilePlan, Vehicle, build_costmap, legend_svg,
+    preview_png,
 };
 use planner_core::terrain::Dem;
 
@@ -15,6 +16,8 @@ use super::record::{
     COSTMAP_TIF, CostmapResult, JobStatus, LEGEND_SVG, PREVIEW_MAX_SIDE, PREVIEW_PNG,
     StoredRequest, layer_file, stage_name,
 };
+use super::tiles::TileSettings;
+use super::tiles::context::dem_source;
 use crate::clock::now_millis;
 use crate::db::{CostmapFileRow, CostmapRow, Db};
 use crate::error::ApiError;
@@ -32,6 +35,9 @@ const PROGRESS_NOTE_EVERY: std::time::Duration = std::time::Duration::from_milli
 /// How a run ended.
 pub(super) enum Outcome {
     Built(Box<Built>),
+    /// Planned as this many tiles, built by the tile jobs
+    /// ([`super::tiles`]).
+    Tiled(usize),
     /// Cancelled: deleted, taken over, or shutdown.
     Cancelled,
     Failed(String),
@@ -55,6 +61,8 @@ pub(super) struct Run<'a, S> {
     pub(super) owner: &'a str,
     /// Resolves when the server begins to shut down.
     pub(super) shutdown: S,
+    /// When a costmap is built as tiles instead.
+    pub(super) tiles: TileSettings,
 }
 
 /// The DEM a job needs, or why the job cannot run.
@@ -63,7 +71,7 @@ async fn job_dem(dems: &DemLoader, id: &str, what: &str) -> Result<Arc<Dem>, Str
 }
 
 /// Why the job cannot run when its DEM (`what`, DEM `id`) cannot be had.
-fn dem_load_error(e: ApiError, id: &str, what: &str) -> String {
+pub(super) fn dem_load_error(e: ApiError, id: &str, what: &str) -> String {
     match e {
         ApiError::NotFound(_) => format!(
             "the {what} (DEM {id:?}) was deleted before the costmap was built: upload it again \
@@ -108,6 +116,11 @@ pub(super) async fn build<S: Future<Output = ()>>(
     if handle.is_cancelled() {
         return Outcome::Cancelled;
     }
+    match plan_tiles(&run, row, &vehicle, &options, landcover.as_deref()).await {
+        Ok(Some(tiles)) => return Outcome::Tiled(tiles),
+        Ok(None) => {}
+        Err(outcome) => return outcome,
+    }
     // The DEM with room in the memory budget for the build (and for
     // reading the DEM, when it is not cached), held until the files are
     // stored; a job waits for room as long as it takes.
@@ -151,6 +164,57 @@ pub(super) async fn build<S: Future<Output = ()>>(
     };
     monitor.abort();
     outcome
+}
+
+/// A costmap of more working cells than `--costmap-tile-cells` is planned
+/// as tile jobs (see [`super::tiles`]): the number of tiles; `None` for
+/// one built whole here (a request the plan refuses too: the whole build
+/// says why).
+async fn plan_tiles<S>(
+    run: &Run<'_, S>,
+    row: &CostmapRow,
+    vehicle: &Vehicle,
+    options: &CostmapOptions,
+    landcover: Option<&Dem>,
+) -> Result<Option<usize>, Outcome> {
+    let src = dem_source(run.dems, &row.dem_id)
+        .await
+        .map_err(|e| Outcome::Failed(dem_load_error(e, &row.dem_id, "DEM")))?;
+    let side = run.tiles.side;
+    let Ok(plan) = TilePlan::new(src.grid(), vehicle, options, landcover, side) else {
+        return Ok(None);
+    };
+    let layout = plan.layout();
+    let cells = (layout.width as u64).saturating_mul(layout.height as u64);
+    if cells <= run.tiles.cells {
+        return Ok(None);
+    }
+    let tiles = plan.tile_count();
+    match run
+        .dems
+        .db
+        .plan_costmap_tiles(&row.id, run.owner, side as i64, tiles as i64, now_millis())
+        .await
+    {
+        Ok(true) => Ok(Some(tiles)),
+        // Deleted or taken over meanwhile.
+        Ok(false) => Err(Outcome::Cancelled),
+        Err(e) => Err(Outcome::Failed(format!(
+            "the costmap could not be planned as tiles: {e}"
+        ))),
+    }
+}
+
+/// The message of a request the costmap builder refuses.
+pub(super) fn invalid_request(issues: &[planner_core::geo::Issue]) -> String {
+    format!(
+        "the costmap cannot be built with these parameters: {}",
+        issues
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join("; ")
+    )
 }
 
 /// While the build runs: write its progress to the job's row (each new
@@ -259,14 +323,7 @@ async fn run_build(job: Job, handle: &Arc<JobHandle>) -> Outcome {
         match costmap {
             Ok(c) => encode(&c).map(|b| Outcome::Built(Box::new(b))),
             Err(CostmapError::Cancelled) => Ok(Outcome::Cancelled),
-            Err(CostmapError::Invalid(issues)) => Ok(Outcome::Failed(format!(
-                "the costmap cannot be built with these parameters: {}",
-                issues
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            ))),
+            Err(CostmapError::Invalid(issues)) => Ok(Outcome::Failed(invalid_request(&issues))),
         }
     });
     match task.await {

@@ -33,6 +33,7 @@ use super::build::{Outcome, Run, build};
 use super::feed::{Feed, JobNote};
 use super::live::{JobHandle, Live};
 use super::record::{JobStatus, MAX_ATTEMPTS};
+use super::tiles::{TileRunner, TileSettings};
 use crate::clock::now_millis;
 use crate::db::Db;
 use crate::state::dem_store::DemLoader;
@@ -62,6 +63,10 @@ pub struct CostmapJobs {
     dems: DemLoader,
     /// Notes to and from the other processes on the database.
     feed: Arc<Feed>,
+    /// When a costmap is built as tiles instead of whole here.
+    tile_settings: TileSettings,
+    /// The tile jobs this process runs.
+    tiles: Arc<TileRunner>,
 }
 
 /// Counts a job task as alive while it exists.
@@ -74,22 +79,43 @@ impl Drop for ActiveGuard<'_> {
 }
 
 impl CostmapJobs {
-    /// A runner of at most `max_jobs` (≥ 1) builds at once, of the jobs
-    /// stored in `dems.db`, holding each under a lease of `lease` (at
-    /// least [`MIN_LEASE`]).
-    pub fn new(max_jobs: usize, dems: DemLoader, lease: Duration) -> CostmapJobs {
+    /// A runner of at most `max_jobs` (≥ 1) builds (or tile jobs) at
+    /// once, of the jobs stored in `dems.db`, holding each under a lease of
+    /// `lease` (at least [`MIN_LEASE`]); costmaps over `tiles.cells` working
+    /// cells are built as tiles by every process.
+    pub fn new(
+        max_jobs: usize,
+        dems: DemLoader,
+        lease: Duration,
+        tiles: TileSettings,
+    ) -> CostmapJobs {
         let max_jobs = max_jobs.max(1);
         let lease = lease.max(MIN_LEASE);
+        let instance = uuid::Uuid::new_v4().to_string();
+        let lease_ms = i64::try_from(lease.as_millis()).unwrap_or(i64::MAX / 2);
+        let slots = Arc::new(Semaphore::new(max_jobs));
+        let shutdown = watch::Sender::new(false);
+        let feed = Arc::new(Feed::new(dems.db.clone()));
+        let tile_runner = TileRunner::new(
+            dems.clone(),
+            feed.clone(),
+            instance.clone(),
+            lease_ms,
+            slots.clone(),
+            shutdown.subscribe(),
+        );
         CostmapJobs {
-            instance: uuid::Uuid::new_v4().to_string(),
-            lease_ms: i64::try_from(lease.as_millis()).unwrap_or(i64::MAX / 2),
+            instance,
+            lease_ms,
             max_jobs,
-            slots: Arc::new(Semaphore::new(max_jobs)),
+            slots,
             jobs: Mutex::new(HashMap::new()),
-            shutdown: watch::Sender::new(false),
+            shutdown,
             active: watch::Sender::new(0),
-            feed: Arc::new(Feed::new(dems.db.clone())),
+            feed,
             dems,
+            tile_settings: tiles,
+            tiles: Arc::new(tile_runner),
         }
     }
 
@@ -188,6 +214,7 @@ impl CostmapJobs {
             }
             Err(e) => tracing::warn!(error = %e, "cannot give back the costmap jobs"),
         }
+        self.tiles.finish().await;
     }
 
     /// Tell every process that job `id` is queued with no holder, for one
@@ -301,6 +328,7 @@ impl CostmapJobs {
             Db::Sqlite(_) => i64::MAX,
             Db::Postgres(_) => now_millis(),
         };
+        self.tiles.recover().await;
         self.adopt_orphans(expired_before).await
     }
 
@@ -332,6 +360,7 @@ impl CostmapJobs {
     /// and whenever a job is given back.
     pub fn start_maintenance(self: &Arc<Self>) {
         self.feed.start_listening(self.shutdown_signal());
+        self.tiles.start(self.notes());
         let jobs = self.clone();
         let stop = self.shutdown_signal();
         let mut notes = self.notes();
@@ -445,6 +474,7 @@ impl CostmapJobs {
                 feed: &self.feed,
                 owner: &owner,
                 shutdown: self.shutdown_signal(),
+                tiles: self.tile_settings,
             };
             build(run, &row, handle).await
         };
@@ -481,6 +511,23 @@ impl CostmapJobs {
                             .await;
                     }
                 }
+            }
+            Outcome::Tiled(tiles) => {
+                tracing::info!(
+                    costmap = %id,
+                    tiles,
+                    tile_side = self.tile_settings.side,
+                    "costmap planned as tiles: built by the tile jobs of every process"
+                );
+                self.feed
+                    .publish(JobNote {
+                        id: id.to_string(),
+                        status: JobStatus::Running,
+                        progress: 0.0,
+                        stage: None,
+                    })
+                    .await;
+                self.tiles.wake();
             }
             Outcome::Cancelled => {
                 if jobs.is_shutting_down() {
@@ -626,7 +673,11 @@ mod tests {
                 memory: Arc::new(MemoryBudget::new(1024)),
                 planner: Arc::new(Planners::default()),
             };
-            let jobs = Arc::new(CostmapJobs::new(1, dems, DEFAULT_LEASE));
+            let whole = TileSettings {
+                cells: u64::MAX,
+                side: 512,
+            };
+            let jobs = Arc::new(CostmapJobs::new(1, dems, DEFAULT_LEASE, whole));
             TestServer { db, jobs, dir }
         }
 

@@ -1,0 +1,222 @@
+//! One tile job's work: its stage run on a blocking thread through
+//! `planner_core::costmap::TilePlan`, its inputs read from and its
+//! outputs made for `costmap_tiles` (what each stage stores: see the
+//! migration `costmap_tile_jobs`).
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use planner_core::costmap::{ClassTiles, CostmapError, TileEdges, TileFill, TilePlan, TiledError};
+
+use super::codec::{decode_classes, encode_classes, encode_values};
+use super::context::CostmapContext;
+use crate::db::{Db, TileJob, TileOutput, TileStage};
+
+/// Pieces read from the database at once (edges, tallies, previews).
+pub const PAGE: i64 = 64;
+
+/// How a stage's run ended, but for its outputs.
+#[derive(Debug)]
+pub enum StageError {
+    /// Stopped: its costmap was deleted or the job taken over, or shutdown.
+    Cancelled,
+    /// It can never succeed (an invalid request, a bug): the costmap fails
+    /// with this.
+    Fatal(String),
+    /// A fault that may pass (storage, damaged pieces): tried again, and
+    /// the costmap fails with it once the job has failed too often.
+    Fault(String),
+}
+
+impl From<TiledError> for StageError {
+    fn from(e: TiledError) -> StageError {
+        match e {
+            TiledError::Costmap(CostmapError::Cancelled) => StageError::Cancelled,
+            TiledError::Costmap(CostmapError::Invalid(issues)) => {
+                StageError::Fatal(super::super::build::invalid_request(&issues))
+            }
+            TiledError::NoSuchTile { .. } => StageError::Fatal(e.to_string()),
+            other => StageError::Fault(other.to_string()),
+        }
+    }
+}
+
+fn storage(e: sqlx::Error) -> StageError {
+    StageError::Fault(format!("the database: {e}"))
+}
+
+/// Run `work` on a blocking thread; a panic is a bug, and fatal.
+pub async fn blocking<T: Send + 'static>(
+    work: impl FnOnce() -> Result<T, StageError> + Send + 'static,
+) -> Result<T, StageError> {
+    match tokio::task::spawn_blocking(work).await {
+        Ok(r) => r,
+        Err(e) if e.is_panic() => {
+            let payload = e.into_panic();
+            let what = payload
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "no message".to_string());
+            Err(StageError::Fatal(format!(
+                "internal error: the costmap builder panicked ({what}); this is a bug, please \
+                 report it"
+            )))
+        }
+        Err(_) => Err(StageError::Cancelled),
+    }
+}
+
+fn output(kind: &str, k: usize, data: Vec<u8>) -> TileOutput {
+    TileOutput {
+        kind: kind.to_string(),
+        tile: k as i64,
+        data,
+    }
+}
+
+fn encoded(r: std::io::Result<Vec<u8>>) -> Result<Vec<u8>, StageError> {
+    r.map_err(|e| StageError::Fault(format!("a tile could not be compressed: {e}")))
+}
+
+/// The stored name of a layer's tiles.
+pub fn layer_kind(layer: planner_core::costmap::Layer) -> String {
+    format!("layer:{}", layer.name())
+}
+
+/// Class tiles of kind `kind` read from the database as a stage's
+/// windows need them (from a blocking thread).
+pub fn stored_classes(
+    db: Db,
+    runtime: tokio::runtime::Handle,
+    id: String,
+    kind: &'static str,
+    plan: &TilePlan,
+) -> ClassTiles<impl Fn(usize) -> Result<Vec<u8>, TiledError> + Sync> {
+    let layout = plan.layout();
+    ClassTiles::new(layout, move |k: usize| {
+        let stored = |m: String| TiledError::Stored(m.into());
+        let data = runtime
+            .block_on(db.costmap_tile(&id, kind, k as i64))
+            .map_err(|e| stored(format!("{kind} classes of tile {k}: {e}")))?
+            .ok_or_else(|| stored(format!("the {kind} classes of tile {k} are missing")))?;
+        let t = layout.tile(k);
+        decode_classes(&data, t.width * t.height).map_err(stored)
+    })
+}
+
+/// Run job `job`'s stage (but the finish) and return what it stores.
+pub async fn run_stage(
+    db: &Db,
+    ctx: &Arc<CostmapContext>,
+    job: &TileJob,
+    cancel: &Arc<AtomicBool>,
+) -> Result<Vec<TileOutput>, StageError> {
+    let id = job.key.costmap_id.clone();
+    let n = ctx.plan.tile_count();
+    let k = usize::try_from(job.key.tile)
+        .ok()
+        .filter(|&k| k < n || !job.key.stage.per_tile())
+        .ok_or_else(|| {
+            StageError::Fatal(format!("tile {} is not one of its {n} tiles", job.key.tile))
+        })?;
+    let runtime = tokio::runtime::Handle::current();
+    match job.key.stage {
+        TileStage::Classify => {
+            let (ctx, cancel) = (ctx.clone(), cancel.clone());
+            blocking(move || {
+                let c = ctx
+                    .plan
+                    .classify(&*ctx.dem, ctx.landcover.as_deref(), k, &cancel)?;
+                Ok(vec![
+                    output("prefill", k, encoded(encode_classes(&c.core))?),
+                    output("edges", k, c.edges.to_bytes()),
+                ])
+            })
+            .await
+        }
+        TileStage::Join => {
+            let mut pieces = Vec::with_capacity(n);
+            while pieces.len() < n {
+                let page = db
+                    .costmap_tiles_of_kind(&id, "edges", pieces.len() as i64, PAGE)
+                    .await
+                    .map_err(storage)?;
+                if page.is_empty() {
+                    break;
+                }
+                pieces.extend(page);
+            }
+            if pieces.len() != n {
+                return Err(StageError::Fault(format!(
+                    "the edges of {} of its {n} tiles are stored",
+                    pieces.len()
+                )));
+            }
+            let ctx = ctx.clone();
+            blocking(move || {
+                let mut edges = Vec::with_capacity(n);
+                for (t, bytes) in pieces {
+                    let e = TileEdges::from_bytes(&bytes).map_err(TiledError::from)?;
+                    edges.push((t as usize, e));
+                }
+                let fill = ctx.plan.join(edges)?;
+                if fill.len() != n {
+                    return Err(StageError::Fatal(format!(
+                        "the join decided for {} tiles of {n}",
+                        fill.len()
+                    )));
+                }
+                Ok(fill
+                    .into_tiles()
+                    .iter()
+                    .enumerate()
+                    .map(|(t, f)| output("fill", t, f.to_bytes()))
+                    .collect())
+            })
+            .await
+        }
+        TileStage::Fill => {
+            let fill = db
+                .costmap_tile(&id, "fill", k as i64)
+                .await
+                .map_err(storage)?
+                .ok_or_else(|| StageError::Fault(format!("the fill of tile {k} is missing")))?;
+            let (ctx, db) = (ctx.clone(), db.clone());
+            blocking(move || {
+                let fill = TileFill::from_bytes(&fill).map_err(TiledError::from)?;
+                let prefill = stored_classes(db, runtime, id, "prefill", &ctx.plan);
+                let core = ctx.plan.fill(k, &prefill, &fill)?;
+                Ok(vec![output("final", k, encoded(encode_classes(&core))?)])
+            })
+            .await
+        }
+        TileStage::Cost => {
+            let (ctx, db, cancel) = (ctx.clone(), db.clone(), cancel.clone());
+            blocking(move || {
+                let classes = stored_classes(db, runtime, id, "final", &ctx.plan);
+                let c = ctx
+                    .plan
+                    .cost(&*ctx.dem, ctx.landcover.as_deref(), &classes, k, &cancel)?;
+                let mut out = vec![
+                    output("cost", k, encoded(encode_values(&c.cost))?),
+                    output("class", k, encoded(encode_classes(&c.class))?),
+                    output("tally", k, c.tally.to_bytes()),
+                    output("preview", k, c.preview.to_bytes()),
+                ];
+                for (layer, values) in &c.layers {
+                    out.push(output(
+                        &layer_kind(*layer),
+                        k,
+                        encoded(encode_values(values))?,
+                    ));
+                }
+                Ok(out)
+            })
+            .await
+        }
+        TileStage::Finish => Err(StageError::Fatal(
+            "the finish stage is run by the finish, not as a tile".into(),
+        )),
+    }
+}
