@@ -1,7 +1,15 @@
-//! Storage quotas per project: the bytes of its DEMs and costmap files
-//! (`--project-quota-mb`), and its costmap jobs waiting or running
-//! (`--project-queued-jobs`). Checked before work is queued or a file is
-//! stored: over the bytes, 413; over the jobs, 429.
+//! Storage quotas per project: the bytes it stores (`--project-quota-mb`),
+//! and its costmap jobs waiting or running (`--project-queued-jobs`).
+//! Checked before work is queued or a file is stored: over the bytes,
+//! 413; over the jobs, 429.
+//!
+//! A project's stored bytes are its DEMs' tiles (compressed, overviews
+//! included), the files kept with them (an ESRI grid's or `.hgt` file's,
+//! and that of a DEM stored before tiles; a GeoTIFF's is not kept), the
+//! tiles of its uploads still running, and its costmaps' files. An upload
+//! is refused before its body is read when its declared size alone would
+//! pass the quota, and while its tiles are stored, before the batch that
+//! would pass it (what it stored is then removed).
 //!
 //! A costmap counts against the bytes by an estimate of its files when it
 //! is asked for; the queued-jobs limit bounds how far estimates of jobs
@@ -27,7 +35,8 @@ pub struct Quotas {
 /// A project's use of its quotas, as the project resource reports it.
 #[derive(Debug, Serialize, Deserialize, ToSchema)]
 pub struct Usage {
-    /// Bytes of the project's DEM files and costmap files.
+    /// Bytes the project stores: its DEMs' tiles and kept files, the
+    /// tiles of its uploads running, its costmaps' files.
     pub stored_bytes: u64,
     /// `--project-quota-mb` in bytes; absent when there is no limit.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -80,6 +89,27 @@ impl Usage {
         Ok(())
     }
 
+    /// 413 when storing `adding` more bytes of an upload's tiles (of
+    /// which `so_far` are stored, and counted in the usage) would take
+    /// project `project_id` past its quota.
+    pub fn check_tiles(&self, project_id: &str, so_far: u64, adding: u64) -> Result<(), ApiError> {
+        let Some(quota) = self.quota_bytes else {
+            return Ok(());
+        };
+        let after = self.stored_bytes.saturating_add(adding);
+        if after > quota {
+            return Err(ApiError::PayloadTooLarge(format!(
+                "the DEM's tiles ({} compressed so far, overviews included) would take project \
+                 {project_id:?} past its {} quota (--project-quota-mb; {} stored without this \
+                 upload): delete DEMs or costmaps first; nothing of this upload was kept",
+                mib(so_far.saturating_add(adding)),
+                mib(quota),
+                mib(self.stored_bytes.saturating_sub(so_far)),
+            )));
+        }
+        Ok(())
+    }
+
     /// 429 when project `project_id` already has as many costmap jobs
     /// queued or running as it may.
     pub fn check_jobs(&self, project_id: &str) -> Result<(), ApiError> {
@@ -118,6 +148,33 @@ mod tests {
         let q = Quotas::new(2, 3);
         assert_eq!(q.bytes, Some(2 * 1024 * 1024));
         assert_eq!(q.queued_jobs, Some(3));
+    }
+
+    #[test]
+    fn tiles_past_the_quota_are_refused_naming_it() {
+        let usage = Usage {
+            stored_bytes: 900 * 1024,
+            quota_bytes: Some(1024 * 1024),
+            queued_jobs: 0,
+            max_queued_jobs: None,
+        };
+        assert!(usage.check_tiles("p", 100 * 1024, 124 * 1024).is_ok());
+        let e = usage
+            .check_tiles("p", 100 * 1024, 124 * 1024 + 1)
+            .unwrap_err();
+        let ApiError::PayloadTooLarge(m) = e else {
+            panic!("not a 413: {e:?}")
+        };
+        assert!(
+            m.contains("--project-quota-mb") && m.contains("1.0 MiB quota"),
+            "{m}"
+        );
+        assert!(m.contains("0.8 MiB stored without this upload"), "{m}");
+        let unlimited = Usage {
+            quota_bytes: None,
+            ..usage
+        };
+        assert!(unlimited.check_tiles("p", 0, u64::MAX).is_ok());
     }
 
     #[test]

@@ -71,6 +71,13 @@ pub async fn serve(config: ServeConfig) -> Result<(), String> {
         tracing::info!(jobs = recovered, "unfinished costmap jobs queued again");
     }
     jobs.start_maintenance();
+    // Tiles of uploads a killed server left (see dem_store::uploads).
+    match crate::state::dem_store::uploads::sweep_at_start(&db).await {
+        Ok(0) => {}
+        Ok(n) => tracing::info!(uploads = n, "swept the tiles of unfinished DEM uploads"),
+        Err(e) => return Err(format!("cannot sweep unfinished DEM uploads: {e}")),
+    }
+    crate::state::dem_store::uploads::start_sweeping(db.clone(), config.job_lease());
     let allowed_hosts = crate::guard::AllowedHosts::new(&config.host, &config.allowed_hosts);
     let app = router(
         state,

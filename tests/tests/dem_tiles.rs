@@ -4,9 +4,17 @@
 //! GDAL's read of the file, their overview level the 2×2 means; truncated
 //! and corrupt uploads answered with a 4xx and nothing left in the
 //! database; and the server's peak resident memory while it cuts an
-//! 8000 × 8000 Float32 GeoTIFF into tiles far below the raster's size.
+//! 8000 × 8000 Float32 GeoTIFF into tiles far below the raster's size;
+//! and a server killed (SIGKILL) mid-upload leaves no tiles once it is
+//! started again.
+
+#[path = "support/dem_rows.rs"]
+mod dem_rows;
 
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use dem_rows::{DemRows, dem_rows, upload_in_background};
 
 use serde_json::Value;
 use terraplan_e2e::{Server, assert_problem, get, post, run_tool, shared_data};
@@ -82,23 +90,12 @@ fn same(a: f64, b: f64) -> bool {
     a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
 }
 
-/// Rows in the tables that hold a DEM, counted in the server's SQLite file.
+/// Rows of `dems`, `dem_tile_sets` and `dem_tiles` in the server's
+/// SQLite file; no upload is left recorded as running.
 fn stored_rows(data_dir: &Path) -> (u64, u64, u64) {
-    let db = data_dir.join("terraplan.sqlite3");
-    let out = run_tool(
-        "python3",
-        &[
-            "-c",
-            "import sqlite3, sys\n\
-             c = sqlite3.connect(sys.argv[1])\n\
-             print(*[c.execute(f'SELECT COUNT(*) FROM {t}').fetchone()[0] \
-                     for t in ('dems', 'dem_tile_sets', 'dem_tiles')])",
-            db.to_str().unwrap(),
-        ],
-        None,
-    );
-    let n: Vec<u64> = out.split_whitespace().map(|v| v.parse().unwrap()).collect();
-    (n[0], n[1], n[2])
+    let rows = dem_rows(data_dir);
+    assert_eq!(rows.uploads, 0, "{rows:?}");
+    (rows.dems, rows.tile_sets, rows.tiles)
 }
 
 /// The 2×2 means of the non-NaN cells (the overview rule).
@@ -521,4 +518,64 @@ fn a_dem_over_the_memory_budget_is_stored_and_served_by_tiles() {
         "{p}"
     );
     assert_eq!(get(&server.url("/healthz")).status, 200);
+}
+
+/// A server killed (SIGKILL) in the middle of an upload, its tiles partly
+/// written, leaves them recorded as an upload running; the next server on
+/// the database sweeps them at start-up, before it listens: no tile and no
+/// record of the upload is left, and uploads work as before.
+#[test]
+fn tiles_of_an_upload_killed_mid_way_are_swept_at_the_next_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let work = tempfile::tempdir().unwrap();
+    // 6000 × 6000 Deflate strips: 144 level-0 tiles, stored 16 at a time.
+    let file = resampled(
+        &shared_data("dems/opengeos_data__elevation_dtm.tif"),
+        &work.path().join("big.tif"),
+        6000,
+        6000,
+        &["-co", "COMPRESS=DEFLATE"],
+    );
+    let server = Server::start(dir.path(), &[]);
+    let sending = upload_in_background(&server, "crs=EPSG:32618", std::fs::read(&file).unwrap());
+    // Until the first tiles are committed (and long before the last).
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let during = loop {
+        let rows = dem_rows(dir.path());
+        if rows.tiles > 0 {
+            break rows;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no tile stored in 120 s: {rows:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    server.kill();
+    let _ = sending.join();
+    let left = dem_rows(dir.path());
+    assert_eq!(
+        (left.dems, left.tile_sets, left.uploads),
+        (0, 0, 1),
+        "killed mid-upload: {left:?} (seen {during:?})"
+    );
+    assert!(left.tiles >= during.tiles && left.tiles < 144, "{left:?}");
+
+    let server = Server::start(dir.path(), &[]);
+    assert_eq!(dem_rows(dir.path()), DemRows::NONE);
+    let r = upload(
+        &server,
+        &shared_data("dems/opengeos_data__elevation_dtm.tif"),
+        "EPSG:32618",
+    );
+    assert_eq!(r.status, 201, "{}", r.text());
+    assert_eq!(
+        dem_rows(dir.path()),
+        DemRows {
+            dems: 1,
+            tile_sets: 1,
+            tiles: 1,
+            uploads: 0
+        }
+    );
 }

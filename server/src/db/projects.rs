@@ -190,12 +190,18 @@ impl Db {
         Ok(total)
     }
 
-    /// A project's stored bytes (its DEM files and costmap files) and its
+    /// A project's stored bytes (its DEMs' tiles and kept files, the tiles
+    /// of its uploads running, its costmap files; see `quota`) and its
     /// costmap jobs queued or running.
     pub async fn project_usage(&self, project_id: &str) -> Result<(i64, i64), sqlx::Error> {
         // SUM of BIGINT is NUMERIC on PostgreSQL: cast back.
         const SQL: &str = "SELECT \
-            CAST((SELECT COALESCE(SUM(size_bytes), 0) FROM dems WHERE project_id = $1) AS BIGINT), \
+            CAST((SELECT COALESCE(SUM(d.size_bytes), 0) FROM dems d WHERE d.project_id = $1 \
+                  AND EXISTS (SELECT 1 FROM dem_chunks c WHERE c.dem_id = d.id AND c.seq = 0)) \
+                 + (SELECT COALESCE(SUM(t.size_bytes), 0) FROM dem_tile_sets t \
+                  JOIN dems d ON d.id = t.dem_id WHERE d.project_id = $1) \
+                 + (SELECT COALESCE(SUM(u.size_bytes), 0) FROM dem_uploads u \
+                  WHERE u.project_id = $1) AS BIGINT), \
             CAST((SELECT COALESCE(SUM(f.size_bytes), 0) FROM costmap_files f \
                   JOIN costmaps c ON c.id = f.costmap_id WHERE c.project_id = $1) AS BIGINT), \
             (SELECT COUNT(*) FROM costmaps WHERE project_id = $1 \

@@ -3,6 +3,7 @@
 //! with room for it in the memory budget, for handlers and costmap jobs.
 
 pub mod tiles;
+pub mod uploads;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};

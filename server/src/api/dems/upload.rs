@@ -43,6 +43,7 @@ use crate::db::{CHUNK_BYTES, DemMetaRow};
 use crate::error::{ApiError, Problem};
 use crate::memory::{Reservation, dem_read_bytes, mib};
 use crate::state::dem_store::tiles;
+use crate::state::dem_store::uploads::{self, UploadLease};
 use crate::state::{AppState, Work};
 
 /// What the upload limits' messages call a DEM upload.
@@ -392,64 +393,76 @@ async fn store_geotiff(
     // any tile is stored); its statistics from the cutting.
     let grid = windows.grid().clone();
     tiles::windows_info(&grid, DemFormat::GeoTiff, &tiles::CellStats::default())?;
-    let guard = TilesGuard::new(state, id);
-    let stored = tiles::store_tiles(&state.db, &state.planner, id, windows, Some(exact)).await?;
-    let info = tiles::windows_info(&grid, DemFormat::GeoTiff, &stored.stats)?;
-    let pixels = (width as u64).saturating_mul(height as u64);
-    let row = DemMetaRow {
-        id: id.to_string(),
-        name: labels.name,
-        created_at: now_millis(),
-        file_name: labels.file_name,
-        crs_override: crs.map(i64::from),
-        info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
-        size_bytes: spool.len as i64,
-        // Read whole again from its tiles: the heights and a tile or two.
-        read_bytes: i64::try_from(dem_read_bytes(pixels, 4 << 20, 0)).ok(),
-        project_id: Some(project_id),
-    };
-    drop(spool);
-    state.db.insert_dem_tiled(&row, &stored.row, &[]).await?;
-    guard.disarm();
-    Ok((row, info))
-}
-
-/// Deletes the tiles stored under an upload's id unless the DEM was
-/// stored: on an error, and when the client goes away mid-upload (the
-/// handler is then dropped at an await, and the cutting stops at its next
-/// tile).
-struct TilesGuard {
-    db: crate::db::Db,
-    id: String,
-    armed: bool,
-}
-
-impl TilesGuard {
-    fn new(state: &AppState, id: &str) -> TilesGuard {
-        TilesGuard {
-            db: state.db.clone(),
+    let lease = begin_upload(state, id, &project_id).await?;
+    let stored = async {
+        let stored =
+            tiles::store_tiles(&state.db, &state.planner, &lease, windows, Some(exact)).await?;
+        let info = tiles::windows_info(&grid, DemFormat::GeoTiff, &stored.stats)?;
+        let pixels = (width as u64).saturating_mul(height as u64);
+        let row = DemMetaRow {
             id: id.to_string(),
-            armed: true,
-        }
+            name: labels.name,
+            created_at: now_millis(),
+            file_name: labels.file_name,
+            crs_override: crs.map(i64::from),
+            info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
+            size_bytes: spool.len as i64,
+            // Read whole again from its tiles: the heights and a tile or two.
+            read_bytes: i64::try_from(dem_read_bytes(pixels, 4 << 20, 0)).ok(),
+            project_id: Some(project_id),
+        };
+        drop(spool);
+        insert_dem(state, &row, &stored.row, &[]).await?;
+        Ok::<_, ApiError>((row, info))
     }
+    .await;
+    settle(lease, stored).await
+}
 
-    fn disarm(mut self) {
-        self.armed = false;
+/// Record upload `id` of project `project_id` as held by this process
+/// (see `state::dem_store::uploads`).
+async fn begin_upload(
+    state: &AppState,
+    id: &str,
+    project_id: &str,
+) -> Result<UploadLease, ApiError> {
+    let jobs = &state.costmaps;
+    UploadLease::begin(
+        &state.db,
+        id,
+        project_id,
+        jobs.instance(),
+        jobs.lease_ms(),
+        state.quotas,
+    )
+    .await
+}
+
+/// Store the DEM of an upload whose tiles are stored; a 503 when the
+/// upload was swept meanwhile (see [`uploads::swept_error`]).
+async fn insert_dem(
+    state: &AppState,
+    row: &DemMetaRow,
+    set: &crate::db::DemTileSetRow,
+    data: &[u8],
+) -> Result<(), ApiError> {
+    match state.db.insert_dem_tiled(row, set, data).await {
+        Err(sqlx::Error::RowNotFound) => Err(uploads::swept_error()),
+        other => Ok(other?),
     }
 }
 
-impl Drop for TilesGuard {
-    fn drop(&mut self) {
-        if !self.armed {
-            return;
+/// The upload's end: finished when its DEM was stored, else abandoned,
+/// its tiles removed before the answer is sent.
+async fn settle<T>(lease: UploadLease, result: Result<T, ApiError>) -> Result<T, ApiError> {
+    match result {
+        Ok(v) => {
+            lease.finished();
+            Ok(v)
         }
-        let (db, id) = (self.db.clone(), std::mem::take(&mut self.id));
-        if let Ok(rt) = tokio::runtime::Handle::try_current() {
-            rt.spawn(async move {
-                if let Err(e) = db.delete_dem_tiles(&id).await {
-                    tracing::warn!(dem_id = id, error = %e, "tiles of a failed upload not deleted");
-                }
-            });
+        Err(e) => {
+            lease.abandon().await;
+            Err(e)
         }
     }
 }
@@ -476,28 +489,34 @@ async fn store_whole(
         })
         .await??;
     let dem = Arc::new(dem);
-    let guard = TilesGuard::new(state, id);
-    let stored = tiles::store_tiles(
-        &state.db,
-        &state.planner,
-        id,
-        tiles::SharedDem::new(dem.clone()),
-        None,
-    )
-    .await?;
-    let row = DemMetaRow {
-        id: id.to_string(),
-        name: labels.name,
-        created_at: now_millis(),
-        file_name: labels.file_name,
-        crs_override: crs.map(i64::from),
-        info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
-        size_bytes: data.len() as i64,
-        read_bytes: i64::try_from(need).ok(),
-        project_id: Some(project_id),
-    };
-    state.db.insert_dem_tiled(&row, &stored.row, &data).await?;
-    guard.disarm();
+    let lease = begin_upload(state, id, &project_id).await?;
+    let stored = async {
+        let stored = tiles::store_tiles(
+            &state.db,
+            &state.planner,
+            &lease,
+            tiles::SharedDem::new(dem.clone()),
+            None,
+        )
+        .await?;
+        // The file is kept too: it counts with the tiles.
+        lease.check_file_quota(data.len() as u64).await?;
+        let row = DemMetaRow {
+            id: id.to_string(),
+            name: labels.name,
+            created_at: now_millis(),
+            file_name: labels.file_name,
+            crs_override: crs.map(i64::from),
+            info: serde_json::to_string(&info).map_err(|e| ApiError::Internal(e.to_string()))?,
+            size_bytes: data.len() as i64,
+            read_bytes: i64::try_from(need).ok(),
+            project_id: Some(project_id),
+        };
+        insert_dem(state, &row, &stored.row, &data).await?;
+        Ok::<_, ApiError>(row)
+    }
+    .await;
+    let row = settle(lease, stored).await?;
     state.dems.cache.insert(&row.id, dem, None);
     Ok((row, info))
 }

@@ -18,6 +18,7 @@ use planner_core::terrain::{
 
 use crate::db::{Db, DemTileRow, DemTileSetRow};
 use crate::error::ApiError;
+use crate::state::dem_store::uploads::{UploadLease, swept_error};
 use crate::state::{Planners, Work};
 
 /// Tiles written per transaction.
@@ -498,29 +499,13 @@ pub struct StoredSet {
 
 /// Cut `src` into tiles (f32 when `f32_exact` says every value fits,
 /// `None`: checked by a first pass) on a DEM planner slot and store them
-/// under `dem_id` as they come, a few per transaction. On any fault the
-/// tiles stored so far are deleted again.
+/// under upload `upload` as they come, a few per transaction, each batch
+/// checked against the project's storage quota first. On a fault the
+/// caller abandons the upload (its tiles go with it).
 pub async fn store_tiles<S: RasterWindows + Send + 'static>(
     db: &Db,
     planner: &Planners,
-    dem_id: &str,
-    src: S,
-    f32_exact: Option<bool>,
-) -> Result<StoredSet, ApiError> {
-    let result = store_tiles_once(db, planner, dem_id, src, f32_exact).await;
-    if result.is_err() {
-        // Best effort: the DEM has no row yet, so no one sees them.
-        if let Err(e) = db.delete_dem_tiles(dem_id).await {
-            tracing::warn!(dem_id, error = %e, "tiles of a failed upload not deleted");
-        }
-    }
-    result
-}
-
-async fn store_tiles_once<S: RasterWindows + Send + 'static>(
-    db: &Db,
-    planner: &Planners,
-    dem_id: &str,
+    upload: &UploadLease,
     src: S,
     f32_exact: Option<bool>,
 ) -> Result<StoredSet, ApiError> {
@@ -544,14 +529,15 @@ async fn store_tiles_once<S: RasterWindows + Send + 'static>(
         })?;
         Ok::<_, CutError>((set, stats, transform))
     });
-    let storing = async {
+    // Moves `take` in: a fault drops it, and the cutting stops at its
+    // next tile (instead of waiting for room in the channel).
+    let storing = async move {
         let mut batch = Vec::with_capacity(TILES_PER_INSERT);
-        let mut bytes = 0i64;
+        let mut bytes = 0u64;
         loop {
             let tile = take.recv().await;
             let done = tile.is_none();
             if let Some(t) = tile {
-                bytes += t.data.len() as i64;
                 batch.push(DemTileRow {
                     level: t.level as i64,
                     row: t.row as i64,
@@ -560,16 +546,30 @@ async fn store_tiles_once<S: RasterWindows + Send + 'static>(
                 });
             }
             if batch.len() >= TILES_PER_INSERT || (done && !batch.is_empty()) {
-                // A fault drops `take`: the cutting stops at its next tile.
-                db.insert_dem_tiles(dem_id, &batch).await?;
+                let adding: u64 = batch.iter().map(|t| t.data.len() as u64).sum();
+                upload.check_held()?;
+                upload.check_quota(bytes, adding).await?;
+                let held = db
+                    .insert_dem_tiles(
+                        upload.dem_id(),
+                        upload.owner(),
+                        &batch,
+                        upload.lease_until(),
+                    )
+                    .await?;
+                if !held {
+                    return Err(swept_error());
+                }
+                bytes += adding;
                 batch.clear();
             }
             if done {
-                return Ok::<_, sqlx::Error>(bytes);
+                return Ok::<_, ApiError>(bytes);
             }
         }
     };
     let (cut, stored) = tokio::join!(cutting, storing);
+    // The storing's fault first: it is why the cutting stopped.
     let bytes = stored?;
     let (set, stats, transform) = cut?.map_err(|e| match e {
         CutError::Terrain(t) => ApiError::from(t),
@@ -581,7 +581,7 @@ async fn store_tiles_once<S: RasterWindows + Send + 'static>(
         levels: set.levels as i64,
         transform: serde_json::to_string(&transform)
             .map_err(|e| ApiError::Internal(e.to_string()))?,
-        size_bytes: bytes,
+        size_bytes: i64::try_from(bytes).unwrap_or(i64::MAX),
     };
     Ok(StoredSet { row, stats })
 }
