@@ -605,9 +605,22 @@ mod tests {
     use crate::costmap::regions::fill_enclosed;
     use crate::test_rng::Lcg;
 
-    /// The fill of `class` tile by tile (tiles of `tile` cells).
-    fn tiled_fill(class: &[u8], w: usize, h: usize, tile: usize, min_cells: f64) -> Vec<u8> {
+    /// The fill of `class` tile by tile (tiles of `tile` cells), the
+    /// tiles' edges joined in an order drawn from `seed`.
+    fn tiled_fill(
+        class: &[u8],
+        w: usize,
+        h: usize,
+        tile: usize,
+        min_cells: f64,
+        seed: u64,
+    ) -> Vec<u8> {
         let layout = TileLayout::new(w, h, tile);
+        let mut order: Vec<usize> = (0..layout.count()).collect();
+        let mut s = Lcg(seed);
+        for i in (1..order.len()).rev() {
+            order.swap(i, ((s.next() * (i + 1) as f64) as usize).min(i));
+        }
         let mut join = RegionJoin::new(layout, min_cells);
         let window_of = |t: &TileWindow| {
             let p = t.padded([1, 1], w, h);
@@ -617,7 +630,7 @@ mod tests {
             }
             (win, p)
         };
-        for k in 0..layout.count() {
+        for &k in &order {
             let t = layout.tile(k);
             let (win, p) = window_of(&t);
             let labels = label_tile(&win, p.width, [p.dx, p.dy], &t, [w, h]);
@@ -674,7 +687,7 @@ mod tests {
             fill_enclosed(&mut want, w, h, min);
             for tile in [1, 2, 3, 5, 10, 16, 30] {
                 assert_eq!(
-                    tiled_fill(&class, w, h, tile, min),
+                    tiled_fill(&class, w, h, tile, min, tile as u64),
                     want,
                     "tile {tile} min {min}"
                 );
@@ -706,10 +719,55 @@ mod tests {
             let mut want = class.clone();
             fill_enclosed(&mut want, w, h, min);
             assert_eq!(
-                tiled_fill(&class, w, h, tile, min),
+                tiled_fill(&class, w, h, tile, min, tile as u64),
                 want,
                 "case {case}: {w}×{h} tile {tile} min {min}"
             );
         }
+    }
+
+    #[test]
+    fn damaged_edges_and_fills_are_refused() {
+        let (w, h) = (12, 9);
+        let mut s = Lcg(0xed9e);
+        let class: Vec<u8> = (0..w * h)
+            .map(|_| {
+                if s.next() < 0.6 {
+                    Class::Traversable as u8
+                } else {
+                    Class::Step as u8
+                }
+            })
+            .collect();
+        let layout = TileLayout::new(w, h, 5);
+        let mut join = RegionJoin::new(layout, 4.0);
+        let mut all_edges = Vec::new();
+        for k in 0..layout.count() {
+            let t = layout.tile(k);
+            let p = t.padded([1, 1], w, h);
+            let mut win = Vec::new();
+            for r in p.row0..p.row0 + p.height {
+                win.extend_from_slice(&class[r * w + p.col0..r * w + p.col0 + p.width]);
+            }
+            let labels = label_tile(&win, p.width, [p.dx, p.dy], &t, [w, h]);
+            let edges = TileEdges::of(&t, &labels);
+            all_edges.push(edges.to_bytes());
+            join.add(k, edges).unwrap();
+        }
+        let fill = join.join().unwrap();
+        use crate::costmap::tile_bytes::testing::assert_refuses_damage;
+        assert_refuses_damage(&all_edges[4], TileEdges::from_bytes, 1);
+        let part = fill.tile(4).unwrap().to_bytes();
+        assert_refuses_damage(&part, TileFill::from_bytes, 2);
+        assert_refuses_damage(&fill.to_bytes(), RegionFill::from_bytes, 3);
+        // A core of 2^32 × 2^32 cells announced in a few bytes.
+        let mut huge = all_edges[0][..2].to_vec();
+        huge.extend_from_slice(&u32::MAX.to_le_bytes());
+        huge.extend_from_slice(&u32::MAX.to_le_bytes());
+        assert!(TileEdges::from_bytes(&huge).is_err());
+        // Edges that disagree at a corner.
+        let mut e = TileEdges::from_bytes(&all_edges[0]).unwrap();
+        e.top[0] = e.top[0].wrapping_add(1);
+        assert!(TileEdges::from_bytes(&e.to_bytes()).is_err());
     }
 }

@@ -749,3 +749,338 @@ impl FinishMerge<'_> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::JoinError;
+    use crate::costmap::tiled::tests::{assert_same, terrain, tiled};
+    use crate::costmap::{InflationMode, NegativeStepOptions, RoughnessOptions, VehiclePreset};
+    use crate::terrain::DemWindows;
+    use crate::test_rng::Lcg;
+
+    /// 0..n in an order drawn from `s`.
+    fn shuffled(n: usize, s: &mut Lcg) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            let j = (s.next() * (i + 1) as f64) as usize;
+            order.swap(i, j.min(i));
+        }
+        order
+    }
+
+    /// A costmap made by the stages as jobs would make it: each stage's
+    /// tiles in a shuffled order, each on a plan rebuilt from the request
+    /// (as every process does), every exchanged piece through its bytes;
+    /// then the tiles assembled into whole grids.
+    struct Staged {
+        map: TiledCostmap,
+        cost: Vec<f32>,
+        class: Vec<u8>,
+        layers: Vec<(Layer, Vec<f32>)>,
+    }
+
+    fn staged(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize, seed: u64) -> Staged {
+        let src = DemWindows::new(d);
+        let plan_of = || {
+            TilePlan::new(src.grid(), v, o, None, tile)
+                .unwrap()
+                .with_preview_max_side(64)
+        };
+        let plan = plan_of();
+        let n = plan.tile_count();
+        let mut s = Lcg(seed);
+        let cancel = AtomicBool::new(false);
+
+        // 1. classify
+        let mut prefill = vec![Vec::new(); n];
+        let mut edges = vec![Vec::new(); n];
+        for k in shuffled(n, &mut s) {
+            let c = plan_of().classify(&src, None, k, &cancel).unwrap();
+            prefill[k] = c.core;
+            edges[k] = c.edges.to_bytes();
+        }
+        // 2. join
+        let order = shuffled(n, &mut s);
+        let fill = plan_of()
+            .join(
+                order
+                    .iter()
+                    .map(|&k| (k, TileEdges::from_bytes(&edges[k]).unwrap())),
+            )
+            .unwrap();
+        let fill = RegionFill::from_bytes(&fill.to_bytes()).unwrap();
+        let fill: Vec<Vec<u8>> = fill.into_tiles().iter().map(TileFill::to_bytes).collect();
+        // 3. fill, reading the classes before the fill only
+        let prefill_windows = ClassTiles::new(plan.layout(), |k| Ok(prefill[k].as_slice()));
+        let mut classes = vec![Vec::new(); n];
+        for k in shuffled(n, &mut s) {
+            let part = TileFill::from_bytes(&fill[k]).unwrap();
+            classes[k] = plan_of().fill(k, &prefill_windows, &part).unwrap();
+        }
+        // 4. cost
+        let final_windows = ClassTiles::new(plan.layout(), |k| Ok(classes[k].as_slice()));
+        let (w, h) = (plan.layout().width, plan.layout().height);
+        let mut cost = vec![0.0; w * h];
+        let mut class = vec![0; w * h];
+        let mut layers: Vec<(Layer, Vec<f32>)> = plan
+            .layers()
+            .into_iter()
+            .map(|l| (l, vec![0.0; w * h]))
+            .collect();
+        let mut parts = vec![(Vec::new(), Vec::new()); n];
+        for k in shuffled(n, &mut s) {
+            let t = plan_of()
+                .cost(&src, None, &final_windows, k, &cancel)
+                .unwrap();
+            let tw = &t.window;
+            for r in 0..tw.height {
+                let at = (tw.row0 + r) * w + tw.col0;
+                let from = r * tw.width..(r + 1) * tw.width;
+                cost[at..at + tw.width].copy_from_slice(&t.cost[from.clone()]);
+                class[at..at + tw.width].copy_from_slice(&t.class[from.clone()]);
+                assert_eq!(t.layers.len(), layers.len());
+                for ((la, all), (lb, part)) in layers.iter_mut().zip(&t.layers) {
+                    assert_eq!(la, lb);
+                    all[at..at + tw.width].copy_from_slice(&part[from.clone()]);
+                }
+            }
+            parts[k] = (t.tally.to_bytes(), t.preview.to_bytes());
+        }
+        // 5. finish, the parts read back in tile order
+        let map = plan_of()
+            .finish(parts.iter().enumerate().map(|(k, (t, p))| {
+                (
+                    k,
+                    TallyPart::from_bytes(t).unwrap(),
+                    PreviewPart::from_bytes(p).unwrap(),
+                )
+            }))
+            .unwrap();
+        Staged {
+            map,
+            cost,
+            class,
+            layers,
+        }
+    }
+
+    /// The stages in shuffled order give what the sequential tiled run
+    /// gives, bit for bit (statistics and preview included), and that is
+    /// the whole-raster run's ([`assert_same`]).
+    fn assert_stages_equal(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize, seed: u64) {
+        assert_same(d, v, o, tile);
+        let (m, seq) = tiled(d, v, o, tile);
+        let st = staged(d, v, o, tile, seed);
+        let label = format!("{}×{} tile {tile}", m.width, m.height);
+        assert!(
+            st.cost
+                .iter()
+                .zip(&seq.cost)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{label}: costs"
+        );
+        assert_eq!(st.class, seq.class, "{label}: classes");
+        assert_eq!(st.layers.len(), seq.layers.len(), "{label}");
+        for ((la, a), (lb, b)) in st.layers.iter().zip(&seq.layers) {
+            assert_eq!(la, lb);
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{label}: {la:?}"
+            );
+        }
+        let sm = &st.map;
+        assert_eq!(sm.stats, m.stats, "{label}: statistics");
+        assert_eq!(
+            sm.stats.cost_mean.map(f64::to_bits),
+            m.stats.cost_mean.map(f64::to_bits),
+            "{label}: mean"
+        );
+        assert_eq!(sm.warnings, m.warnings, "{label}");
+        assert_eq!(sm.preview_png, m.preview_png, "{label}: preview");
+        assert_eq!(
+            (
+                sm.width,
+                sm.height,
+                sm.transform,
+                &sm.crs,
+                sm.tile,
+                sm.halos
+            ),
+            (m.width, m.height, m.transform, &m.crs, m.tile, m.halos),
+            "{label}"
+        );
+        assert_eq!(sm.params, m.params);
+        assert_eq!(sm.legend_svg(), m.legend_svg());
+    }
+
+    #[test]
+    fn stages_in_any_order_equal_the_sequential_and_whole_runs() {
+        let v = VehiclePreset::UGo.vehicle();
+        // Walled pockets across tile borders, nodata on tile borders.
+        let d = terrain(47, 39, 0.1, 7);
+        let o = CostmapOptions {
+            layers: Layer::ALL
+                .into_iter()
+                .filter(|&l| l != Layer::Landcover)
+                .collect(),
+            roughness: Some(RoughnessOptions {
+                max_m: 0.05,
+                weight: 2.0,
+            }),
+            negative_steps: Some(NegativeStepOptions {
+                max_depth_m: Some(0.1),
+                radius_m: Some(0.3),
+            }),
+            min_region_area_m2: Some(1.0),
+            ..Default::default()
+        };
+        for (i, tile) in [1, 3, 7, 16, 23, 47, 100].into_iter().enumerate() {
+            assert_stages_equal(&d, &v, &o, tile, 100 + i as u64);
+        }
+    }
+
+    #[test]
+    fn stages_equal_the_runs_on_random_dems_modes_and_tile_sizes() {
+        let v = VehiclePreset::UGo.vehicle();
+        let mut s = Lcg(0x57a9e5);
+        for case in 0..10 {
+            let w = 8 + (s.next() * 60.0) as usize;
+            let h = 8 + (s.next() * 60.0) as usize;
+            let cell = 0.05 + 0.1 * s.next();
+            let d = terrain(w, h, cell, case);
+            let tile = 1 + (s.next() * 30.0) as usize;
+            // Every third case resampled to cells twice as large.
+            let resampled = case % 3 == 2;
+            let work = if resampled { 2.0 * cell } else { cell };
+            let o = CostmapOptions {
+                min_region_area_m2: Some(0.5 + 3.0 * s.next()),
+                inflation_sigma_m: Some(work * (0.2 + 2.0 * s.next())),
+                inflation: [InflationMode::Distance, InflationMode::Blur][case as usize % 2],
+                pca_radius_m: Some(work * (1.5 + 1.5 * s.next())),
+                resolution_m: resampled.then_some(work),
+                layers: vec![Layer::Slope, Layer::Inflation],
+                ..Default::default()
+            };
+            assert_stages_equal(&d, &v, &o, tile, case);
+        }
+    }
+
+    #[test]
+    fn the_plan_is_the_same_on_every_rebuild() {
+        let v = VehiclePreset::UGo.vehicle();
+        let d = terrain(40, 30, 0.1, 2);
+        let src = DemWindows::new(&d);
+        let o = CostmapOptions::default();
+        let a = TilePlan::new(src.grid(), &v, &o, None, 16).unwrap();
+        let b = TilePlan::new(src.grid(), &v, &o, None, 16).unwrap();
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        assert_eq!(a.tile_count(), 6);
+        assert_eq!(a.header().tile, 16);
+    }
+
+    #[test]
+    fn stage_inputs_that_do_not_fit_the_plan_are_errors() {
+        let v = VehiclePreset::UGo.vehicle();
+        let d = terrain(40, 30, 0.1, 2);
+        let src = DemWindows::new(&d);
+        let plan = TilePlan::new(src.grid(), &v, &CostmapOptions::default(), None, 16).unwrap();
+        let cancel = AtomicBool::new(false);
+        let n = plan.tile_count();
+        assert!(matches!(
+            plan.classify(&src, None, n, &cancel),
+            Err(TiledError::NoSuchTile { k, count }) if k == n && count == n
+        ));
+        // Another DEM's source.
+        let other = terrain(41, 30, 0.1, 2);
+        assert!(matches!(
+            plan.classify(&DemWindows::new(&other), None, 0, &cancel),
+            Err(TiledError::Mismatch(_))
+        ));
+        // Cancelled before it starts.
+        let stop = AtomicBool::new(true);
+        assert!(matches!(
+            plan.classify(&src, None, 0, &stop),
+            Err(TiledError::Costmap(CostmapError::Cancelled))
+        ));
+        let classified: Vec<Classified> = (0..n)
+            .map(|k| plan.classify(&src, None, k, &cancel).unwrap())
+            .collect();
+        // The join: a tile twice, one missing, another tile's edges.
+        let edges = |k: usize| classified[k].edges.clone();
+        let r = plan.join([(0, edges(0)), (0, edges(0))]);
+        assert!(
+            matches!(r, Err(TiledError::Join(JoinError::Twice(0)))),
+            "{r:?}"
+        );
+        let r = plan.join((0..n - 1).map(|k| (k, edges(k))));
+        assert!(
+            matches!(r, Err(TiledError::Join(JoinError::Missing(k))) if k == n - 1),
+            "{r:?}"
+        );
+        // Tile 2 is 8 cells wide, tile 0 16.
+        let r = plan.join([(2, edges(0))]);
+        assert!(
+            matches!(r, Err(TiledError::Join(JoinError::WrongSize { k: 2, .. }))),
+            "{r:?}"
+        );
+        let fill = plan.join((0..n).rev().map(|k| (k, edges(k)))).unwrap();
+        // Class tiles of the wrong size.
+        let short = ClassTiles::new(plan.layout(), |_| Ok(vec![1u8; 3]));
+        let r = plan.fill(0, &short, fill.tile(0).unwrap());
+        assert!(matches!(r, Err(TiledError::Mismatch(_))), "{r:?}");
+        // A store that fails says so.
+        let failing = ClassTiles::new(plan.layout(), |_| -> Result<Vec<u8>, TiledError> {
+            Err(TiledError::Stored("the database is gone".into()))
+        });
+        let r = plan.cost(&src, None, &failing, 0, &cancel);
+        assert!(
+            matches!(&r, Err(e) if e.to_string().contains("the database is gone")),
+            "{r:?}"
+        );
+        // Finish: out of order, wrong tile, incomplete.
+        let prefill = ClassTiles::new(plan.layout(), |k| Ok(classified[k].core.as_slice()));
+        let finals: Vec<Vec<u8>> = (0..n)
+            .map(|k| plan.fill(k, &prefill, fill.tile(k).unwrap()).unwrap())
+            .collect();
+        let classes = ClassTiles::new(plan.layout(), |k| Ok(finals[k].as_slice()));
+        let tiles: Vec<CostTile> = (0..n)
+            .map(|k| plan.cost(&src, None, &classes, k, &cancel).unwrap())
+            .collect();
+        let part = |k: usize| (k, tiles[k].tally.clone(), tiles[k].preview.clone());
+        let r = plan.finish([part(1), part(0)]);
+        assert!(matches!(r, Err(TiledError::Mismatch(_))), "{r:?}");
+        let mut merge = plan.merge();
+        merge.add(0, &tiles[0].tally, &tiles[0].preview).unwrap();
+        // Tile 2's tally (fewer cells) given as tile 1's.
+        let r = merge.add(1, &tiles[2].tally, &tiles[1].preview);
+        assert!(matches!(r, Err(TiledError::Mismatch(_))), "{r:?}");
+        assert!(matches!(merge.finish(), Err(TiledError::Mismatch(_))));
+        plan.finish((0..n).map(part)).unwrap();
+    }
+
+    #[test]
+    fn class_tiles_cut_windows_across_tiles() {
+        let layout = TileLayout::new(10, 7, 4);
+        // Each tile's cells hold their grid index mod 251.
+        let tiles: Vec<Vec<u8>> = (0..layout.count())
+            .map(|k| {
+                let t = layout.tile(k);
+                (0..t.width * t.height)
+                    .map(|i| (((t.row0 + i / t.width) * 10 + t.col0 + i % t.width) % 251) as u8)
+                    .collect()
+            })
+            .collect();
+        let windows = ClassTiles::new(layout, |k| Ok(tiles[k].as_slice()));
+        let mut out = Vec::new();
+        for (c0, r0, w, h) in [(0, 0, 10, 7), (3, 2, 5, 4), (9, 6, 1, 1), (2, 3, 0, 2)] {
+            windows.read_classes(c0, r0, w, h, &mut out).unwrap();
+            let want: Vec<u8> = (0..w * h)
+                .map(|i| (((r0 + i / w.max(1)) * 10 + c0 + i % w.max(1)) % 251) as u8)
+                .collect();
+            assert_eq!(out, want, "{c0} {r0} {w} {h}");
+        }
+        assert!(windows.read_classes(8, 0, 3, 1, &mut out).is_err());
+        assert!(windows.read_classes(0, 0, usize::MAX, 1, &mut out).is_err());
+    }
+}

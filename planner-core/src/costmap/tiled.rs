@@ -220,7 +220,7 @@ pub fn build_costmap_tiled(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::costmap::{Costmap, InflationMode, StepMode, VehiclePreset, build_costmap};
     use crate::terrain::DemWindows;
@@ -228,11 +228,11 @@ mod tests {
     use crate::test_rng::Lcg;
 
     /// Collects the tiles into whole grids.
-    struct Assemble {
+    pub(crate) struct Assemble {
         width: usize,
-        cost: Vec<f32>,
-        class: Vec<u8>,
-        layers: Vec<(Layer, Vec<f32>)>,
+        pub(crate) cost: Vec<f32>,
+        pub(crate) class: Vec<u8>,
+        pub(crate) layers: Vec<(Layer, Vec<f32>)>,
         order: Vec<(usize, usize)>,
     }
 
@@ -261,11 +261,16 @@ mod tests {
         }
     }
 
-    fn quiet() -> impl Progress {
+    pub(crate) fn quiet() -> impl Progress {
         |_: Stage, _: f64| true
     }
 
-    fn tiled(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize) -> (TiledCostmap, Assemble) {
+    pub(crate) fn tiled(
+        d: &Dem,
+        v: &Vehicle,
+        o: &CostmapOptions,
+        tile: usize,
+    ) -> (TiledCostmap, Assemble) {
         let whole = build_costmap(d, v, o, None, &quiet()).unwrap();
         let mut sink = Assemble {
             width: whole.width,
@@ -287,7 +292,7 @@ mod tests {
     /// The tiled run equals the whole-grid run: costs, classes and layers
     /// bit for bit, the statistics (the mean within 1e-9 relative) and the
     /// preview.
-    fn assert_same(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize) -> Costmap {
+    pub(crate) fn assert_same(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize) -> Costmap {
         let whole = build_costmap(d, v, o, None, &quiet()).unwrap();
         let (m, got) = tiled(d, v, o, tile);
         assert_eq!((m.width, m.height), (whole.width, whole.height));
@@ -337,7 +342,7 @@ mod tests {
 
     /// Rough ground with kerbs, pits, walled pockets crossing tile
     /// borders and nodata holes (some on tile borders).
-    fn terrain(w: usize, h: usize, cell: f64, seed: u64) -> Dem {
+    pub(crate) fn terrain(w: usize, h: usize, cell: f64, seed: u64) -> Dem {
         let mut s = Lcg(seed);
         let noise: Vec<f64> = (0..w * h).map(|_| s.next()).collect();
         let values = (0..w * h)
