@@ -4,13 +4,16 @@
 # (scripts/pg-cluster.sh), against one server on the embedded SQLite,
 # with 32 concurrent loopback clients (surveys/s, p50/p99, errors, peak RSS
 # per replica); then wall time and peak RSS of the CLI costmap of a big
-# Float32 DEM (generated as bench-costmap-tiled.sh does, kept in --dem-dir).
-# Costmap tiles are not yet spread over replicas/workers, so no multi-worker
-# costmap figure is reported. Writes target/bench-scale.json.
+# Float32 DEM (generated as bench-costmap-tiled.sh does, kept in --dem-dir);
+# then the same costmap through the service, its tile jobs built by 1, 2 and
+# 3 processes (a serve and 0-2 `terraplan worker`s on the PostgreSQL
+# database): wall time, speed-up, CPU and peak RSS per process.
+# Writes target/bench-scale.json.
 #
 #   bash scripts/bench-scale.sh [--seconds 20] [--clients 32] [--max-replicas 3]
 #                               [--dem-size 20000] [--tile-size 1024] [--dem-dir /tmp]
-#                               [--no-survey] [--no-costmap]
+#                               [--service-tile-side 512] [--service-tile-cells N]
+#                               [--no-survey] [--no-costmap] [--no-service-costmap]
 #   bash scripts/bench-scale.sh --seconds 10 --dem-size 8000   # a quicker run
 #
 # Needs what `bash scripts/setup.sh --with-validators` installs (cargo,

@@ -8,6 +8,11 @@
 2. The CLI costmap of a big Float32 DEM (generated as
    scripts/bench-costmap-tiled.sh does, and cached under the same name):
    wall time and peak RSS.
+3. The same costmap through the service, its tiles spread over 1, 2 and 3
+   processes on the PostgreSQL database (one `terraplan serve` and 0, 1, 2
+   `terraplan worker`s, one tile at a time each): the DEM uploaded once,
+   then one costmap per configuration; wall time from the POST to status
+   done, speed-up, CPU seconds and peak RSS per process.
 
 Standard library only; the DEM generator alone (`--generate-dem`, run as
 a child under /usr/bin/python3) needs numpy and GDAL's Python bindings.
@@ -29,12 +34,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-COSTMAP_NOT_SPREAD = (
-    "costmap tiles are not yet spread over replicas or workers: the tile-job "
-    "queue of issue 22 item 2 (its server half) is not built, so a costmap is "
-    "built by one process (here the CLI, tile by tile); the 1, 2, 3 replica "
-    "figures are for the survey service only"
-)
 
 
 # ---------------------------------------------------------------- processes
@@ -264,6 +263,17 @@ def run_config(label, servers, token, args, body):
     return res
 
 
+def start_cluster(workdir):
+    """A throwaway PostgreSQL cluster (scripts/pg-cluster.sh) in the temp dir;
+    its URL."""
+    start = subprocess.run(["bash", str(ROOT / "scripts/pg-cluster.sh"), "start",
+                            str(workdir / "pg")],
+                           capture_output=True, text=True, start_new_session=True)
+    if start.returncode != 0:
+        raise SystemExit(f"pg-cluster.sh start failed: {start.stderr.strip()}")
+    return start.stdout.strip().splitlines()[-1]
+
+
 def survey_bench(args, procs, workdir, binary):
     body = survey_body()
     common = ["--planning-per-minute", "0"]
@@ -279,12 +289,7 @@ def survey_bench(args, procs, workdir, binary):
     procs.stop(single.proc)
 
     # Replicas on one PostgreSQL database, added one at a time.
-    pg_dir = workdir / "pg"
-    start = subprocess.run(["bash", str(ROOT / "scripts/pg-cluster.sh"), "start", str(pg_dir)],
-                           capture_output=True, text=True, start_new_session=True)
-    if start.returncode != 0:
-        raise SystemExit(f"pg-cluster.sh start failed: {start.stderr.strip()}")
-    url = start.stdout.strip().splitlines()[-1]
+    url = start_cluster(workdir)
     env_pg = dict(env, DATABASE_URL=url)
     replicas = []
     token = None
@@ -325,7 +330,8 @@ def print_survey_table(results, args):
 
 # ---------------------------------------------------------------- costmap
 
-def costmap_bench(args, procs, workdir, binary):
+def bench_dem(args, procs):
+    """The generated big DEM (made once, kept in --dem-dir)."""
     dem = Path(args.dem_dir) / f"terraplan-bench-dem-{args.dem_size}.tif"
     if not dem.exists():
         print(f"generating {dem} ({args.dem_size} x {args.dem_size} Float32, kept for "
@@ -339,6 +345,11 @@ def costmap_bench(args, procs, workdir, binary):
         finally:
             procs.stop(gen)
             Path(str(dem) + ".part").unlink(missing_ok=True)
+    return dem
+
+
+def costmap_bench(args, procs, workdir, binary):
+    dem = bench_dem(args, procs)
     out = workdir / "costmap"
     print(f"  terraplan costmap {dem.name} --tile-size {args.tile_size}...",
           file=sys.stderr, flush=True)
@@ -363,7 +374,6 @@ def costmap_bench(args, procs, workdir, binary):
         "cpu_seconds": usage.ru_utime + usage.ru_stime,
         "peak_rss_mib": usage.ru_maxrss / 1024,
         "processes": 1,
-        "note": COSTMAP_NOT_SPREAD,
     }
 
 
@@ -373,7 +383,155 @@ def print_costmap(c):
     print(f"{'processes':<10} {'wall s':>8} {'CPU s':>8} {'M cells/s':>9} {'peak RSS MiB':>13}")
     print(f"{1:<10} {c['seconds']:8.1f} {c['cpu_seconds']:8.1f} "
           f"{c['cells'] / 1e6 / c['seconds']:9.2f} {c['peak_rss_mib']:13.0f}")
-    print(f"2, 3 workers: not measured: {c['note']}.")
+
+
+# ---------------------------------------------------------------- costmap over workers
+
+class Worker:
+    """A `terraplan worker` (no HTTP) on the PostgreSQL database, its log in
+    a file."""
+
+    def __init__(self, procs, binary, name, workdir, env_extra, extra_args):
+        self.name = name
+        data = workdir / f"data-{name}"
+        data.mkdir(parents=True, exist_ok=True)
+        self.log_path = workdir / f"{name}.log"
+        env = dict(os.environ, NO_COLOR="1", TERRAPLAN_LOG_FORMAT="text", **env_extra)
+        self.proc = procs.start(
+            [str(binary), "worker", "--data-dir", str(data), *extra_args],
+            stdout=subprocess.PIPE, stderr=open(self.log_path, "wb"), env=env, text=True)
+        first = self.proc.stdout.readline().strip()
+        if not (first.startswith("worker ") and first.endswith(" ready")):
+            self.proc.wait(5)
+            tail = self.log_path.read_text(errors="replace")[-2000:]
+            raise SystemExit(f"{name}: did not start (first line {first!r}); log:\n{tail}")
+        threading.Thread(target=lambda: self.proc.stdout.read(), daemon=True).start()
+
+    @property
+    def pid(self):
+        return self.proc.pid
+
+
+def api(server, token, method, path, body=None, content_type="application/json",
+        length=None, timeout=3600):
+    """One request to `server`; (status, parsed JSON or raw bytes)."""
+    headers = {"Authorization": f"Bearer {token}"}
+    if body is not None:
+        headers["Content-Type"] = content_type
+        if length is not None:
+            headers["Content-Length"] = str(length)
+    conn = http.client.HTTPConnection(server.host, server.port, timeout=timeout)
+    try:
+        conn.request(method, path, body=body, headers=headers)
+        r = conn.getresponse()
+        data = r.read()
+    finally:
+        conn.close()
+    try:
+        return r.status, json.loads(data)
+    except ValueError:
+        return r.status, data
+
+
+def service_costmap_bench(args, procs, workdir, binary, url):
+    """The big DEM's costmap through the service, its tiles built by 1, 2, 3
+    processes (a serve and 0, 1, 2 workers, --costmap-jobs 1 each)."""
+    dem = bench_dem(args, procs)
+    env = {"TERRAPLAN_LOG": args.log_level, "DATABASE_URL": url}
+    size_mb = dem.stat().st_size // (1024 * 1024) + 1
+    common = ["--costmap-jobs", "1", "--costmap-tile-side", str(args.service_tile_side),
+              "--costmap-tile-cells", str(args.service_tile_cells),
+              "--project-quota-mb", "0", "--project-queued-jobs", "0",
+              "--planning-per-minute", "0"]
+    serve_args = common + ["--max-dem-mb", str(max(256, size_mb)),
+                           "--max-dem-pixels", str(max(args.dem_size ** 2, 64_000_000))]
+    server = Server(procs, binary, "costmap-serve", workdir, env, serve_args)
+    token = make_token(binary, env)
+    print(f"  uploading {dem.name} ({dem.stat().st_size / 2**20:.0f} MiB) to the service...",
+          file=sys.stderr, flush=True)
+    began = time.monotonic()
+    with open(dem, "rb") as f:
+        status, up = api(server, token, "POST", "/api/v1/dems", body=f,
+                         content_type="image/tiff", length=dem.stat().st_size)
+    upload_s = time.monotonic() - began
+    if status != 201:
+        raise SystemExit(f"the DEM upload failed: HTTP {status}: {str(up)[:500]}")
+    dem_id = up["id"]
+    upload_rss = peak_rss_mib(server.pid)
+    runs = []
+    workers = []
+    for n in range(1, args.max_replicas + 1):
+        while len(workers) < n - 1:
+            workers.append(Worker(procs, binary, f"worker{len(workers) + 1}", workdir, env,
+                                  common))
+        processes = [server, *workers]
+        for p in processes:
+            reset_peak_rss(p.pid)
+        cpu_before = {p.name: cpu_seconds(p.pid) for p in processes}
+        print(f"  costmap on {n} process{'es' if n > 1 else ''}...", file=sys.stderr,
+              flush=True)
+        began = time.monotonic()
+        status, job = api(server, token, "POST", "/api/v1/costmaps",
+                          body=json.dumps({"dem_id": dem_id, "name": f"bench-{n}"}).encode())
+        if status != 202 and status != 201:
+            raise SystemExit(f"POST /api/v1/costmaps failed: HTTP {status}: {str(job)[:500]}")
+        cid = job["id"]
+        peaks = {p.name: 0.0 for p in processes}
+        while True:
+            time.sleep(0.5)
+            for p in processes:
+                peaks[p.name] = max(peaks[p.name], peak_rss_mib(p.pid) or 0.0)
+            status, job = api(server, token, "GET", f"/api/v1/costmaps/{cid}")
+            if status != 200:
+                raise SystemExit(f"GET costmap failed: HTTP {status}: {str(job)[:500]}")
+            if job["status"] in ("done", "failed"):
+                break
+        wall = time.monotonic() - began
+        if job["status"] != "done":
+            raise SystemExit(f"the costmap on {n} processes failed: {job.get('error')}")
+        tiles = {}
+        for p in processes:
+            log = p.log_path.read_text(errors="replace").splitlines()
+            tiles[p.name] = sum(1 for line in log if "costmap tile job done" in line
+                                and cid in line and "discarded" not in line)
+        runs.append({
+            "processes": n,
+            "seconds": wall,
+            "cpu_s": {p.name: (cpu_seconds(p.pid) - cpu_before[p.name])
+                      if cpu_before[p.name] is not None else None for p in processes},
+            "peak_rss_mib": peaks,
+            "tile_jobs_logged": tiles,
+        })
+        # The next run starts from an empty costmap table: drop this one.
+        api(server, token, "DELETE", f"/api/v1/costmaps/{cid}")
+    for w in workers:
+        procs.stop(w.proc)
+    procs.stop(server.proc)
+    return {"dem_size": args.dem_size, "cells": args.dem_size ** 2,
+            "tile_side": args.service_tile_side, "upload_s": upload_s,
+            "upload_peak_rss_mib": upload_rss, "runs": runs}
+
+
+def print_service_costmap(c, cli):
+    print(f"\nCostmap through the service ({c['dem_size']} x {c['dem_size']}, tiles of "
+          f"{c['tile_side']}): one serve and 0-2 workers on PostgreSQL, one tile at a time "
+          f"each; the DEM uploaded once in {c['upload_s']:.1f} s (serve's peak RSS "
+          f"{c['upload_peak_rss_mib'] or 0:.0f} MiB)")
+    print(f"{'processes':<10} {'wall s':>8} {'speed-up':>8} {'CPU s':>8}  "
+          f"peak RSS per process (MiB); tile jobs logged")
+    base = c["runs"][0]["seconds"] if c["runs"] else None
+    for r in c["runs"]:
+        cpu = sum(v for v in r["cpu_s"].values() if v is not None)
+        rss = ", ".join(f"{k} {v:.0f}" for k, v in r["peak_rss_mib"].items())
+        tiles = ", ".join(f"{k} {v}" for k, v in r["tile_jobs_logged"].items())
+        print(f"{r['processes']:<10} {r['seconds']:8.1f} {base / r['seconds']:7.2f}x "
+              f"{cpu:8.1f}  {rss}; {tiles}")
+    if cli:
+        print(f"CLI (one process, same DEM): {cli['seconds']:.1f} s, "
+              f"{cli['peak_rss_mib']:.0f} MiB. Speed-up per added process is bounded by the "
+              f"{os.cpu_count()} cores shared with PostgreSQL: in principle each tile is "
+              f"independent within a stage (classify, fill, cost; join and finish are one "
+              f"job each), so processes on more machines add their cores.")
 
 
 # ---------------------------------------------------------------- main
@@ -389,6 +547,13 @@ def main():
     parser.add_argument("--dem-size", type=int, default=20000,
                         help="costmap DEM side, cells (default 20000)")
     parser.add_argument("--tile-size", type=int, default=1024)
+    parser.add_argument("--service-tile-side", type=int, default=512,
+                        help="--costmap-tile-side of the service's tiled costmap (default 512)")
+    parser.add_argument("--service-tile-cells", type=int, default=1_000_000,
+                        help="--costmap-tile-cells of the service: costmaps over this many "
+                             "cells are built as tile jobs (default 1 000 000)")
+    parser.add_argument("--no-service-costmap", action="store_true",
+                        help="skip the costmap through the service on 1-3 processes")
     parser.add_argument("--dem-dir", default="/tmp",
                         help="where the generated DEM is kept (default /tmp)")
     parser.add_argument("--no-survey", action="store_true")
@@ -422,9 +587,10 @@ def main():
     }
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
           f"temp dir {workdir}", file=sys.stderr, flush=True)
+    url = None
     try:
         if not args.no_survey:
-            report["surveys"], _ = survey_bench(args, procs, workdir, binary)
+            report["surveys"], url = survey_bench(args, procs, workdir, binary)
             print_survey_table(report["surveys"], args)
             print(f"CPU busy: all {os.cpu_count()} CPUs of the machine during the run, other "
                   f"work included; cores: CPU time the server processes used (sum over "
@@ -435,6 +601,11 @@ def main():
         if not args.no_costmap:
             report["costmap"] = costmap_bench(args, procs, workdir, binary)
             print_costmap(report["costmap"])
+        if not args.no_service_costmap:
+            if url is None:
+                url = start_cluster(workdir)
+            report["service_costmap"] = service_costmap_bench(args, procs, workdir, binary, url)
+            print_service_costmap(report["service_costmap"], report.get("costmap"))
         report["load_average_at_end"] = os.getloadavg()
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(report, indent=1))
