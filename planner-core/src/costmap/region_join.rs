@@ -146,13 +146,30 @@ fn edge_labels(top: &[u32], bottom: &[u32], left: &[u32], right: &[u32]) -> Vec<
     on_edge
 }
 
-/// The labels on the edges of a tile's core, ascending.
-fn labels_on_edges(labels: &[u32], w: usize, h: usize) -> Vec<u32> {
+/// A digest of the labels along the four edges (FNV-1a, 64 bits): the
+/// fill checks with it that a tile is labelled as when its edges were
+/// joined.
+fn edges_digest(top: &[u32], bottom: &[u32], left: &[u32], right: &[u32]) -> u64 {
+    let mut d: u64 = 0xcbf2_9ce4_8422_2325;
+    for &x in top.iter().chain(bottom).chain(left).chain(right) {
+        for b in x.to_le_bytes() {
+            d = (d ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    d
+}
+
+/// The labels on the edges of a `w`×`h` tile's core, ascending, and the
+/// digest of its edges.
+fn labels_on_edges(labels: &[u32], w: usize, h: usize) -> (Vec<u32>, u64) {
     let top = &labels[..w];
     let bottom = &labels[(h - 1) * w..];
     let left: Vec<u32> = (0..h).map(|r| labels[r * w]).collect();
     let right: Vec<u32> = (0..h).map(|r| labels[r * w + w - 1]).collect();
-    edge_labels(top, bottom, &left, &right)
+    (
+        edge_labels(top, bottom, &left, &right),
+        edges_digest(top, bottom, &left, &right),
+    )
 }
 
 impl TileEdges {
@@ -286,9 +303,11 @@ impl TileEdges {
 /// decided; the regions inside the tile are decided from the tile alone.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TileFill {
-    /// How many labels the tile had on its edges (checked when applied:
-    /// the labels must be those the join saw).
+    /// How many labels the tile had on its edges and the digest of its
+    /// edges' labels (checked when applied: the labels must be those the
+    /// join saw).
     edge_labels: u32,
+    digest: u64,
     /// The local labels on the edges that are filled, ascending.
     filled: Vec<u32>,
 }
@@ -310,8 +329,15 @@ impl TileFill {
         min_cells: f64,
         core: &mut [u8],
     ) -> Result<usize, JoinError> {
-        let on_edge = labels_on_edges(&labels.labels, tile.width, tile.height);
+        if labels.labels.len() != tile.width * tile.height {
+            return Err(JoinError::Labels {
+                tx: tile.tx,
+                ty: tile.ty,
+            });
+        }
+        let (on_edge, digest) = labels_on_edges(&labels.labels, tile.width, tile.height);
         if on_edge.len() != self.edge_labels as usize
+            || digest != self.digest
             || self
                 .filled
                 .iter()
@@ -347,6 +373,7 @@ impl TileFill {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut b = ByteWriter::new(Self::KIND);
         b.u32(self.edge_labels);
+        b.u64(self.digest);
         b.len32(self.filled.len());
         b.u32s(&self.filled);
         b.finish()
@@ -355,6 +382,7 @@ impl TileFill {
     pub fn from_bytes(bytes: &[u8]) -> Result<TileFill, PieceError> {
         let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
         let edge_labels = r.u32()?;
+        let digest = r.u64()?;
         let n = r.u32()? as usize;
         if n > edge_labels as usize {
             return Err(r.fault(format!("{n} filled regions of {edge_labels} on the edges")));
@@ -366,6 +394,7 @@ impl TileFill {
         r.end()?;
         Ok(TileFill {
             edge_labels,
+            digest,
             filled,
         })
     }
@@ -415,8 +444,8 @@ impl RegionFill {
     pub fn from_bytes(bytes: &[u8]) -> Result<RegionFill, PieceError> {
         let mut r = ByteReader::new(bytes, Self::KIND, Self::WHAT)?;
         let n = r.u32()? as usize;
-        // Each part takes at least its length and 10 bytes.
-        r.expect_items(n, 14)?;
+        // Each part takes at least its length and 18 bytes.
+        r.expect_items(n, 22)?;
         let mut tiles = Vec::with_capacity(n);
         for _ in 0..n {
             let len = r.u32()? as usize;
@@ -592,6 +621,7 @@ impl RegionJoin {
             }
             tiles.push(TileFill {
                 edge_labels: edges.on_edge.len() as u32,
+                digest: edges_digest(&edges.top, &edges.bottom, &edges.left, &edges.right),
                 filled,
             });
         }

@@ -1043,6 +1043,26 @@ mod tests {
         let finals: Vec<Vec<u8>> = (0..n)
             .map(|k| plan.fill(k, &prefill, fill.tile(k).unwrap()).unwrap())
             .collect();
+        // Another tile's fill, or classes that are not those joined.
+        let r = plan.fill(0, &prefill, fill.tile(1).unwrap());
+        assert!(
+            matches!(r, Err(TiledError::Join(JoinError::Labels { tx: 0, ty: 0 }))),
+            "{r:?}"
+        );
+        let changed = ClassTiles::new(plan.layout(), |k| {
+            let mut c = classified[k].core.clone();
+            c[0] = if c[0] == Class::Traversable as u8 {
+                Class::Step as u8
+            } else {
+                Class::Traversable as u8
+            };
+            Ok(c)
+        });
+        let r = plan.fill(4, &changed, fill.tile(4).unwrap());
+        assert!(
+            matches!(r, Err(TiledError::Join(JoinError::Labels { tx: 1, ty: 1 }))),
+            "{r:?}"
+        );
         let classes = ClassTiles::new(plan.layout(), |k| Ok(finals[k].as_slice()));
         let tiles: Vec<CostTile> = (0..n)
             .map(|k| plan.cost(&src, None, &classes, k, &cancel).unwrap())
