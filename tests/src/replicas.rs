@@ -6,7 +6,7 @@
 //! cut.
 
 use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -437,6 +437,142 @@ pub fn logged_anywhere<'a>(
                 .map(move |l| (r.name.clone(), l))
         })
         .collect()
+}
+
+/// Compares two rasters with GDAL (osgeo, the system Python): size,
+/// geotransform, projection, the first band's nodata, description, unit,
+/// metadata, data type and every value (NaN where NaN); when `tile` is not
+/// 0, the second must be in blocks of `tile` × `tile`. `a` and `b` may be
+/// GDAL names (`GTIFF_DIR:2:…` for a costmap's class page). The cells
+/// compared.
+pub fn gdal_same_raster(a: &str, b: &str, tile: usize) -> u64 {
+    const COMPARE: &str = r#"
+import sys, math
+import numpy as np
+from osgeo import gdal
+gdal.UseExceptions()
+pa, pb, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
+a = gdal.Open(pa)
+b = gdal.Open(pb)
+ba, bb = a.GetRasterBand(1), b.GetRasterBand(1)
+assert (a.RasterXSize, a.RasterYSize) == (b.RasterXSize, b.RasterYSize)
+assert a.GetGeoTransform() == b.GetGeoTransform()
+assert a.GetProjection() == b.GetProjection()
+assert tile == 0 or bb.GetBlockSize() == [tile, tile], bb.GetBlockSize()
+for f in ("GetNoDataValue", "GetDescription", "GetUnitType", "GetMetadata"):
+    va, vb = getattr(ba, f)(), getattr(bb, f)()
+    same = va == vb or (isinstance(va, float) and math.isnan(va) and math.isnan(vb))
+    assert same, (f, va, vb)
+assert ba.DataType == bb.DataType
+xa, xb = ba.ReadAsArray(), bb.ReadAsArray()
+assert np.array_equal(xa, xb, equal_nan=xa.dtype.kind == "f")
+print(xa.size)
+"#;
+    let out = Command::new(crate::GDAL_PYTHON)
+        .args(["-c", COMPARE, a, b, &tile.to_string()])
+        .output()
+        .expect("run python3");
+    assert!(
+        out.status.success(),
+        "{a} vs {b}: {}{}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    text(&out.stdout)
+        .trim()
+        .parse()
+        .expect("the cells compared")
+}
+
+/// A costmap's files as downloaded into a directory: `costmap.tif`,
+/// `preview.png`, `legend.svg` and `layers/<name>.tif`.
+pub struct CostmapFiles {
+    pub dir: PathBuf,
+    pub layers: Vec<String>,
+}
+
+/// The costmap of `tiled` (built in tiles of `tile` cells) equals the one
+/// of `whole` (built whole): GDAL reads every page of costmap.tif and
+/// every layer equal (see [`gdal_same_raster`]), the tiled one in blocks of
+/// `tile`; preview.png and legend.svg are the same bytes. The cells
+/// compared.
+pub fn assert_same_costmap_files(whole: &CostmapFiles, tiled: &CostmapFiles, tile: usize) -> u64 {
+    assert_eq!(whole.layers, tiled.layers);
+    for name in ["preview.png", "legend.svg"] {
+        let a = std::fs::read(whole.dir.join(name)).expect("the whole build's file");
+        let b = std::fs::read(tiled.dir.join(name)).expect("the tiled build's file");
+        assert!(a == b, "{name} differs");
+    }
+    let path = |f: &CostmapFiles, name: &str| f.dir.join(name).display().to_string();
+    let mut cells = 0;
+    let (a, b) = (path(whole, "costmap.tif"), path(tiled, "costmap.tif"));
+    cells += gdal_same_raster(&a, &b, tile);
+    cells += gdal_same_raster(
+        &format!("GTIFF_DIR:2:{a}"),
+        &format!("GTIFF_DIR:2:{b}"),
+        tile,
+    );
+    for l in &whole.layers {
+        let name = format!("layers/{l}.tif");
+        cells += gdal_same_raster(&path(whole, &name), &path(tiled, &name), tile);
+    }
+    cells
+}
+
+/// Download the files of done costmap `map` (its answer) through the
+/// server at `base` into `dir`.
+pub fn download_costmap_files(base: &str, map: &serde_json::Value, dir: &Path) -> CostmapFiles {
+    let urls = map["urls"].as_object().expect("the costmap's urls");
+    std::fs::create_dir_all(dir.join("layers")).expect("a directory for the files");
+    let fetch = |url: &str, to: PathBuf| {
+        let reply = crate::get(&format!("{base}{url}"));
+        assert_eq!(reply.status, 200, "GET {url}: {}", reply.text());
+        std::fs::write(to, &reply.body).expect("write a downloaded file");
+    };
+    for (key, name) in [
+        ("costmap_tif", "costmap.tif"),
+        ("preview_png", "preview.png"),
+        ("legend_svg", "legend.svg"),
+    ] {
+        let url = urls[key]
+            .as_str()
+            .unwrap_or_else(|| panic!("no {key} in {map}"));
+        fetch(url, dir.join(name));
+    }
+    let mut layers = Vec::new();
+    for (name, url) in urls["layers"].as_object().into_iter().flatten() {
+        fetch(
+            url.as_str().expect("a layer's url"),
+            dir.join(format!("layers/{name}.tif")),
+        );
+        layers.push(name.clone());
+    }
+    layers.sort();
+    CostmapFiles {
+        dir: dir.to_path_buf(),
+        layers,
+    }
+}
+
+/// The parts of a costmap's answer that are its content (not its id,
+/// name, DEM, project, times or URLs): what a tiled and a whole build of
+/// the same request must agree on.
+pub fn costmap_content(map: &serde_json::Value) -> serde_json::Value {
+    let mut m = map.clone();
+    if let Some(o) = m.as_object_mut() {
+        for k in [
+            "id",
+            "name",
+            "dem_id",
+            "project_id",
+            "created_at",
+            "updated_at",
+            "urls",
+        ] {
+            o.remove(k);
+        }
+    }
+    m
 }
 
 #[cfg(test)]

@@ -314,6 +314,14 @@ impl TileRunner {
         let key = &job.key;
         let id = key.costmap_id.as_str();
         let lease = self.keep_lease(key, cancel);
+        tracing::info!(
+            costmap = %id,
+            stage = key.stage.name(),
+            tile = key.tile,
+            attempt = job.attempts,
+            holder = %self.instance,
+            "costmap tile job started"
+        );
         let started = std::time::Instant::now();
         let outcome = self.run_stage(job, cancel).await;
         lease.abort();
