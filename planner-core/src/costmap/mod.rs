@@ -57,7 +57,7 @@ pub use tile_stages::{
 pub use tiled::{
     CostmapTile, MapHeader, TileSink, TiledCostmap, TiledError, TiledOptions, build_costmap_tiled,
 };
-pub use tiled_tiff::TiledTiffFiles;
+pub use tiled_tiff::{CostmapTiffWriter, LayerTiffWriter, TiledTiffFiles};
 pub use vehicle::{Vehicle, VehiclePreset, VehicleSpec};
 
 use serde::{Deserialize, Serialize};

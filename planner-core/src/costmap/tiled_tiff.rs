@@ -2,6 +2,13 @@
 //! GeoTIFF (cost and class pages, as [`super::Costmap::write_geotiff`]
 //! writes them) and each kept layer's GeoTIFF, all tiled GeoTIFFs whose
 //! tiles are the run's tiles, so nothing of the map is held.
+//!
+//! The writers need only [`Write`], never `Seek`: a tiled GeoTIFF's
+//! header and directories (with every tile's offset) are written first,
+//! then the tiles strictly in row-major tile order. [`TiledTiffFiles`]
+//! writes every file at once from a run's tiles; [`CostmapTiffWriter`]
+//! and [`LayerTiffWriter`] write one file each (e.g. from stored tiles,
+//! one file after another).
 
 use std::io::{self, Write};
 
@@ -9,6 +16,99 @@ use super::Layer;
 use super::pipeline::{CLASS_NODATA, class_names};
 use super::tiled::{CostmapTile, MapHeader, TileSink};
 use crate::terrain::geotiff::{Band, BandData, Page, TiledGeoTiffWriter};
+
+/// costmap.tif (page 1 the cost, page 2 the class) written tile by tile.
+pub struct CostmapTiffWriter<W: Write> {
+    out: TiledGeoTiffWriter<W>,
+}
+
+impl<W: Write> CostmapTiffWriter<W> {
+    /// Writes the header of the map's costmap GeoTIFF to `out` (at the
+    /// start of the file). The tile side must be a multiple of 16.
+    pub fn new(out: W, map: &MapHeader) -> io::Result<CostmapTiffWriter<W>> {
+        let names = class_names();
+        let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+        let cost = [Band::new("cost", "cost", BandData::F32(&[]))];
+        let class = [Band {
+            description: "class",
+            unit: "",
+            metadata: &names,
+            data: BandData::U8(&[]),
+        }];
+        let pages = [
+            Page {
+                bands: &cost,
+                nodata: Some(f64::NAN),
+            },
+            Page {
+                bands: &class,
+                nodata: Some(f64::from(CLASS_NODATA)),
+            },
+        ];
+        let out = TiledGeoTiffWriter::new(
+            out,
+            map.width,
+            map.height,
+            map.tile,
+            &map.transform,
+            &map.crs,
+            &pages,
+        )?;
+        Ok(CostmapTiffWriter { out })
+    }
+
+    /// Writes the next tile (row-major tile order): its costs and classes,
+    /// row-major, the tile's own width.
+    pub fn write_tile(&mut self, cost: &[f32], class: &[u8]) -> io::Result<()> {
+        self.out
+            .write_tile(&[BandData::F32(cost), BandData::U8(class)])
+    }
+
+    /// The writer, once every tile is written (flush it).
+    pub fn finish(self) -> io::Result<W> {
+        self.out.finish()
+    }
+}
+
+/// One layer's GeoTIFF written tile by tile.
+pub struct LayerTiffWriter<W: Write> {
+    layer: Layer,
+    out: TiledGeoTiffWriter<W>,
+}
+
+impl<W: Write> LayerTiffWriter<W> {
+    /// Writes the header of the map's `layer` GeoTIFF to `out`.
+    pub fn new(out: W, map: &MapHeader, layer: Layer) -> io::Result<LayerTiffWriter<W>> {
+        let band = [Band::new(layer.name(), layer.unit(), BandData::F32(&[]))];
+        let page = [Page {
+            bands: &band,
+            nodata: Some(f64::NAN),
+        }];
+        let out = TiledGeoTiffWriter::new(
+            out,
+            map.width,
+            map.height,
+            map.tile,
+            &map.transform,
+            &map.crs,
+            &page,
+        )?;
+        Ok(LayerTiffWriter { layer, out })
+    }
+
+    pub fn layer(&self) -> Layer {
+        self.layer
+    }
+
+    /// Writes the next tile's values (row-major tile order).
+    pub fn write_tile(&mut self, values: &[f32]) -> io::Result<()> {
+        self.out.write_tile(&[BandData::F32(values)])
+    }
+
+    pub fn finish(self) -> io::Result<W> {
+        self.out.finish()
+    }
+}
 
 /// The costmap's GeoTIFF and its layers' being written tile by tile.
 pub struct TiledTiffFiles<W: Write> {
@@ -22,16 +122,16 @@ enum State<W: Write> {
         layers: Vec<(Layer, W)>,
     },
     Writing {
-        costmap: TiledGeoTiffWriter<W>,
-        layers: Vec<(Layer, TiledGeoTiffWriter<W>)>,
+        costmap: CostmapTiffWriter<W>,
+        layers: Vec<LayerTiffWriter<W>>,
     },
     Failed,
 }
 
 impl<W: Write> TiledTiffFiles<W> {
     /// The costmap's file goes to `costmap`, each layer's to its writer in
-    /// `layers` (the run's layers, which it checks). The tile side must be
-    /// a multiple of 16.
+    /// `layers` (the run's layers, in [`Layer::ALL`] order, which it
+    /// checks). The tile side must be a multiple of 16.
     pub fn new(costmap: W, layers: Vec<(Layer, W)>) -> TiledTiffFiles<W> {
         TiledTiffFiles {
             state: State::Pending { costmap, layers },
@@ -46,7 +146,10 @@ impl<W: Write> TiledTiffFiles<W> {
         let costmap = costmap.finish()?;
         let layers = layers
             .into_iter()
-            .map(|(l, w)| w.finish().map(|w| (l, w)))
+            .map(|w| {
+                let layer = w.layer();
+                w.finish().map(|w| (layer, w))
+            })
             .collect::<io::Result<Vec<_>>>()?;
         Ok((costmap, layers))
     }
@@ -63,37 +166,10 @@ fn start<W: Write>(costmap: W, layers: Vec<(Layer, W)>, map: &MapHeader) -> io::
             ),
         ));
     }
-    let (size, tile, t, crs) = ((map.width, map.height), map.tile, &map.transform, &map.crs);
-    let names = class_names();
-    let names: Vec<(&str, &str)> = names.iter().map(|(n, v)| (n.as_str(), *v)).collect();
-    let cost = [Band::new("cost", "cost", BandData::F32(&[]))];
-    let class = [Band {
-        description: "class",
-        unit: "",
-        metadata: &names,
-        data: BandData::U8(&[]),
-    }];
-    let pages = [
-        Page {
-            bands: &cost,
-            nodata: Some(f64::NAN),
-        },
-        Page {
-            bands: &class,
-            nodata: Some(f64::from(CLASS_NODATA)),
-        },
-    ];
-    let costmap = TiledGeoTiffWriter::new(costmap, size.0, size.1, tile, t, crs, &pages)?;
+    let costmap = CostmapTiffWriter::new(costmap, map)?;
     let layers = layers
         .into_iter()
-        .map(|(layer, out)| {
-            let band = [Band::new(layer.name(), layer.unit(), BandData::F32(&[]))];
-            let page = [Page {
-                bands: &band,
-                nodata: Some(f64::NAN),
-            }];
-            TiledGeoTiffWriter::new(out, size.0, size.1, tile, t, crs, &page).map(|w| (layer, w))
-        })
+        .map(|(layer, out)| LayerTiffWriter::new(out, map, layer))
         .collect::<io::Result<Vec<_>>>()?;
     Ok(State::Writing { costmap, layers })
 }
@@ -115,12 +191,13 @@ impl<W: Write> TileSink for TiledTiffFiles<W> {
                 "a tile before the costmap's files were begun",
             ));
         };
-        costmap.write_tile(&[BandData::F32(t.cost), BandData::U8(t.class)])?;
-        for (layer, w) in layers {
+        costmap.write_tile(t.cost, t.class)?;
+        for w in layers {
+            let layer = w.layer();
             let data = t
                 .layers
                 .iter()
-                .find(|(l, _)| l == layer)
+                .find(|(l, _)| *l == layer)
                 .map(|(_, d)| d.as_slice())
                 .ok_or_else(|| {
                     io::Error::new(
@@ -128,7 +205,7 @@ impl<W: Write> TileSink for TiledTiffFiles<W> {
                         format!("the tile has no {} layer", layer.name()),
                     )
                 })?;
-            w.write_tile(&[BandData::F32(data)])?;
+            w.write_tile(data)?;
         }
         Ok(())
     }
@@ -137,12 +214,14 @@ impl<W: Write> TileSink for TiledTiffFiles<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::costmap::tile_stages::{ClassTiles, TilePlan};
     use crate::costmap::{
         CostmapOptions, Progress, Stage, TiledOptions, VehiclePreset, build_costmap,
         build_costmap_tiled,
     };
     use crate::terrain::test_support::{dem, north_up};
-    use crate::terrain::{DemLimits, DemWindows, read_geotiff_page_band};
+    use crate::terrain::{DemLimits, DemWindows, RasterWindows, read_geotiff_page_band};
+    use std::sync::atomic::AtomicBool;
 
     #[test]
     fn the_tiled_files_read_back_as_the_whole_maps_files() {
@@ -218,5 +297,61 @@ mod tests {
             assert!(whole.write_layer_geotiff(*layer, &mut one).unwrap());
             same(bytes, &one.into_inner(), 1);
         }
+
+        // The same files one at a time from the stages' tiles, into a
+        // writer that cannot seek: the same bytes.
+        struct Forward(Vec<u8>);
+        impl Write for Forward {
+            fn write(&mut self, b: &[u8]) -> io::Result<usize> {
+                self.0.extend_from_slice(b);
+                Ok(b.len())
+            }
+            fn flush(&mut self) -> io::Result<()> {
+                Ok(())
+            }
+        }
+        let src = DemWindows::new(&d);
+        let plan = TilePlan::new(src.grid(), &v, &o, None, 16).unwrap();
+        let cancel = AtomicBool::new(false);
+        let n = plan.tile_count();
+        let classified: Vec<_> = (0..n)
+            .map(|k| plan.classify(&src, None, k, &cancel).unwrap())
+            .collect();
+        let fill = plan
+            .join(
+                classified
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| (k, c.edges.clone())),
+            )
+            .unwrap();
+        let prefill = ClassTiles::new(plan.layout(), |k| Ok(classified[k].core.as_slice()));
+        let finals: Vec<Vec<u8>> = (0..n)
+            .map(|k| plan.fill(k, &prefill, fill.tile(k).unwrap()).unwrap())
+            .collect();
+        let classes = ClassTiles::new(plan.layout(), |k| Ok(finals[k].as_slice()));
+        let tiles: Vec<_> = (0..n)
+            .map(|k| plan.cost(&src, None, &classes, k, &cancel).unwrap())
+            .collect();
+        let header = plan.header();
+        let mut c = CostmapTiffWriter::new(Forward(Vec::new()), &header).unwrap();
+        for t in &tiles {
+            c.write_tile(&t.cost, &t.class).unwrap();
+        }
+        assert!(c.finish().unwrap().0 == tif);
+        for (i, (layer, bytes)) in layers.iter().enumerate() {
+            let mut l = LayerTiffWriter::new(Forward(Vec::new()), &header, *layer).unwrap();
+            for t in &tiles {
+                assert_eq!(t.layers[i].0, *layer);
+                l.write_tile(&t.layers[i].1).unwrap();
+            }
+            assert_eq!(&l.finish().unwrap().0, bytes, "{layer:?}");
+        }
+        // A tile too many is refused.
+        let mut c = CostmapTiffWriter::new(Forward(Vec::new()), &header).unwrap();
+        for t in tiles.iter().chain(&tiles[..1]).take(n) {
+            c.write_tile(&t.cost, &t.class).unwrap();
+        }
+        assert!(c.write_tile(&tiles[0].cost, &tiles[0].class).is_err());
     }
 }
