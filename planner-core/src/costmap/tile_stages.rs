@@ -108,32 +108,49 @@ where
         if width == 0 || height == 0 {
             return Ok(());
         }
-        let nx = l.tiles()[0];
-        for ty in row0 / l.tile..=(row0 + height - 1) / l.tile {
-            for tx in col0 / l.tile..=(col0 + width - 1) / l.tile {
-                let k = ty * nx + tx;
-                let t = l.tile(k);
-                let data = (self.fetch)(k)?;
-                let data = data.as_ref();
-                if data.len() != t.width * t.height {
-                    return Err(TiledError::Mismatch(format!(
-                        "tile {k}'s classes are {} bytes, the tile has {} cells",
-                        data.len(),
-                        t.width * t.height
-                    )));
-                }
-                // The overlap of the tile and the window.
-                let (c0, c1) = (t.col0.max(col0), (t.col0 + t.width).min(col0 + width));
-                let (r0, r1) = (t.row0.max(row0), (t.row0 + t.height).min(row0 + height));
-                for r in r0..r1 {
-                    let from = (r - t.row0) * t.width + (c0 - t.col0);
-                    let to = (r - row0) * width + (c0 - col0);
-                    out[to..to + c1 - c0].copy_from_slice(&data[from..from + c1 - c0]);
-                }
+        for k in tiles_under(l, col0, row0, width, height) {
+            let t = l.tile(k);
+            let data = (self.fetch)(k)?;
+            let data = data.as_ref();
+            if data.len() != t.width * t.height {
+                return Err(TiledError::Mismatch(format!(
+                    "tile {k}'s classes are {} bytes, the tile has {} cells",
+                    data.len(),
+                    t.width * t.height
+                )));
+            }
+            // The overlap of the tile and the window.
+            let (c0, c1) = (t.col0.max(col0), (t.col0 + t.width).min(col0 + width));
+            let (r0, r1) = (t.row0.max(row0), (t.row0 + t.height).min(row0 + height));
+            for r in r0..r1 {
+                let from = (r - t.row0) * t.width + (c0 - t.col0);
+                let to = (r - row0) * width + (c0 - col0);
+                out[to..to + c1 - c0].copy_from_slice(&data[from..from + c1 - c0]);
             }
         }
         Ok(())
     }
+}
+
+/// The tiles of `l` that the window (inside the grid) overlaps, ascending.
+fn tiles_under(
+    l: &TileLayout,
+    col0: usize,
+    row0: usize,
+    width: usize,
+    height: usize,
+) -> Vec<usize> {
+    if width == 0 || height == 0 {
+        return Vec::new();
+    }
+    let nx = l.tiles()[0];
+    let mut out = Vec::new();
+    for ty in row0 / l.tile..=(row0 + height - 1) / l.tile {
+        for tx in col0 / l.tile..=(col0 + width - 1) / l.tile {
+            out.push(ty * nx + tx);
+        }
+    }
+    out
 }
 
 /// What [`TilePlan::classify`] makes of a tile.
@@ -334,6 +351,23 @@ impl TilePlan {
             return Err(TiledError::NoSuchTile { k, count });
         }
         Ok(self.layout.tile(k))
+    }
+
+    /// The tiles whose classes before the fill [`TilePlan::fill`] reads
+    /// for tile `k` (it and its neighbours), ascending: what to fetch
+    /// before it runs.
+    pub fn fill_reads(&self, k: usize) -> Result<Vec<usize>, TiledError> {
+        let t = self.tile(k)?;
+        let p = t.padded([1, 1], self.layout.width, self.layout.height);
+        Ok(tiles_under(&self.layout, p.col0, p.row0, p.width, p.height))
+    }
+
+    /// The tiles whose final classes [`TilePlan::cost`] reads for tile
+    /// `k` (those within its inflation halo), ascending.
+    pub fn cost_reads(&self, k: usize) -> Result<Vec<usize>, TiledError> {
+        let t = self.tile(k)?;
+        let p = t.padded(self.halos.inflation, self.layout.width, self.layout.height);
+        Ok(tiles_under(&self.layout, p.col0, p.row0, p.width, p.height))
     }
 
     fn check_source(&self, src: &dyn RasterWindows) -> Result<(), TiledError> {
@@ -780,6 +814,23 @@ mod tests {
         layers: Vec<(Layer, Vec<f32>)>,
     }
 
+    /// Class windows of only the tiles a stage says it reads.
+    fn only<'a>(
+        layout: TileLayout,
+        tiles: &'a [Vec<u8>],
+        reads: Vec<usize>,
+    ) -> ClassTiles<impl Fn(usize) -> Result<&'a [u8], TiledError> + Sync> {
+        ClassTiles::new(layout, move |j| {
+            if reads.contains(&j) {
+                Ok(tiles[j].as_slice())
+            } else {
+                Err(TiledError::Mismatch(format!(
+                    "tile {j} read, not in {reads:?}"
+                )))
+            }
+        })
+    }
+
     fn staged(d: &Dem, v: &Vehicle, o: &CostmapOptions, tile: usize, seed: u64) -> Staged {
         let src = DemWindows::new(d);
         let plan_of = || {
@@ -812,14 +863,13 @@ mod tests {
         let fill = RegionFill::from_bytes(&fill.to_bytes()).unwrap();
         let fill: Vec<Vec<u8>> = fill.into_tiles().iter().map(TileFill::to_bytes).collect();
         // 3. fill, reading the classes before the fill only
-        let prefill_windows = ClassTiles::new(plan.layout(), |k| Ok(prefill[k].as_slice()));
         let mut classes = vec![Vec::new(); n];
         for k in shuffled(n, &mut s) {
             let part = TileFill::from_bytes(&fill[k]).unwrap();
+            let prefill_windows = only(plan.layout(), &prefill, plan.fill_reads(k).unwrap());
             classes[k] = plan_of().fill(k, &prefill_windows, &part).unwrap();
         }
         // 4. cost
-        let final_windows = ClassTiles::new(plan.layout(), |k| Ok(classes[k].as_slice()));
         let (w, h) = (plan.layout().width, plan.layout().height);
         let mut cost = vec![0.0; w * h];
         let mut class = vec![0; w * h];
@@ -830,6 +880,7 @@ mod tests {
             .collect();
         let mut parts = vec![(Vec::new(), Vec::new()); n];
         for k in shuffled(n, &mut s) {
+            let final_windows = only(plan.layout(), &classes, plan.cost_reads(k).unwrap());
             let t = plan_of()
                 .cost(&src, None, &final_windows, k, &cancel)
                 .unwrap();
