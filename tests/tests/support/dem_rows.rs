@@ -51,6 +51,64 @@ pub fn dem_rows(data_dir: &Path) -> DemRows {
     }
 }
 
+/// A Python process that counts the rows of [`dem_rows`] on each call
+/// (one process for many counts: a fuzz test counts after every upload).
+pub struct RowCounter {
+    child: std::process::Child,
+    out: std::io::BufReader<std::process::ChildStdout>,
+}
+
+#[allow(dead_code)] // not every test file that includes this counts often
+impl RowCounter {
+    pub fn new(data_dir: &Path) -> RowCounter {
+        let db = data_dir.join("terraplan.sqlite3");
+        let mut child = std::process::Command::new("python3")
+            .args([
+                "-c",
+                "import sqlite3, sys\n\
+                 c = sqlite3.connect('file:' + sys.argv[1] + '?mode=ro', uri=True)\n\
+                 for _ in sys.stdin:\n\
+                 \x20   print(*[c.execute(f'SELECT COUNT(*) FROM {t}').fetchone()[0] \
+                           for t in ('dems', 'dem_tile_sets', 'dem_tiles', 'dem_uploads')], \
+                           flush=True)",
+                db.to_str().unwrap(),
+            ])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("python3");
+        let out = std::io::BufReader::new(child.stdout.take().unwrap());
+        RowCounter { child, out }
+    }
+
+    pub fn count(&mut self) -> DemRows {
+        use std::io::BufRead;
+        let stdin = self.child.stdin.as_mut().unwrap();
+        stdin.write_all(b"\n").unwrap();
+        stdin.flush().unwrap();
+        let mut line = String::new();
+        self.out.read_line(&mut line).unwrap();
+        let n: Vec<u64> = line
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert_eq!(n.len(), 4, "row counter answered {line:?}");
+        DemRows {
+            dems: n[0],
+            tile_sets: n[1],
+            tiles: n[2],
+            uploads: n[3],
+        }
+    }
+}
+
+impl Drop for RowCounter {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 /// Start sending `body` as a GeoTIFF upload (`query` after `?`) on a
 /// connection of its own from another thread, its answer not awaited
 /// (the server may be killed under it).
