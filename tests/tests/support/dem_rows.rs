@@ -2,6 +2,9 @@
 //! (opened read-only by Python's sqlite3, beside the running server), and
 //! a raw upload sent without waiting for its answer.
 
+// Each test file that includes this module uses a part of it.
+#![allow(dead_code)]
+
 use std::io::Write;
 use std::path::Path;
 
@@ -58,7 +61,6 @@ pub struct RowCounter {
     out: std::io::BufReader<std::process::ChildStdout>,
 }
 
-#[allow(dead_code)] // not every test file that includes this counts often
 impl RowCounter {
     pub fn new(data_dir: &Path) -> RowCounter {
         let db = data_dir.join("terraplan.sqlite3");
@@ -112,7 +114,6 @@ impl Drop for RowCounter {
 /// Start sending `body` as a GeoTIFF upload (`query` after `?`) on a
 /// connection of its own from another thread, its answer not awaited
 /// (the server may be killed under it).
-#[allow(dead_code)] // not every test file that includes this sends one
 pub fn upload_in_background(
     server: &Server,
     query: &str,
