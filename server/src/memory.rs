@@ -115,6 +115,27 @@ pub fn route_search_bytes(cells: u64, file_bytes: u64) -> u64 {
         .saturating_add(SLACK)
 }
 
+/// Peak memory of a route search coarse to fine, beside `search_bytes`
+/// (the search's own estimate, `CoarseToFineOptions::estimated_bytes`):
+/// what the sources it reads keep, each at most the data it caches — the
+/// costmap's decoded chunks (`window_cache` bytes at most, f64 per cell of
+/// its `cells`), the stored file's chunks (`file_cache` bytes at most, the
+/// file's `file_bytes`), and the DEM's decoded tiles for the heights
+/// (`dem_cache` bytes at most, f64 per cell of its `dem_cells`; 0
+/// without heights).
+pub fn route_coarse_to_fine_bytes(
+    search_bytes: u64,
+    (cells, window_cache): (u64, u64),
+    (file_bytes, file_cache): (u64, u64),
+    (dem_cells, dem_cache): (u64, u64),
+) -> u64 {
+    search_bytes
+        .saturating_add(cells.saturating_mul(8).min(window_cache))
+        .saturating_add(file_bytes.min(file_cache))
+        .saturating_add(dem_cells.saturating_mul(8).min(dem_cache))
+        .saturating_add(SLACK)
+}
+
 /// Why no room was made in the budget.
 #[derive(Debug, thiserror::Error)]
 pub enum BudgetError {
@@ -406,6 +427,21 @@ mod tests {
         assert_eq!(hillshade_bytes(100, 50, 1024), 5000 * 12 + SLACK);
         assert_eq!(costmap_build_bytes(1000, 0), 21_000 + 2 * SLACK);
         assert_eq!(route_search_bytes(1000, 5000), 41_000 + 5000 + SLACK);
+        // A costmap of 1 M cells (8 MB decoded, a 5 MB file) and a DEM of
+        // 4 M cells: each source's cache bounded by its data or its cap.
+        assert_eq!(
+            route_coarse_to_fine_bytes(
+                100,
+                (1_000_000, 16 * MIB),
+                (5_000_000, 8 * MIB),
+                (4_000_000, 64 * MIB)
+            ),
+            100 + 8_000_000 + 5_000_000 + 32_000_000 + SLACK
+        );
+        assert_eq!(
+            route_coarse_to_fine_bytes(0, (u64::MAX, 16 * MIB), (u64::MAX, 8 * MIB), (0, 64 * MIB)),
+            24 * MIB + SLACK
+        );
         assert_eq!(dem_read_bytes(u64::MAX, 1, 1), u64::MAX);
     }
 

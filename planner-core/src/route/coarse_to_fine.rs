@@ -121,10 +121,14 @@ impl CoarseToFineOptions {
         let block = self.block.max(1) as u64;
         let (w, h) = (width as u64, height as u64);
         let blocks = w.div_ceil(block).saturating_mul(h.div_ceil(block));
-        let side = ((1024 / block).max(1) * block).min(w.max(1));
-        let coarse_windows = 2 * side * side * (4 + 8);
-        let tile = self.tile as u64;
+        // Windows of whole blocks about 1024 cells a side, two at a time.
+        let side = (1024 / block).max(1) * block;
+        let windows = w.div_ceil(side).saturating_mul(h.div_ceil(side)).min(2);
+        let coarse_windows = windows * side.min(w) * side.min(h) * (4 + 8);
+        let tile = self.tile.max(1) as u64;
+        let tiles = w.div_ceil(tile).saturating_mul(h.div_ceil(tile));
         let cache = (self.cache_tiles as u64)
+            .min(tiles)
             .saturating_mul(tile * tile * 4)
             .saturating_add(tile * tile * 8);
         let corridor = self

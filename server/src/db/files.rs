@@ -67,6 +67,59 @@ impl Db {
         )
     }
 
+    /// The length in bytes of each chunk of a stored file, in `seq`
+    /// order, with its `seq`: where each chunk lies in the file, for
+    /// reading byte ranges (chunks are at most 1 MiB, not all the same).
+    pub async fn file_chunk_lengths(
+        &self,
+        file: &StoredFile,
+    ) -> Result<Vec<(i64, i64)>, sqlx::Error> {
+        const DEM: &str = "SELECT seq, CAST(length(data) AS BIGINT) FROM dem_chunks \
+                           WHERE dem_id = $1 ORDER BY seq";
+        const COSTMAP: &str = "SELECT seq, CAST(length(data) AS BIGINT) FROM costmap_file_chunks \
+                               WHERE costmap_id = $1 AND name = $2 ORDER BY seq";
+        on_pool!(self, pool => match file {
+            StoredFile::Dem(id) => sqlx::query_as(DEM).bind(id).fetch_all(pool).await,
+            StoredFile::Costmap(id, name) => {
+                sqlx::query_as(COSTMAP).bind(id).bind(name).fetch_all(pool).await
+            }
+        })
+    }
+
+    /// Chunks `first..=last` of a stored file, (`seq`, data) in order (those
+    /// that exist).
+    pub async fn file_chunks_between(
+        &self,
+        file: &StoredFile,
+        first: i64,
+        last: i64,
+    ) -> Result<Vec<(i64, Vec<u8>)>, sqlx::Error> {
+        const DEM: &str = "SELECT seq, data FROM dem_chunks \
+                           WHERE dem_id = $1 AND seq >= $2 AND seq <= $3 ORDER BY seq";
+        const COSTMAP: &str = "SELECT seq, data FROM costmap_file_chunks \
+                               WHERE costmap_id = $1 AND name = $2 AND seq >= $3 AND seq <= $4 \
+                               ORDER BY seq";
+        on_pool!(self, pool => match file {
+            StoredFile::Dem(id) => {
+                sqlx::query_as(DEM)
+                    .bind(id)
+                    .bind(first)
+                    .bind(last)
+                    .fetch_all(pool)
+                    .await
+            }
+            StoredFile::Costmap(id, name) => {
+                sqlx::query_as(COSTMAP)
+                    .bind(id)
+                    .bind(name)
+                    .bind(first)
+                    .bind(last)
+                    .fetch_all(pool)
+                    .await
+            }
+        })
+    }
+
     /// A stored file of `size` bytes, read whole into one buffer.
     pub async fn read_file(&self, file: &StoredFile, size: i64) -> Result<Vec<u8>, sqlx::Error> {
         use futures_util::TryStreamExt;

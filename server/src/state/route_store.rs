@@ -11,10 +11,17 @@ use crate::config::ServeConfig;
 /// `--route-cache-mb` by default.
 const ROUTE_CACHE_BYTES: usize = 512 * 1024 * 1024;
 
+/// `--route-coarse-cells` by default: 4000 × 4000 (plain A* then holds
+/// 16 B × 16 M = 256 MB), as `terraplan route --coarse-to-fine-above`.
+pub const COARSE_CELLS: u64 = 16_000_000;
+
 /// The D* Lite searches kept in memory so that a replan repairs the
 /// previous search instead of starting over.
 pub struct RouteStore {
     pub searches: SearchCache,
+    /// Costmaps with more cells are routed coarse to fine
+    /// (`--route-coarse-cells`).
+    pub coarse_cells: u64,
     /// Routes whose D* Lite search is being built in the background: a
     /// receiver that turns true when it is done (or dropped if it failed).
     warming: Mutex<HashMap<String, tokio::sync::watch::Receiver<bool>>>,
@@ -43,6 +50,7 @@ impl RouteStore {
     pub fn new(cache_bytes: usize) -> RouteStore {
         RouteStore {
             searches: SearchCache::new(cache_bytes),
+            coarse_cells: COARSE_CELLS,
             warming: Mutex::new(HashMap::new()),
         }
     }
@@ -70,7 +78,10 @@ impl RouteStore {
     }
 
     pub fn from_config(config: &ServeConfig) -> RouteStore {
-        RouteStore::new(config.route_cache_bytes())
+        RouteStore {
+            coarse_cells: config.route_coarse_cells,
+            ..RouteStore::new(config.route_cache_bytes())
+        }
     }
 }
 

@@ -71,6 +71,9 @@ pub struct GeoTiffWindows<R: ReadAt = File> {
 }
 
 impl<R: ReadAt> GeoTiffWindows<R> {
+    /// Bytes of decoded chunks (as f64 cells) the windows keep at most.
+    pub const CACHE_BYTES: usize = CACHE_BYTES;
+
     /// Open a single-band GeoTIFF as a DEM (its first page), as
     /// [`crate::terrain::read_dem`] reads it: `crs` overrides or supplies
     /// the CRS, `limits` are checked from the header.

@@ -12,7 +12,9 @@ use super::model::{
     StoredRequest, StoredResult, response, stored, to_json,
 };
 use super::request::{Earlier, parse_create, parse_replan, polygon_geojson};
-use super::search::{Planned, ReplanInput, map_source, plan_route, replan, warm_search};
+use super::search::{
+    Planned, ReplanInput, map_source, not_in_memory, plan_route, replan, warm_search,
+};
 use crate::api::access::{ProjectFilter, list_visible, visible};
 use crate::api::costmaps::visible_costmap;
 use crate::api::json_body::JsonBody;
@@ -90,6 +92,7 @@ async fn store(state: &AppState, new: NewRoute, planned: Planned) -> Result<Rout
             planner: planned.planner,
             reused_search: planned.reused_search,
             route: planned.route,
+            search: planned.report,
         })?,
         project_id: new.project_id,
     };
@@ -239,6 +242,9 @@ pub async fn replan_route(
         &id,
     )?;
     let src = map_source(&state, &costmap).await?;
+    if src.is_windowed() {
+        return Err(not_in_memory(&src));
+    }
     let mut changes = previous.clone();
     changes
         .cost_changes
@@ -293,7 +299,7 @@ async fn replan_off_runtime(
             let searches = &held.routes.searches;
             let cached = match input.options.planner() {
                 Planner::DstarLite => searches.take(&parent_id),
-                Planner::Astar => None,
+                Planner::Astar | Planner::CoarseToFine => None,
             };
             tracing::debug!(route = %parent_id, held = cached.is_some(), "replanning");
             replan(&input, cached, stop).map_err(|failure| {

@@ -32,6 +32,7 @@ mod handlers;
 mod model;
 mod request;
 mod search;
+mod stored_file;
 
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;

@@ -3,7 +3,9 @@
 //! answer built from a stored route.
 
 use planner_core::export::ground_route::route_feature;
-use planner_core::route::{ArcCost, MapRoute, Position, RouteOptions};
+use planner_core::route::{
+    ArcCost, CoarseToFine, CoarseToFineStats, MapRoute, Position, RouteOptions,
+};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use utoipa::{IntoParams, ToSchema};
@@ -29,6 +31,43 @@ pub enum Planner {
     /// Lite search is built in the background for replans), and replans
     /// with `epsilon` > 1 (at most `epsilon` × the optimum, from scratch).
     Astar,
+    /// Coarse to fine, on a costmap too big for A* in memory (more cells
+    /// than `--route-coarse-cells`, or over the memory budget): A* on block
+    /// minima, then A* in a corridor around that route, widened until the
+    /// route is proven optimal or a limit stops it (see `search`).
+    CoarseToFine,
+}
+
+/// How a coarse-to-fine search ended: whether the route is proven
+/// optimal for the whole costmap, else how far from the optimum it may be.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SearchReport {
+    /// `coarse_to_fine`.
+    pub(super) method: String,
+    /// True when `path_cost` is proven the optimum of the whole costmap
+    /// (up to floating-point rounding).
+    pub(super) proven_optimal: bool,
+    /// A lower bound on the optimum: `path_cost` when proven, else the
+    /// optimum lies between it and `path_cost`.
+    pub(super) lower_bound: f64,
+    /// (`path_cost` − `lower_bound`) / `path_cost`: 0 when proven.
+    pub(super) gap: f64,
+    /// The search's figures: corridors searched, the last one's half-width
+    /// (blocks) and cells, cells touched and expanded, tiles read, bytes of
+    /// search state at the peak, milliseconds of each phase.
+    pub(super) stats: CoarseToFineStats,
+}
+
+impl SearchReport {
+    pub(super) fn of(found: &CoarseToFine) -> SearchReport {
+        SearchReport {
+            method: "coarse_to_fine".into(),
+            proven_optimal: found.proven_optimal,
+            lower_bound: found.lower_bound,
+            gap: found.gap(),
+            stats: found.stats.clone(),
+        }
+    }
 }
 
 /// How a route is searched (a replan keeps its parent's).
@@ -100,6 +139,8 @@ pub(super) struct StoredResult {
     pub(super) reused_search: bool,
     #[serde(flatten)]
     pub(super) route: MapRoute,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(super) search: Option<SearchReport>,
 }
 
 /// Body of `POST /api/v1/costmaps/{id}/routes`.
@@ -203,6 +244,10 @@ pub struct RouteResponse {
     reused_search: bool,
     #[serde(flatten)]
     route: MapRoute,
+    /// Only for a route planned coarse to fine (`planner` is
+    /// `coarse_to_fine`): the proof of optimality, or the bound achieved.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    search: Option<SearchReport>,
     /// The route as a GeoJSON LineString, `[lon, lat, height]` when every
     /// waypoint's terrain height is known, else `[lon, lat]`; the height is
     /// above the WGS 84 ellipsoid (RFC 7946): the DEM's height plus the
@@ -281,6 +326,7 @@ pub(super) fn response(row: &RouteRow) -> Result<RouteResponse, ApiError> {
         reused_search: result.reused_search,
         geometry: geometry(&result.route),
         route: result.route,
+        search: result.search,
         blocked: changes.blocked,
         cost_changes: changes.cost_changes,
         urls: RouteUrls {

@@ -2,6 +2,14 @@
 //! route by A*, the D* Lite search built for its replans, and a replan
 //! (repairing the parent's search or from scratch) with the rules of
 //! [`planner_core::route::changes`]; their faults named by JSON pointer.
+//!
+//! A costmap of more cells than `--route-coarse-cells`, or whose search in
+//! memory would not fit the memory budget, is planned coarse to fine
+//! instead ([`planner_core::route::WindowedMap`]): its GeoTIFF read a
+//! window at a time from the stored chunks ([`StoredFileReader`]), memory
+//! reserved for the corridor the budget allows, never 16 bytes a cell of
+//! the map. Such routes are not replanned (no map in memory to change):
+//! a replan on such a costmap is a 422 naming why.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -12,32 +20,89 @@ use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::Issue;
 use planner_core::route::changes::{self, BlockedEnd, CellChanges, ChangeError, ChangedArea};
 use planner_core::route::{
-    Cell, CostGrid, DStarLite, Endpoint, MapRoute, MapRouteError, Position, Route, RouteError,
-    RouteMap, astar,
+    BigRouteError, Cell, CoarseToFineOptions, CostGrid, DStarLite, Endpoint, MapRoute,
+    MapRouteError, Position, Route, RouteError, RouteMap, WindowedMap, WindowedRouteError, astar,
 };
-use planner_core::terrain::{Dem, DemLimits};
+use planner_core::terrain::{Dem, DemLimits, GeoTiffWindows, RasterWindows};
 use serde::Deserialize;
 
-use super::model::{Changes, Planner, SearchOptions, stored};
+use super::model::{Changes, Planner, SearchOptions, SearchReport, stored};
 use super::request::{Area, stored_polygon};
-use crate::db::CostmapRow;
+use super::stored_file::{CACHED_CHUNKS, StoredFileReader};
+use crate::db::{CHUNK_BYTES, CostmapRow, StoredFile};
 use crate::error::{ApiError, not_found};
 use crate::jobs::COSTMAP_TIF;
 use crate::state::AppState;
 
+/// Most cells of a coarse-to-fine corridor (its search state: about 21
+/// bytes a cell, 4.2 GB), as `terraplan route --max-corridor-cells`; the
+/// memory budget may allow fewer.
+const MAX_CORRIDOR_CELLS: u64 = 200_000_000;
+
 /// What a search needs from storage, gathered on the async side.
 pub(super) struct MapSource {
     costmap_id: String,
-    tif: Vec<u8>,
-    dem: Option<Arc<Dem>>,
+    map: Source,
     /// Room in the memory budget for the search (and a D* Lite search
     /// built after it), held as long as the source.
     _room: crate::memory::Reservation,
 }
 
+enum Source {
+    /// The costmap's GeoTIFF read whole, and its DEM (for heights; `None`
+    /// when the DEM has been deleted): plain A*, D* Lite for replans.
+    Whole { tif: Vec<u8>, dem: Option<Arc<Dem>> },
+    /// The costmap read a window at a time: coarse to fine.
+    Windowed(Windowed),
+}
+
+struct Windowed {
+    tif: Arc<StoredFileReader>,
+    cells: u64,
+    c2f: CoarseToFineOptions,
+}
+
+impl MapSource {
+    /// True for a costmap planned coarse to fine.
+    pub(super) fn is_windowed(&self) -> bool {
+        matches!(self.map, Source::Windowed(_))
+    }
+}
+
+/// How a costmap of `cells` cells in a `file_bytes` file is searched: in
+/// memory when it has at most `--route-coarse-cells` cells and the search
+/// (with reading its DEM, `dem_read` bytes) fits the memory budget, else
+/// coarse to fine.
+fn coarse_to_fine_for(state: &AppState, cells: u64, file_bytes: u64, dem_read: u64) -> bool {
+    cells > state.routes.coarse_cells
+        || crate::memory::route_search_bytes(cells, file_bytes).saturating_add(dem_read)
+            > state.memory.total()
+}
+
+/// The memory reading costmap `costmap`'s DEM whole takes (its estimate
+/// at upload; 0 when it is gone or in the DEM cache).
+async fn dem_read_bytes(state: &AppState, costmap: &CostmapRow) -> Result<u64, ApiError> {
+    if state.dems.cache.get(&costmap.dem_id).is_some() {
+        return Ok(0);
+    }
+    let Some(meta) = state.db.get_dem_meta(&costmap.dem_id).await? else {
+        return Ok(0);
+    };
+    Ok(match meta.read_bytes.and_then(|b| u64::try_from(b).ok()) {
+        Some(b) => b,
+        None => {
+            let (w, h) = crate::state::dem_store::stored_size(&meta)?;
+            let pixels = w.saturating_mul(h);
+            let file = u64::try_from(meta.size_bytes).unwrap_or(0);
+            crate::memory::dem_read_bytes(pixels, pixels.saturating_mul(8), file)
+        }
+    })
+}
+
 /// The costmap's GeoTIFF and its DEM (for heights; `None` when the DEM
 /// has been deleted), once there is room in the memory budget for a
-/// search on it (a 422 when it alone needs more than the budget).
+/// search on it (a 422 when it alone needs more than the budget); or, for
+/// a costmap to plan coarse to fine, its stored file to read by windows.
 pub(super) async fn map_source(
     state: &AppState,
     costmap: &CostmapRow,
@@ -57,14 +122,17 @@ pub(super) async fn map_source(
         "result",
         costmap.result.as_deref().unwrap_or(""),
     )?;
-    let need = crate::memory::route_search_bytes(
-        size.width.saturating_mul(size.height),
-        u64::try_from(meta.size_bytes).unwrap_or(0),
-    );
+    let cells = size.width.saturating_mul(size.height);
+    let file_bytes = u64::try_from(meta.size_bytes).unwrap_or(0);
     let what = format!(
         "a route search (costmap {}, {} × {} cells)",
         costmap.id, size.width, size.height
     );
+    let dem_read = dem_read_bytes(state, costmap).await?;
+    if coarse_to_fine_for(state, cells, file_bytes, dem_read) {
+        return windowed_source(state, costmap, (size.width, size.height), file_bytes, &what).await;
+    }
+    let need = crate::memory::route_search_bytes(cells, file_bytes);
     let (dem, room) = match state
         .load_dem_for(&costmap.dem_id, &what, |_, _| need)
         .await
@@ -80,8 +148,67 @@ pub(super) async fn map_source(
         .ok_or_else(|| not_found("costmap", &costmap.id))?;
     Ok(MapSource {
         costmap_id: costmap.id.clone(),
-        tif: file.data,
-        dem,
+        map: Source::Whole {
+            tif: file.data,
+            dem,
+        },
+        _room: room,
+    })
+}
+
+/// The stored costmap file to read by windows, with room in the budget
+/// for a coarse-to-fine search: the caches of what it reads and a
+/// corridor as large as the rest of the budget allows (at most
+/// [`MAX_CORRIDOR_CELLS`] and the map's cells).
+async fn windowed_source(
+    state: &AppState,
+    costmap: &CostmapRow,
+    (width, height): (u64, u64),
+    file_bytes: u64,
+    what: &str,
+) -> Result<MapSource, ApiError> {
+    let cells = width.saturating_mul(height);
+    let (w, h) = (
+        usize::try_from(width).unwrap_or(usize::MAX),
+        usize::try_from(height).unwrap_or(usize::MAX),
+    );
+    let sources = |search: u64| {
+        crate::memory::route_coarse_to_fine_bytes(
+            search,
+            (cells, GeoTiffWindows::<std::fs::File>::CACHE_BYTES as u64),
+            (file_bytes, (CACHED_CHUNKS * CHUNK_BYTES) as u64),
+            (0, 0),
+        )
+    };
+    let no_corridor = CoarseToFineOptions {
+        max_corridor_cells: 0,
+        ..CoarseToFineOptions::default()
+    };
+    let fixed = sources(no_corridor.estimated_bytes(w, h));
+    let room_for_corridor = state.memory.total().saturating_sub(fixed);
+    let c2f = CoarseToFineOptions {
+        max_corridor_cells: (room_for_corridor / CoarseToFineOptions::CORRIDOR_BYTES_PER_CELL)
+            .min(MAX_CORRIDOR_CELLS)
+            .min(cells),
+        ..CoarseToFineOptions::default()
+    };
+    let need = sources(c2f.estimated_bytes(w, h));
+    let what = format!("{what} coarse to fine");
+    let room = state.memory.reserve(need, &what).await?;
+    let file = StoredFile::Costmap(costmap.id.clone(), COSTMAP_TIF.to_string());
+    let tif = StoredFileReader::open(state.db.clone(), file, file_bytes, CACHED_CHUNKS)
+        .await
+        .map_err(|e| match e {
+            super::stored_file::StoredFileError::Db(e) => ApiError::from(e),
+            other => ApiError::Internal(format!("costmap {}: {other}", costmap.id)),
+        })?;
+    Ok(MapSource {
+        costmap_id: costmap.id.clone(),
+        map: Source::Windowed(Windowed {
+            tif: Arc::new(tif),
+            cells,
+            c2f,
+        }),
         _room: room,
     })
 }
@@ -89,15 +216,13 @@ pub(super) async fn map_source(
 /// The route map (on a planner thread: it holds PROJ objects, which
 /// stay on the thread that made them).
 fn build_map(src: &MapSource) -> Result<RouteMap, ApiError> {
-    // Written by this server: the limits of the day need not hold again.
-    let limits = DemLimits {
-        max_pixels: u64::MAX,
-        max_side: u32::MAX,
+    let Source::Whole { tif, dem } = &src.map else {
+        return Err(not_in_memory(src));
     };
-    let built = match RouteMap::from_costmap_geotiff(&src.tif, src.dem.as_deref(), &limits) {
+    let built = match RouteMap::from_costmap_geotiff(tif, dem.as_deref(), &ANY_SIZE) {
         Err(MapRouteError::DemMismatch(why)) => {
             tracing::warn!(costmap = %src.costmap_id, %why, "the DEM does not fit the costmap: planning without heights");
-            RouteMap::from_costmap_geotiff(&src.tif, None, &limits)
+            RouteMap::from_costmap_geotiff(tif, None, &ANY_SIZE)
         }
         other => other,
     };
@@ -111,6 +236,31 @@ fn build_map(src: &MapSource) -> Result<RouteMap, ApiError> {
             src.costmap_id
         )),
     })
+}
+
+/// Costmaps are written by this server: the limits of the day need not
+/// hold again.
+const ANY_SIZE: DemLimits = DemLimits {
+    max_pixels: u64::MAX,
+    max_side: u32::MAX,
+};
+
+/// The answer to a replan on a costmap planned coarse to fine.
+pub(super) fn not_in_memory(src: &MapSource) -> ApiError {
+    let cells = match &src.map {
+        Source::Windowed(w) => w.cells,
+        Source::Whole { .. } => 0,
+    };
+    ApiError::Validation(vec![Issue::new(
+        "",
+        &format!(
+            "routes on costmap {} ({cells} cells) are planned coarse to fine, a window at a \
+             time: it has more cells than the server's --route-coarse-cells or its search in \
+             memory would not fit the memory budget, and such routes cannot be replanned with \
+             blocked areas or cost changes; plan a new route from the position instead",
+            src.costmap_id
+        ),
+    )])
 }
 
 /// Which request the search serves, for naming the members at fault.
@@ -227,6 +377,8 @@ pub(super) struct Planned {
     /// A new route's D* Lite search, its first search to be completed
     /// for its replans (it has the route's A* as its landmark).
     pub(super) warm: Option<DStarLite>,
+    /// How a coarse-to-fine search ended.
+    pub(super) report: Option<SearchReport>,
 }
 
 /// A new route, on a planner thread.
@@ -237,6 +389,9 @@ pub(super) fn plan_route(
     options: &SearchOptions,
     stop: &CancelToken,
 ) -> Result<Planned, ApiError> {
+    if let Source::Windowed(windowed) = &src.map {
+        return plan_coarse_to_fine(src, windowed, start, goal, options, stop);
+    }
     let map = build_map(src)?;
     let ends = Ends::Create;
     let mut issues = Vec::new();
@@ -265,6 +420,94 @@ pub(super) fn plan_route(
         reused_search: false,
         search: None,
         warm,
+        report: None,
+    })
+}
+
+/// A new route coarse to fine, the costmap read by windows from its
+/// stored chunks (blocking this planner thread on the database).
+fn plan_coarse_to_fine(
+    src: &MapSource,
+    windowed: &Windowed,
+    start: &Position,
+    goal: &Position,
+    options: &SearchOptions,
+    stop: &CancelToken,
+) -> Result<Planned, ApiError> {
+    if options.epsilon != 1.0 {
+        return Err(ApiError::Validation(vec![Issue::new(
+            "/epsilon",
+            &format!(
+                "costmap {} ({} cells) is planned coarse to fine, which finds the optimum \
+                 (or says how far from it the route may be): epsilon must be 1",
+                src.costmap_id, windowed.cells
+            ),
+        )]));
+    }
+    let unreadable = |e: planner_core::terrain::TerrainError| {
+        ApiError::Internal(format!("costmap {} read by windows: {e}", src.costmap_id))
+    };
+    let costs = GeoTiffWindows::open_band(Arc::clone(&windowed.tif), 1, 1, None, &ANY_SIZE)
+        .map_err(unreadable)?;
+    // The class codes name what a blocked endpoint is on: page 2, or band
+    // 2 of costmaps written before the class page.
+    let classes = GeoTiffWindows::open_band(Arc::clone(&windowed.tif), 2, 1, None, &ANY_SIZE)
+        .or_else(|_| GeoTiffWindows::open_band(Arc::clone(&windowed.tif), 1, 2, None, &ANY_SIZE))
+        .ok();
+    let map = WindowedMap::new(&costs, classes.as_ref().map(|c| c as &dyn RasterWindows)).map_err(
+        |e| match e {
+            MapRouteError::Grid(_) | MapRouteError::RotatedGrid => ApiError::Conflict(format!(
+                "no route can be planned on costmap {}: {e}",
+                src.costmap_id
+            )),
+            other => ApiError::Internal(format!(
+                "costmap {} as a route map: {other}",
+                src.costmap_id
+            )),
+        },
+    )?;
+    let ends = Ends::Create;
+    let mut issues = Vec::new();
+    for (p, end) in [(start, Endpoint::Start), (goal, Endpoint::Goal)] {
+        if let Err(e) = map.locate(p, end) {
+            match endpoint_issue(&e, ends) {
+                Some(issue) => issues.push(issue),
+                None => return Err(ApiError::Internal(format!("locating the {end}: {e}"))),
+            }
+        }
+    }
+    if !issues.is_empty() {
+        return Err(ApiError::Validation(issues));
+    }
+    let opts = options.route_options(usize::try_from(windowed.cells).unwrap_or(usize::MAX));
+    let (route, found) = map
+        .plan(start, goal, &opts, &windowed.c2f, &|| stop.is_cancelled())
+        .map_err(|e| match e {
+            WindowedRouteError::Map(e) => search_fault(e, ends, stop),
+            WindowedRouteError::Search(BigRouteError::Route(e)) => {
+                search_fault(from_search(e), ends, stop)
+            }
+            WindowedRouteError::Search(BigRouteError::Source(e)) => {
+                ApiError::Internal(format!("costmap {} read by windows: {e}", src.costmap_id))
+            }
+            WindowedRouteError::Search(e @ BigRouteError::CorridorLimit { .. }) => {
+                ApiError::Validation(vec![Issue::new(
+                    "",
+                    &format!(
+                        "{e} (the corridor is bounded by the server's memory budget: at most \
+                         {} cells)",
+                        windowed.c2f.max_corridor_cells
+                    ),
+                )])
+            }
+        })?;
+    Ok(Planned {
+        route,
+        planner: Planner::CoarseToFine,
+        reused_search: false,
+        search: None,
+        warm: None,
+        report: Some(SearchReport::of(&found)),
     })
 }
 
@@ -438,7 +681,10 @@ pub(super) fn replan(
     };
     match input.options.planner() {
         Planner::DstarLite => replan_dstar_lite(&map, input, &checked, cached, stop),
-        Planner::Astar => replan_astar(&map, input, &checked, stop).map_err(|e| failed(e, None)),
+        // (A map in memory is never planned coarse to fine.)
+        Planner::Astar | Planner::CoarseToFine => {
+            replan_astar(&map, input, &checked, stop).map_err(|e| failed(e, None))
+        }
     }
 }
 
@@ -489,6 +735,7 @@ fn replan_dstar_lite(
         reused_search: reused,
         search: Some(search),
         warm: None,
+        report: None,
     })
 }
 
@@ -516,5 +763,6 @@ fn replan_astar(
         reused_search: false,
         search: None,
         warm: None,
+        report: None,
     })
 }
