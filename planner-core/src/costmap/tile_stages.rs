@@ -554,6 +554,16 @@ impl TilePlan {
         prefill: &dyn ClassWindows,
         fill: &TileFill,
     ) -> Result<Vec<u8>, TiledError> {
+        self.fill_counted(k, prefill, fill).map(|(core, _)| core)
+    }
+
+    /// [`TilePlan::fill`] and how many cells it filled.
+    pub(crate) fn fill_counted(
+        &self,
+        k: usize,
+        prefill: &dyn ClassWindows,
+        fill: &TileFill,
+    ) -> Result<(Vec<u8>, usize), TiledError> {
         let t = self.tile(k)?;
         let [w, h] = [self.layout.width, self.layout.height];
         let ring = t.padded([1, 1], w, h);
@@ -578,12 +588,13 @@ impl TilePlan {
             &mut core,
         );
         let mut plain_core: Vec<u8> = core.iter().map(|&c| c & !HOLE_BIT).collect();
-        if fill.apply(&t, &labels, self.min_cells, &mut plain_core)? > 0 {
+        let filled = fill.apply(&t, &labels, self.min_cells, &mut plain_core)?;
+        if filled > 0 {
             for (c, p) in core.iter_mut().zip(&plain_core) {
                 *c = (*c & HOLE_BIT) | p;
             }
         }
-        Ok(core)
+        Ok((core, filled))
     }
 
     /// Stage 4: tile `k`'s costs, classes and layers, from its surface

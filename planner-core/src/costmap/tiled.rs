@@ -197,11 +197,13 @@ pub fn build_costmap_tiled(
     for k in 0..n {
         report(Stage::Regions, 0.5 + 0.1 * k as f64 / n as f64)?;
         let part = fill.tile(k).ok_or(JoinError::Missing(k))?;
-        let core = plan.fill(k, &store, part)?;
-        let t = plan.tile(k)?;
-        store
-            .write(t.col0, t.row0, t.width, t.height, &core)
-            .map_err(TiledError::Scratch)?;
+        let (core, filled) = plan.fill_counted(k, &store, part)?;
+        if filled > 0 {
+            let t = plan.tile(k)?;
+            store
+                .write(t.col0, t.row0, t.width, t.height, &core)
+                .map_err(TiledError::Scratch)?;
+        }
     }
     drop(fill);
 
