@@ -639,7 +639,7 @@ mod tests {
     use planner_core::terrain::DemLimits;
 
     use crate::db::{CostmapRow, DemMetaRow};
-    use crate::jobs::record::{COSTMAP_TIF, DEFAULT_LEASE, StoredRequest};
+    use crate::jobs::record::{COSTMAP_TIF, DEFAULT_LEASE, LEGEND_SVG, PREVIEW_PNG, StoredRequest};
     use crate::memory::MemoryBudget;
     use crate::state::{DemStore, Planners};
 
@@ -659,6 +659,24 @@ mod tests {
 
     impl TestServer {
         async fn start() -> TestServer {
+            TestServer::start_with(TileSettings {
+                cells: u64::MAX,
+                side: 512,
+            })
+            .await
+        }
+
+        /// A server that builds costmaps of over 100 working cells as
+        /// tiles of 16 (the test DEM's 40 × 40: 9 tiles).
+        async fn start_tiled() -> TestServer {
+            TestServer::start_with(TileSettings {
+                cells: 100,
+                side: 16,
+            })
+            .await
+        }
+
+        async fn start_with(tiles: TileSettings) -> TestServer {
             let dir = std::env::temp_dir()
                 .join(format!("terraplan-costmap-jobs-{}", uuid::Uuid::new_v4()));
             std::fs::create_dir_all(&dir).unwrap();
@@ -673,11 +691,7 @@ mod tests {
                 memory: Arc::new(MemoryBudget::new(1024)),
                 planner: Arc::new(Planners::default()),
             };
-            let whole = TileSettings {
-                cells: u64::MAX,
-                side: 512,
-            };
-            let jobs = Arc::new(CostmapJobs::new(1, dems, DEFAULT_LEASE, whole));
+            let jobs = Arc::new(CostmapJobs::new(1, dems, DEFAULT_LEASE, tiles));
             TestServer { db, jobs, dir }
         }
 
@@ -933,5 +947,117 @@ mod tests {
                 row.error
             );
         }
+    }
+
+    impl TestServer {
+        /// Run the tile jobs (as the maintenance loop starts them).
+        fn run_tiles(&self) {
+            self.jobs().tiles.start(self.jobs().notes());
+        }
+
+        /// Until costmap `id` is done or failed.
+        async fn finished(&self, id: &str) -> CostmapRow {
+            tokio::time::timeout(Duration::from_secs(120), async {
+                loop {
+                    let row = self.row(id).await;
+                    if row.status == "done" || row.status == "failed" {
+                        return row;
+                    }
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            })
+            .await
+            .expect("the costmap finishes")
+        }
+
+        /// The cost band of a stored costmap.tif.
+        async fn costs(&self, id: &str) -> Vec<f64> {
+            let tif = self.db.get_costmap_file(id, COSTMAP_TIF).await.unwrap();
+            let limits = DemLimits {
+                max_pixels: u64::MAX,
+                max_side: u32::MAX,
+            };
+            planner_core::terrain::read_dem(&tif.unwrap().data, Some("c.tif"), None, &limits)
+                .unwrap()
+                .values
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_costmap_over_the_threshold_is_built_as_tiles_like_the_whole_build() {
+        let whole = TestServer::start().await;
+        let id = whole.job(&whole.dem().await).await;
+        whole.jobs().enqueue(&id);
+        whole.settle().await;
+        let reference = whole.row(&id).await;
+        assert_eq!(reference.status, "done", "{:?}", reference.error);
+
+        let t = TestServer::start_tiled().await;
+        t.run_tiles();
+        let tiled = t.job(&t.dem().await).await;
+        t.jobs().enqueue(&tiled);
+        let row = t.finished(&tiled).await;
+        assert_eq!(row.status, "done", "{:?}", row.error);
+        assert_eq!((row.progress, row.attempts), (1.0, 1));
+        assert_eq!(row.result, reference.result);
+        for name in [PREVIEW_PNG, LEGEND_SVG] {
+            let a = whole.db.get_costmap_file(&id, name).await.unwrap().unwrap();
+            let b = t.db.get_costmap_file(&tiled, name).await.unwrap().unwrap();
+            assert!(a.data == b.data, "{name}");
+        }
+        let (a, b) = (whole.costs(&id).await, t.costs(&tiled).await);
+        assert_eq!(a.len(), 1600);
+        assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+        let (jobs,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM costmap_tile_jobs")
+            .fetch_one(t.pool())
+            .await
+            .unwrap();
+        assert_eq!(jobs, 0);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_tile_job_failing_on_a_fault_is_retried_then_fails_its_costmap() {
+        let t = TestServer::start_tiled().await;
+        // The fill stage's results cannot be stored.
+        t.sql(
+            "CREATE TRIGGER refuse_final BEFORE INSERT ON costmap_tiles \
+             WHEN NEW.kind = 'final' BEGIN SELECT RAISE(ABORT, 'disk I/O error'); END",
+        )
+        .await;
+        t.run_tiles();
+        let id = t.job(&t.dem().await).await;
+        t.jobs().enqueue(&id);
+        let row = t.finished(&id).await;
+        assert_eq!(row.status, "failed");
+        let error = row.error.unwrap();
+        assert!(
+            error.starts_with("tile 0 of stage fill failed 3 times, the last time: ")
+                && error.contains("disk I/O error"),
+            "{error}"
+        );
+        // Its tile jobs and tiles are gone.
+        let (left,): (i64,) = sqlx::query_as(
+            "SELECT (SELECT COUNT(*) FROM costmap_tile_jobs) + (SELECT COUNT(*) FROM costmap_tiles)",
+        )
+        .fetch_one(t.pool())
+        .await
+        .unwrap();
+        assert_eq!(left, 0);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_tiled_costmap_whose_dem_is_deleted_fails_saying_so() {
+        let t = TestServer::start_tiled().await;
+        let dem = t.dem().await;
+        let id = t.job(&dem).await;
+        // Planned as tiles by its costmap job; no tile runs yet.
+        t.jobs().enqueue(&id);
+        t.settle().await;
+        assert_eq!(t.db.costmap_tile_side(&id).await.unwrap(), Some(16));
+        assert!(t.db.delete_dem(&dem).await.unwrap());
+        t.run_tiles();
+        let row = t.finished(&id).await;
+        assert_eq!(row.status, "failed");
+        assert!(row.error.unwrap().contains("was deleted"));
     }
 }

@@ -35,6 +35,7 @@ use super::feed::{Feed, JobNote};
 use super::record::{JobStatus, MAX_ATTEMPTS, parse_stage};
 use crate::clock::now_millis;
 use crate::db::{Db, TileClaim, TileJob, TileJobKey, TileProgress};
+use crate::memory::BudgetError;
 use crate::state::dem_store::DemLoader;
 
 /// Leases are renewed (and the queue polled) this many times per lease.
@@ -404,6 +405,30 @@ impl TileRunner {
             Err(ContextError::Fatal(m)) => return Err(StageError::Fatal(m)),
             Err(ContextError::Fault(m)) => return Err(StageError::Fault(m)),
         };
+        // Room in the memory budget for the job, waited for as long as it
+        // takes (a background job); a tile that alone needs more than the
+        // budget cannot be built here.
+        let k = usize::try_from(job.key.tile).unwrap_or(0);
+        let need = stages::job_bytes(&ctx.plan, job.key.stage, k);
+        let what = format!("{} of a costmap", job.key.stage.job_name(job.key.tile));
+        let _room = tokio::select! {
+            room = self.dems.memory.reserve_within(need, &what, None) => match room {
+                Ok(room) => room,
+                Err(_) if self.is_shutting_down() => {
+                    return Err(StageError::Cancelled);
+                }
+                Err(e @ BudgetError::OverBudget { .. }) => {
+                    return Err(StageError::Fatal(format!(
+                        "the costmap cannot be built on this server: {e}"
+                    )));
+                }
+                Err(e) => return Err(StageError::Fault(e.to_string())),
+            },
+            () = self.stopped() => return Err(StageError::Cancelled),
+        };
+        if cancel.load(Ordering::Relaxed) {
+            return Err(StageError::Cancelled);
+        }
         let db = self.db();
         if job.key.stage == crate::db::TileStage::Finish {
             let finished = finish::finish(db, &ctx, job, &self.instance, cancel).await?;

@@ -11,6 +11,7 @@ use planner_core::costmap::{ClassTiles, CostmapError, TileEdges, TileFill, TileP
 use super::codec::{decode_classes, encode_classes, encode_values};
 use super::context::CostmapContext;
 use crate::db::{Db, TileJob, TileOutput, TileStage};
+use crate::memory;
 
 /// Pieces read from the database at once (edges, tallies, previews).
 pub const PAGE: i64 = 64;
@@ -103,6 +104,28 @@ pub fn stored_classes(
         let t = layout.tile(k);
         decode_classes(&data, t.width * t.height).map_err(stored)
     })
+}
+
+/// The memory a job of `stage` on tile `k` takes at most, bytes: the
+/// per-cell build of the whole pipeline over the tile's widest window
+/// (its core and halos, at the DEM's resolution), and its heights.
+pub fn job_bytes(plan: &TilePlan, stage: TileStage, k: usize) -> u64 {
+    if !matches!(stage, TileStage::Classify | TileStage::Cost) {
+        // Class tiles, edges and parts: about a tile's cells a few times.
+        let side = plan.layout().tile as u64;
+        return memory::costmap_build_bytes(side * side, 0);
+    }
+    let Ok(t) = plan.tile(k) else {
+        return 0;
+    };
+    let h = plan.halos();
+    let reach = |a: usize| h.surface[a].max(h.inflation[a]) as u64 + 1;
+    let [fx, fy] = plan.params().resample_factor;
+    let cells = (t.width as u64 + 2 * reach(0))
+        .saturating_mul(t.height as u64 + 2 * reach(1))
+        .saturating_mul((fx * fy) as u64);
+    memory::costmap_build_bytes(cells, plan.layers().len() as u64)
+        .saturating_add(cells.saturating_mul(8))
 }
 
 /// Run job `job`'s stage (but the finish) and return what it stores.
