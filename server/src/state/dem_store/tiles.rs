@@ -911,4 +911,205 @@ mod tests {
         assert_eq!(TileSet::new(512, 512, TileSample::F32).levels, 1);
         assert_eq!(TileSet::new(513, 10, TileSample::F32).levels, 2);
     }
+
+    /// xorshift64*: the same cases every run.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+
+        fn below(&mut self, n: usize) -> usize {
+            (self.next() % n.max(1) as u64) as usize
+        }
+
+        fn bytes(&mut self, n: usize) -> Vec<u8> {
+            (0..n).map(|_| self.next() as u8).collect()
+        }
+    }
+
+    /// This process' peak resident memory, bytes, after resetting it (the
+    /// tests run one per process under nextest).
+    fn reset_peak() {
+        let _ = std::fs::write("/proc/self/clear_refs", "5");
+    }
+
+    fn peak() -> u64 {
+        let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+            .unwrap_or(0)
+            * 1024
+    }
+
+    /// Property test of the stored tiles' decoding: random bytes, zlib
+    /// streams of the wrong length and a zlib bomb (16 MiB of zeros in a
+    /// few KiB) are errors, never a panic, and the memory taken stays that
+    /// of one tile whatever the bytes claim.
+    #[test]
+    fn decoding_random_and_hostile_tiles_is_an_error_within_bounded_memory() {
+        let mut rng = Rng(0x5EED_0001);
+        let mut bomb = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        bomb.write_all(&vec![0u8; 16 << 20]).unwrap();
+        let bomb = bomb.finish().unwrap();
+        reset_peak();
+        let before = peak();
+        let mut decoded = 0;
+        for case in 0..600 {
+            let (cw, ch) = (1 + rng.below(512), 1 + rng.below(512));
+            let sample = if rng.below(2) == 0 {
+                TileSample::F32
+            } else {
+                TileSample::F64
+            };
+            let want = cw * ch * sample.bytes();
+            let data = match case % 4 {
+                0 => {
+                    let n = rng.below(4096);
+                    rng.bytes(n)
+                }
+                1 => {
+                    // A valid stream of a random length, sometimes right.
+                    let n = if rng.below(4) == 0 {
+                        want
+                    } else {
+                        rng.below(2 * want + 2)
+                    };
+                    let raw = rng.bytes(n);
+                    let mut z =
+                        flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+                    z.write_all(&raw).unwrap();
+                    z.finish().unwrap()
+                }
+                2 => {
+                    // A valid tile with bytes flipped or cut.
+                    let d = dem(cw, ch, |x, y| (x * 3 + y) as f64);
+                    let mut t = encode_tile(&d.values, cw, 0, cw, ch, sample).unwrap();
+                    if rng.below(2) == 0 {
+                        let cut = rng.below(t.len());
+                        t.truncate(cut);
+                    } else {
+                        for _ in 0..1 + rng.below(8) {
+                            let i = rng.below(t.len());
+                            t[i] ^= 1 << rng.below(8);
+                        }
+                    }
+                    t
+                }
+                _ => bomb.clone(),
+            };
+            match decode_tile(&data, cw, ch, sample) {
+                Ok(cells) => {
+                    assert_eq!(cells.len(), cw * ch, "case {case}");
+                    decoded += 1;
+                }
+                Err(e) => assert!(
+                    e.to_string().contains("stored DEM tile"),
+                    "case {case}: {e}"
+                ),
+            }
+        }
+        // Streams of exactly a tile's bytes decode (a quarter of case 1).
+        assert!(decoded > 10, "{decoded}");
+        // One tile of 512² f64 is 2 MiB: a bomb never inflates past it.
+        let grown = peak().saturating_sub(before);
+        assert!(grown < 64 << 20, "decoding grew the peak by {grown} bytes");
+    }
+
+    /// Property test of the windows over stored tiles: with some tiles
+    /// garbage, cut short or missing, random windows (some outside the
+    /// raster) read the cells cut from the source exactly when every tile
+    /// they touch is intact, and are errors otherwise; never a panic.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn windows_over_corrupt_stored_tiles_are_errors_or_the_cells() {
+        let dir = std::env::temp_dir().join(format!("terraplan-tilefuzz-{}", uuid::Uuid::new_v4()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let db = Db::connect(None, &dir).await.unwrap();
+        let mut rng = Rng(0x5EED_0002);
+        let d = dem(1300, 1100, |x, y| ((x * 7 + y * 13) % 1000) as f64 * 0.5);
+        let (set, tiles) = cut(&d, TileSample::F32);
+        db.begin_dem_upload("d", None, "me", 0, i64::MAX)
+            .await
+            .unwrap();
+        let mut broken = std::collections::HashSet::new();
+        let mut rows = Vec::new();
+        for (&(level, col, row), data) in &tiles {
+            let data = match rng.below(6) {
+                0 => {
+                    let n = rng.below(3000);
+                    rng.bytes(n)
+                }
+                1 => data[..rng.below(data.len())].to_vec(),
+                2 if level == 0 => {
+                    broken.insert((level, col, row));
+                    continue; // missing
+                }
+                _ => data.clone(),
+            };
+            if &data != data_of(&tiles, level, col, row) {
+                broken.insert((level, col, row));
+            }
+            rows.push(DemTileRow {
+                level: level as i64,
+                row: row as i64,
+                col: col as i64,
+                data,
+            });
+        }
+        assert!(
+            db.insert_dem_tiles("d", "me", &rows, i64::MAX)
+                .await
+                .unwrap()
+        );
+        let grid = DemWindows::new(&d).grid().clone();
+        let runtime = tokio::runtime::Handle::current();
+        let reader = db.clone();
+        let outcome = tokio::task::spawn_blocking(move || {
+            let windows = StoredTiles::new(reader, runtime, "d", set, 0, &grid);
+            let (mut good, mut bad) = (0, 0);
+            for case in 0..300 {
+                let (c0, r0) = (rng.below(1400), rng.below(1200));
+                let (w, h) = (1 + rng.below(700), 1 + rng.below(700));
+                let mut out = vec![0.0; w * h];
+                let got = windows.read_window(c0, r0, w, h, &mut out);
+                let inside = c0 + w <= 1300 && r0 + h <= 1100;
+                let intact = inside
+                    && (r0 / 512..=(r0 + h - 1) / 512).all(|ty| {
+                        (c0 / 512..=(c0 + w - 1) / 512).all(|tx| !broken.contains(&(0, tx, ty)))
+                    });
+                match got {
+                    Ok(()) => {
+                        assert!(intact, "case {case}: a window over broken tiles read");
+                        for y in 0..h {
+                            for x in 0..w {
+                                let want = d.values[(r0 + y) * 1300 + c0 + x];
+                                assert_eq!(out[y * w + x], want, "case {case} ({x}, {y})");
+                            }
+                        }
+                        good += 1;
+                    }
+                    Err(e) => {
+                        assert!(!intact, "case {case}: intact window refused: {e}");
+                        bad += 1;
+                    }
+                }
+            }
+            (good, bad)
+        })
+        .await
+        .unwrap();
+        assert!(outcome.0 > 5 && outcome.1 > 5, "{outcome:?}");
+        db.close().await;
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    fn data_of(tiles: &Tiles, level: usize, col: usize, row: usize) -> &Vec<u8> {
+        &tiles[&(level, col, row)]
+    }
 }
