@@ -1,9 +1,10 @@
 //! `terraplan worker`: a replica that serves no HTTP and only runs the
 //! costmap jobs of a PostgreSQL database it shares with `terraplan serve`
 //! replicas. It takes over jobs whose holder died or gave them back, as
-//! every replica does, a few at a time (`--costmap-jobs`); on SIGTERM (or
-//! Ctrl-C) it stops taking jobs, gives back the ones it runs, queued for
-//! another replica, and exits 0.
+//! every replica does, and runs the tile jobs of costmaps built as tiles
+//! (over `--costmap-tile-cells`), a few at a time (`--costmap-jobs`); on
+//! SIGTERM (or Ctrl-C) it stops taking jobs, gives back the ones it runs,
+//! queued for another replica, and exits 0.
 
 use super::common::Failure;
 use crate::config::ServeConfig;
@@ -51,6 +52,8 @@ async fn run(config: ServeConfig) -> Result<(), String> {
     tracing::info!(
         instance = jobs.instance(),
         costmap_jobs = config.costmap_jobs,
+        costmap_tile_cells = config.costmap_tile_cells,
+        costmap_tile_side = config.costmap_tile_side,
         lease_s = config.job_lease_s,
         taken_over = recovered,
         "terraplan worker running costmap jobs"
