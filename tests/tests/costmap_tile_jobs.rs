@@ -13,7 +13,9 @@
 //! - its progress reaches the event stream, rising through the stages, up
 //!   to `done`;
 //! - deleted mid-build, its tile jobs stop: its stream says it was deleted,
-//!   nothing of it is left in the tables, and the next costmap is built.
+//!   nothing of it is left in the tables, and the next costmap is built;
+//! - a tile side that is not a multiple of 16 from 16 to 8192, or a
+//!   threshold of 0 cells, is refused at start-up naming the flag.
 
 use std::collections::BTreeSet;
 use std::time::Duration;
@@ -23,8 +25,8 @@ use terraplan_e2e::replicas::{
     assert_same_costmap_files, costmap_content, download_costmap_files, wait_until,
 };
 use terraplan_e2e::{
-    JOB_DEADLINE, Server, delete, dtm, get, get_streaming, post_json, sse_events, upload_dem,
-    wait_costmap_finished,
+    JOB_DEADLINE, Server, delete, dtm, get, get_streaming, post_json, sse_events, terraplan, text,
+    upload_dem, wait_costmap_finished,
 };
 
 /// The DTM's 73 297 working cells are over this: built as tiles.
@@ -195,5 +197,25 @@ fn deleting_a_tiled_costmap_mid_build_stops_its_tiles() {
     }
     for table in ["costmap_tile_jobs", "costmap_tiles"] {
         assert_eq!(rows_of(&server, table, &next), 0, "{table}");
+    }
+}
+
+#[test]
+fn bad_tile_flags_are_refused_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().to_str().unwrap();
+    for (flag, value, says) in [
+        ("--costmap-tile-side", "100", "multiple of 16"),
+        ("--costmap-tile-side", "8208", "from 16 to 8192"),
+        ("--costmap-tile-side", "x", "not a number"),
+        ("--costmap-tile-cells", "0", "0"),
+    ] {
+        let out = terraplan(&["serve", "--port", "0", "--data-dir", data, flag, value]);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            err.contains(flag) && err.contains(says),
+            "{flag} {value}: {err}"
+        );
     }
 }
