@@ -147,9 +147,9 @@ pub async fn finish(
                     .map_err(fault("the tiles' statistics cannot be read"))
             };
             let (tallies, previews) = (read("tally")?, read("preview")?);
-            if tallies.is_empty() {
+            if tallies.is_empty() || previews.is_empty() {
                 return Err(StageError::Fault(format!(
-                    "the statistics of tile {k} are missing"
+                    "the statistics or preview of tile {k} are missing"
                 )));
             }
             for ((t, tally), (p, preview)) in tallies.iter().zip(&previews) {
