@@ -9,7 +9,8 @@
 //!   the same request, built whole; GDAL reads both files' cost and class
 //!   pages and every layer equal value for value, the tiled files in blocks
 //!   of 64; preview.png and legend.svg are the same bytes;
-//! - every job is logged done once, none twice;
+//! - every job is logged done once, none twice; a route across it is the
+//!   route across the whole build;
 //! - its progress reaches the event stream, rising through the stages, up
 //!   to `done`;
 //! - deleted mid-build, its tile jobs stop: its stream says it was deleted,
@@ -131,6 +132,31 @@ fn a_costmap_built_as_tiles_equals_the_whole_build() {
     assert_eq!(b.layers, ["inflation", "slope", "step"]);
     let cells = assert_same_costmap_files(&a, &b, 64);
     assert_eq!(cells, 5 * 283 * 259);
+
+    // Routes see no difference: the same route across both.
+    let route = |server: &Server, map: &Value| {
+        let b: Vec<f64> = map["bounds_wgs84"]
+            .as_array()
+            .expect("bounds_wgs84")
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let at = |fx: f64, fy: f64| json!([b[0] + fx * (b[2] - b[0]), b[1] + fy * (b[3] - b[1])]);
+        let url = server.url(&format!(
+            "/api/v1/costmaps/{}/routes",
+            map["id"].as_str().unwrap()
+        ));
+        let r = post_json(&url, &json!({"start": at(0.3, 0.3), "goal": at(0.7, 0.7)}));
+        assert_eq!(r.status, 201, "{}", r.text());
+        let body = r.json();
+        let route: Vec<&Value> = ["waypoints", "path_cells", "path_cost", "cost", "expanded"]
+            .iter()
+            .map(|k| &body[*k])
+            .collect();
+        assert!(route[0].as_array().is_some_and(|w| w.len() > 10), "{body}");
+        json!(route)
+    };
+    assert_eq!(route(&tiled, &map), route(&whole, &reference));
 }
 
 /// The rows of `table` that belong to costmap `id`, in the server's
