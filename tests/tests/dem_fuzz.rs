@@ -675,6 +675,7 @@ fn fuzz_uploads() -> Vec<String> {
     }
     let (rss_end, peak) = rss(pid);
     eprintln!("{total} hostile uploads: statuses {statuses:?}, {stored} valid and stored");
+    eprintln!("{} distinct faults named:", faults.len());
     for (kind, n) in &faults {
         eprintln!("  {n:4} × {kind}");
     }

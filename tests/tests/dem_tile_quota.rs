@@ -149,6 +149,10 @@ fn dems_count_by_their_tiles_and_kept_files_and_tiles_past_the_quota_are_refused
     let (set_bytes, big_tiles) = tile_bytes(dir.path(), &id);
     assert_eq!(set_bytes, big_tiles);
     assert!(big_tiles > 16 * MIB, "{big_tiles}");
+    eprintln!(
+        "3000 x 3000 Float32: file {} bytes, tiles {big_tiles} bytes",
+        body.len()
+    );
     assert_eq!(stored_bytes(&server, &project), before + big_tiles);
     // Deleting a DEM gives its bytes back.
     let r = terraplan_e2e::delete(&server.url(&format!("/api/v1/dems/{asc_id}")));
