@@ -35,55 +35,20 @@ impl RouteMap {
         h.is_finite().then_some(h)
     }
 
-    /// Bilinear height at fractional cell position (col, row) measured in
-    /// cells from the top-left corner; falls back to the nearest cell when
-    /// a neighbour is unknown.
-    fn height_at_point(&self, col: f64, row: f64) -> Option<f64> {
-        let (w, h) = (self.grid.width(), self.grid.height());
-        let x = (col - 0.5).clamp(0.0, (w - 1) as f64);
-        let y = (row - 0.5).clamp(0.0, (h - 1) as f64);
-        let (c0, r0) = (x.floor() as usize, y.floor() as usize);
-        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
-        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
-        let corners = [
-            self.height_at((r0, c0)),
-            self.height_at((r0, c1)),
-            self.height_at((r1, c0)),
-            self.height_at((r1, c1)),
-        ];
-        if let [Some(a), Some(b), Some(c), Some(d)] = corners {
-            let top = a + (b - a) * fx;
-            let bottom = c + (d - c) * fx;
-            return Some(top + (bottom - top) * fy);
-        }
-        let nearest = (
-            (row.floor().max(0.0) as usize).min(h - 1),
-            (col.floor().max(0.0) as usize).min(w - 1),
-        );
-        self.height_at(nearest)
-    }
-
     /// Terrain slope in degrees at a cell (Horn's 3 × 3 gradient, as
     /// `gdaldem slope`), `None` without heights or where the window has an
     /// unknown height or leaves the map.
-    pub fn slope_deg_at(&self, (r, c): Cell) -> Option<f64> {
-        let (w, h) = (self.grid.width(), self.grid.height());
-        if r == 0 || c == 0 || r + 1 >= h || c + 1 >= w {
-            return None;
+    pub fn slope_deg_at(&self, cell: Cell) -> Option<f64> {
+        slope_deg_at(&self.terrain(), &|c| self.height_at(c), cell)
+    }
+
+    fn terrain(&self) -> Terrain<'_> {
+        Terrain {
+            width: self.grid.width(),
+            height: self.grid.height(),
+            dx: self.grid.dx_per_row(),
+            dy: self.grid.dy(),
         }
-        let z = |dr: usize, dc: usize| self.height_at((r + dr - 1, c + dc - 1));
-        let mut v = [[0.0; 3]; 3];
-        for (dr, row) in v.iter_mut().enumerate() {
-            for (dc, cell) in row.iter_mut().enumerate() {
-                *cell = z(dr, dc)?;
-            }
-        }
-        let (sx, sy) = (self.grid.dx(r), self.grid.dy());
-        let gx = ((v[0][2] + 2.0 * v[1][2] + v[2][2]) - (v[0][0] + 2.0 * v[1][0] + v[2][0]))
-            / (8.0 * sx);
-        let gy = ((v[2][0] + 2.0 * v[2][1] + v[2][2]) - (v[0][0] + 2.0 * v[0][1] + v[0][2]))
-            / (8.0 * sy);
-        Some(gx.hypot(gy).atan().to_degrees())
     }
 
     /// The route as a rover takes it: waypoints in WGS84 and UTM with
@@ -130,70 +95,142 @@ impl RouteMap {
     /// Heights and slopes sampled along the polyline through the cell
     /// centres of `points`.
     fn profile(&self, points: &[Cell]) -> Profile {
-        let mut p = Profile::default();
         if self.heights.is_none() {
-            return p;
+            return Profile::default();
         }
-        let mut length_3d = 0.0;
-        let (mut slope_sum, mut slope_len, mut slope_max) = (0.0, 0.0, f64::NEG_INFINITY);
-        let mut grade_max = f64::NEG_INFINITY;
-        let (mut climb, mut descent) = (0.0, 0.0);
-        let mut heights_known = true;
-        for pair in points.windows(2) {
-            let (a, b) = (pair[0], pair[1]);
-            let (ca, ra) = (a.1 as f64 + 0.5, a.0 as f64 + 0.5);
-            let (cb, rb) = (b.1 as f64 + 0.5, b.0 as f64 + 0.5);
-            let span = (cb - ca).abs().max((rb - ra).abs());
-            let steps = ((span * 2.0).ceil() as usize).max(1);
-            let mut prev: Option<(f64, f64, f64)> = None; // (x m, y m, z)
-            for k in 0..=steps {
-                let t = k as f64 / steps as f64;
-                let (col, row) = (ca + (cb - ca) * t, ra + (rb - ra) * t);
-                let r = (row.floor() as usize).min(self.grid.height() - 1);
-                // Metres along the segment from its start.
-                let xm = (col - ca) * self.grid.dx(r);
-                let ym = (row - ra) * self.grid.dy();
-                let z = self.height_at_point(col, row);
-                let Some(z) = z else {
-                    heights_known = false;
-                    prev = None;
-                    continue;
-                };
-                if let Some((px, py, pz)) = prev {
-                    let d = (xm - px).hypot(ym - py);
-                    length_3d += d.hypot(z - pz);
-                    if d > 0.0 {
-                        grade_max = grade_max.max(((z - pz).abs() / d).atan().to_degrees());
-                        let cell = (r, (col.floor() as usize).min(self.grid.width() - 1));
-                        if let Some(s) = self.slope_deg_at(cell) {
-                            slope_sum += s * d;
-                            slope_len += d;
-                            slope_max = slope_max.max(s);
-                        }
-                    }
-                    if z > pz {
-                        climb += z - pz;
-                    } else {
-                        descent += pz - z;
+        profile(&self.terrain(), &|c| self.height_at(c), points)
+    }
+}
+
+/// A grid's size and cell sizes, for sampling heights on it.
+pub(super) struct Terrain<'a> {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    /// Cell width per row, metres.
+    pub(super) dx: &'a [f64],
+    pub(super) dy: f64,
+}
+
+/// Bilinear height at fractional cell position (col, row) measured in
+/// cells from the top-left corner; falls back to the nearest cell when a
+/// neighbour is unknown. `z` gives the height of a cell.
+fn height_at_point(
+    t: &Terrain,
+    z: &dyn Fn(Cell) -> Option<f64>,
+    col: f64,
+    row: f64,
+) -> Option<f64> {
+    let (w, h) = (t.width, t.height);
+    let x = (col - 0.5).clamp(0.0, (w - 1) as f64);
+    let y = (row - 0.5).clamp(0.0, (h - 1) as f64);
+    let (c0, r0) = (x.floor() as usize, y.floor() as usize);
+    let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
+    let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+    let corners = [z((r0, c0)), z((r0, c1)), z((r1, c0)), z((r1, c1))];
+    if let [Some(a), Some(b), Some(c), Some(d)] = corners {
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        return Some(top + (bottom - top) * fy);
+    }
+    let nearest = (
+        (row.floor().max(0.0) as usize).min(h - 1),
+        (col.floor().max(0.0) as usize).min(w - 1),
+    );
+    z(nearest)
+}
+
+/// Terrain slope in degrees at a cell (Horn's 3 × 3 gradient, as
+/// `gdaldem slope`), `None` where the window has an unknown height or
+/// leaves the grid.
+pub(super) fn slope_deg_at(
+    t: &Terrain,
+    z: &dyn Fn(Cell) -> Option<f64>,
+    (r, c): Cell,
+) -> Option<f64> {
+    if r == 0 || c == 0 || r + 1 >= t.height || c + 1 >= t.width {
+        return None;
+    }
+    let mut v = [[0.0; 3]; 3];
+    for (dr, row) in v.iter_mut().enumerate() {
+        for (dc, cell) in row.iter_mut().enumerate() {
+            *cell = z((r + dr - 1, c + dc - 1))?;
+        }
+    }
+    let (sx, sy) = (t.dx[r], t.dy);
+    let gx =
+        ((v[0][2] + 2.0 * v[1][2] + v[2][2]) - (v[0][0] + 2.0 * v[1][0] + v[2][0])) / (8.0 * sx);
+    let gy =
+        ((v[2][0] + 2.0 * v[2][1] + v[2][2]) - (v[0][0] + 2.0 * v[0][1] + v[0][2])) / (8.0 * sy);
+    Some(gx.hypot(gy).atan().to_degrees())
+}
+
+/// Heights and slopes sampled along the polyline through the cell centres
+/// of `points`, every half cell at least; `z` gives the height of a cell.
+pub(super) fn profile(
+    terrain: &Terrain,
+    height: &dyn Fn(Cell) -> Option<f64>,
+    points: &[Cell],
+) -> Profile {
+    let mut p = Profile::default();
+    let mut length_3d = 0.0;
+    let (mut slope_sum, mut slope_len, mut slope_max) = (0.0, 0.0, f64::NEG_INFINITY);
+    let mut grade_max = f64::NEG_INFINITY;
+    let (mut climb, mut descent) = (0.0, 0.0);
+    let mut heights_known = true;
+    for pair in points.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let (ca, ra) = (a.1 as f64 + 0.5, a.0 as f64 + 0.5);
+        let (cb, rb) = (b.1 as f64 + 0.5, b.0 as f64 + 0.5);
+        let span = (cb - ca).abs().max((rb - ra).abs());
+        let steps = ((span * 2.0).ceil() as usize).max(1);
+        let mut prev: Option<(f64, f64, f64)> = None; // (x m, y m, z)
+        for k in 0..=steps {
+            let t = k as f64 / steps as f64;
+            let (col, row) = (ca + (cb - ca) * t, ra + (rb - ra) * t);
+            let r = (row.floor() as usize).min(terrain.height - 1);
+            // Metres along the segment from its start.
+            let xm = (col - ca) * terrain.dx[r];
+            let ym = (row - ra) * terrain.dy;
+            let z = height_at_point(terrain, height, col, row);
+            let Some(z) = z else {
+                heights_known = false;
+                prev = None;
+                continue;
+            };
+            if let Some((px, py, pz)) = prev {
+                let d = (xm - px).hypot(ym - py);
+                length_3d += d.hypot(z - pz);
+                if d > 0.0 {
+                    grade_max = grade_max.max(((z - pz).abs() / d).atan().to_degrees());
+                    let cell = (r, (col.floor() as usize).min(terrain.width - 1));
+                    if let Some(s) = slope_deg_at(terrain, height, cell) {
+                        slope_sum += s * d;
+                        slope_len += d;
+                        slope_max = slope_max.max(s);
                     }
                 }
-                prev = Some((xm, ym, z));
+                if z > pz {
+                    climb += z - pz;
+                } else {
+                    descent += pz - z;
+                }
             }
+            prev = Some((xm, ym, z));
         }
-        if heights_known {
-            p.length_3d_m = Some(length_3d);
-            p.climb_m = Some(climb);
-            p.descent_m = Some(descent);
-            if grade_max.is_finite() {
-                p.max_grade_deg = Some(grade_max);
-            }
-        }
-        if slope_len > 0.0 {
-            p.max_slope_deg = Some(slope_max);
-            p.mean_slope_deg = Some(slope_sum / slope_len);
-        }
-        p
     }
+    if heights_known {
+        p.length_3d_m = Some(length_3d);
+        p.climb_m = Some(climb);
+        p.descent_m = Some(descent);
+        if grade_max.is_finite() {
+            p.max_grade_deg = Some(grade_max);
+        }
+    }
+    if slope_len > 0.0 {
+        p.max_slope_deg = Some(slope_max);
+        p.mean_slope_deg = Some(slope_sum / slope_len);
+    }
+    p
 }
 
 fn search_error(e: RouteError) -> MapRouteError {
@@ -204,13 +241,13 @@ fn search_error(e: RouteError) -> MapRouteError {
 }
 
 #[derive(Default)]
-struct Profile {
-    length_3d_m: Option<f64>,
-    max_slope_deg: Option<f64>,
-    mean_slope_deg: Option<f64>,
-    max_grade_deg: Option<f64>,
-    climb_m: Option<f64>,
-    descent_m: Option<f64>,
+pub(super) struct Profile {
+    pub(super) length_3d_m: Option<f64>,
+    pub(super) max_slope_deg: Option<f64>,
+    pub(super) mean_slope_deg: Option<f64>,
+    pub(super) max_grade_deg: Option<f64>,
+    pub(super) climb_m: Option<f64>,
+    pub(super) descent_m: Option<f64>,
 }
 
 /// One waypoint of a route.

@@ -61,6 +61,7 @@ pub mod smooth;
 mod testing;
 mod tile_cache;
 mod tiles;
+pub mod windowed_heights;
 pub mod windowed_map;
 
 pub use astar::astar;
@@ -74,6 +75,7 @@ pub use dstar_lite::DStarLite;
 pub use map_route::{MapRoute, RoutePoint};
 pub use on_map::{Endpoint, MapRouteError, Position, RouteMap};
 pub use smooth::{SegmentCost, polyline_cost, segment_cost, smooth_path, turning_points};
+pub use windowed_heights::AveragedHeights;
 pub use windowed_map::{WindowedMap, WindowedRouteError};
 
 use serde::{Deserialize, Serialize};

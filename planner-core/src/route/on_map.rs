@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Cell, CostGrid, GridError, RouteError};
 use crate::costmap::Class;
-use crate::costmap::grid::work_grid;
+use crate::costmap::grid::{work_geometry, work_grid};
 use crate::geo::UtmProjection;
 use crate::terrain::cell_size_m;
 use crate::terrain::{
@@ -65,6 +65,8 @@ pub enum MapRouteError {
     CostmapFile(String),
     #[error("the DEM is not the one the costmap was built from: {0}")]
     DemMismatch(String),
+    #[error("the DEM's heights cannot be read: {0}")]
+    Heights(String),
     #[error("{what} has {got} values; the costmap has {expected} cells")]
     LayerSize {
         what: &'static str,
@@ -567,6 +569,15 @@ impl RouteMap {
 /// The DEM's heights on the costmap's grid `map` (as read from its
 /// GeoTIFF), averaged in blocks as the costmap pipeline does.
 fn heights_on_grid(dem: &Dem, map: &Dem) -> Result<Vec<f64>, MapRouteError> {
+    let factor = averaging_factor(dem, map)?;
+    Ok(work_grid(Cow::Borrowed(dem), factor).z)
+}
+
+/// The block size (columns, rows) that brings `dem` onto the costmap's
+/// grid `map` by the costmap's own block averaging, checked: the same
+/// CRS, and the averaged grid exactly the costmap's. Neither raster's
+/// values are read.
+pub(super) fn averaging_factor(dem: &Dem, map: &Dem) -> Result<[usize; 2], MapRouteError> {
     let mismatch = |why: String| MapRouteError::DemMismatch(why);
     if dem.crs.epsg != map.crs.epsg {
         return Err(mismatch(format!(
@@ -580,7 +591,8 @@ fn heights_on_grid(dem: &Dem, map: &Dem) -> Result<Vec<f64>, MapRouteError> {
     if !(fx >= 1.0 && fy >= 1.0) {
         return Err(mismatch("its cells are larger than the costmap's".into()));
     }
-    let grid = work_grid(Cow::Borrowed(dem), [fx as usize, fy as usize]);
+    let factor = [fx as usize, fy as usize];
+    let grid = work_geometry(dem, factor);
     let g = &grid.transform;
     let close = |a: f64, b: f64, cell: f64| (a - b).abs() <= 1e-6 * cell.abs();
     let same = grid.width == map.width
@@ -602,7 +614,7 @@ fn heights_on_grid(dem: &Dem, map: &Dem) -> Result<Vec<f64>, MapRouteError> {
             m.origin_y
         )));
     }
-    Ok(grid.z)
+    Ok(factor)
 }
 
 /// Sets the cells (in a `w` × `h` grid, pixel coordinates: cell (r, c)

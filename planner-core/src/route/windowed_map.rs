@@ -2,17 +2,23 @@
 //! and projections as [`RouteMap`] has them, its costs read a window at a
 //! time ([`WindowCosts`]), start and goal located by reading their cells,
 //! and the coarse-to-fine route described as a [`MapRoute`] (waypoints in
-//! WGS84 and UTM). What needs the whole map in memory is not offered:
-//! heights and slopes along the route (no DEM), smoothing (the waypoints
-//! are the turning points of the cell path) and replanning.
+//! WGS84 and UTM), with heights and slopes along it when given the heights
+//! on the costmap's grid (also read by windows, e.g. [`AveragedHeights`]).
+//! What needs the whole map in memory is not offered: smoothing (the
+//! waypoints are the turning points of the cell path) and replanning.
+//!
+//! [`AveragedHeights`]: super::AveragedHeights
 //!
 //! [`RouteMap`]: super::RouteMap
+
+use std::cell::RefCell;
+use std::collections::HashMap;
 
 use proj::Proj;
 
 use super::coarse_to_fine::{BigRouteError, CoarseToFine, CoarseToFineOptions, coarse_to_fine};
 use super::cost_source::{CostSource, CostSourceError, WindowCosts};
-use super::map_route::{MapRoute, RoutePoint};
+use super::map_route::{MapRoute, Profile, RoutePoint, Terrain, profile};
 use super::on_map::{
     Endpoint, MapProjections, MapRouteError, Position, blocked_on, coordinates_fault,
     corners_extent_lonlat, crs_error,
@@ -35,6 +41,7 @@ pub enum WindowedRouteError {
 pub struct WindowedMap<'a> {
     costs: WindowCosts<'a>,
     classes: Option<&'a dyn RasterWindows>,
+    heights: Option<&'a dyn RasterWindows>,
     transform: GeoTransform,
     utm: UtmProjection,
     map_to_wgs84: Option<Proj>,
@@ -78,6 +85,7 @@ impl<'a> WindowedMap<'a> {
         Ok(WindowedMap {
             costs: WindowCosts::new(costs).map_err(source_error)?,
             classes,
+            heights: None,
             transform,
             map_to_utm,
             utm_to_map,
@@ -85,6 +93,25 @@ impl<'a> WindowedMap<'a> {
             map_to_wgs84,
             wgs84_to_map,
         })
+    }
+
+    /// The map with the terrain's heights on its grid (metres, NaN
+    /// unknown), for the heights, 3D length and slopes along its routes.
+    pub fn with_heights(
+        mut self,
+        heights: &'a dyn RasterWindows,
+    ) -> Result<WindowedMap<'a>, MapRouteError> {
+        let g = heights.grid();
+        let (w, h) = (self.costs.width(), self.costs.height());
+        if (g.width, g.height) != (w, h) {
+            return Err(MapRouteError::LayerSize {
+                what: "the height grid",
+                expected: w * h,
+                got: g.width * g.height,
+            });
+        }
+        self.heights = Some(heights);
+        Ok(self)
     }
 
     /// The costs, as a search reads them.
@@ -198,15 +225,41 @@ impl<'a> WindowedMap<'a> {
     }
 
     /// The route as [`RouteMap::describe`](super::RouteMap::describe)
-    /// gives it, without heights: the waypoints are the turning points of
-    /// the cell path, so the polyline is the path and its integrated cost
-    /// is summed along the cells.
+    /// gives it: the waypoints are the turning points of the cell path, so
+    /// the polyline is the path and its integrated cost is summed along
+    /// the cells; heights (each cell's read once) and slopes sampled
+    /// along it as there, when the map has heights.
     pub fn describe(
         &self,
         found: &CoarseToFine,
         search_ms: f64,
     ) -> Result<MapRoute, MapRouteError> {
         let points = turning_points(&found.cells);
+        let read: RefCell<HashMap<Cell, Option<f64>>> = RefCell::default();
+        let failed: RefCell<Option<String>> = RefCell::default();
+        let height_at = |cell: Cell| -> Option<f64> {
+            let heights = self.heights?;
+            if let Some(&z) = read.borrow().get(&cell) {
+                return z;
+            }
+            let mut z = [f64::NAN];
+            if let Err(e) = heights.read_window(cell.1, cell.0, 1, 1, &mut z) {
+                failed.borrow_mut().get_or_insert(e.to_string());
+            }
+            let z = z[0].is_finite().then_some(z[0]);
+            read.borrow_mut().insert(cell, z);
+            z
+        };
+        let terrain = Terrain {
+            width: self.costs.width(),
+            height: self.costs.height(),
+            dx: self.costs.dx_per_row(),
+            dy: self.costs.dy(),
+        };
+        let profile = match self.heights {
+            Some(_) => profile(&terrain, &height_at, &points),
+            None => Profile::default(),
+        };
         let mut waypoints = Vec::with_capacity(points.len());
         for &(row, col) in &points {
             let xy = self.centre((row, col));
@@ -217,7 +270,7 @@ impl<'a> WindowedMap<'a> {
                 lat,
                 easting,
                 northing,
-                height_m: None,
+                height_m: height_at((row, col)),
                 row,
                 col,
             });
@@ -243,21 +296,24 @@ impl<'a> WindowedMap<'a> {
             }
             prev = Some((cell, c[0]));
         }
+        if let Some(why) = failed.into_inner() {
+            return Err(MapRouteError::Heights(why));
+        }
         Ok(MapRoute {
             utm_zone: self.utm_zone_name(),
             utm_epsg: self.utm.epsg(),
             waypoints,
             length_2d_m: found.length_m,
-            length_3d_m: None,
+            length_3d_m: profile.length_3d_m,
             cost: line_cost,
             path_cost: found.cost,
             path_length_m: found.length_m,
             path_cells: found.cells.len(),
-            max_slope_deg: None,
-            mean_slope_deg: None,
-            max_grade_deg: None,
-            climb_m: None,
-            descent_m: None,
+            max_slope_deg: profile.max_slope_deg,
+            mean_slope_deg: profile.mean_slope_deg,
+            max_grade_deg: profile.max_grade_deg,
+            climb_m: profile.climb_m,
+            descent_m: profile.descent_m,
             expanded: found.stats.expanded,
             search_ms,
         })
@@ -317,10 +373,35 @@ mod tests {
             false,
         );
         d.crs = Crs::from_epsg(32618).unwrap();
+        // Heights: a tilted, rippled surface with an unknown patch.
+        let mut hd = d.clone();
+        hd.values = (0..w * h)
+            .map(|i| {
+                let (r, c) = (i / w, i % w);
+                if (30..33).contains(&r) && (70..74).contains(&c) {
+                    f64::NAN
+                } else {
+                    200.0 + 0.3 * c as f64 - 0.2 * r as f64 + ((r * 5 + c * 11) % 7) as f64 * 0.1
+                }
+            })
+            .collect();
         let windows = DemWindows::new(&d);
-        let map = WindowedMap::new(&windows, None).unwrap();
+        let height_windows = DemWindows::new(&hd);
+        let map = WindowedMap::new(&windows, None)
+            .unwrap()
+            .with_heights(&height_windows)
+            .unwrap();
         let costs = values.iter().map(|&v| v as f32).collect();
-        let memory = RouteMap::new(w, h, d.transform, d.crs.clone(), costs, None, None).unwrap();
+        let memory = RouteMap::new(
+            w,
+            h,
+            d.transform,
+            d.crs.clone(),
+            costs,
+            Some(hd.values.clone()),
+            None,
+        )
+        .unwrap();
         let at = |cell: Cell| {
             let (x, y) = d.transform.apply(cell.1 as f64 + 0.5, cell.0 as f64 + 0.5);
             let (e, n) = map.map_to_utm.convert((x, y)).unwrap();
@@ -347,6 +428,40 @@ mod tests {
         assert!((route.cost - plain.cost).abs() <= 1e-9 * plain.cost);
         assert!((route.length_2d_m - plain.length_2d_m).abs() <= 1e-9 * plain.length_2d_m);
         assert_eq!(route.utm_zone, "18N");
+        // Heights and the profile as the map in memory gives them for the
+        // same path (plain A* may take another of the same cost).
+        assert_eq!(route.waypoints.len(), in_memory.waypoints.len());
+        let plain = in_memory;
+        let close = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+            (None, None) => true,
+            _ => false,
+        };
+        assert!(plain.length_3d_m.is_some() && plain.max_slope_deg.is_some());
+        for (a, b) in [
+            (route.length_3d_m, plain.length_3d_m),
+            (route.climb_m, plain.climb_m),
+            (route.descent_m, plain.descent_m),
+            (route.max_slope_deg, plain.max_slope_deg),
+            (route.mean_slope_deg, plain.mean_slope_deg),
+            (route.max_grade_deg, plain.max_grade_deg),
+        ] {
+            assert!(close(a, b), "{a:?} vs {b:?}");
+        }
+        let heights = |r: &MapRoute| r.waypoints.iter().map(|p| p.height_m).collect::<Vec<_>>();
+        assert_eq!(heights(&route), heights(&plain));
+        // A height grid of another size is refused.
+        let small = DemWindows::new(&d);
+        let mut cut = d.clone();
+        cut.width = w - 1;
+        cut.values.truncate((w - 1) * h);
+        let cut_windows = DemWindows::new(&cut);
+        assert!(matches!(
+            WindowedMap::new(&small, None)
+                .unwrap()
+                .with_heights(&cut_windows),
+            Err(MapRouteError::LayerSize { .. })
+        ));
         assert!(
             route.waypoints.iter().any(|p| p.row >= 60),
             "round the wall"

@@ -160,7 +160,7 @@ fn map_failure(e: MapRouteError, args: &RouteArgs) -> Failure {
             planner_core::route::RouteError::InvalidOptions(_) => Failure::input(inner.to_string()),
             other => Failure::other(other.to_string()),
         },
-        MapRouteError::Crs(_) => Failure::other(e.to_string()),
+        MapRouteError::Crs(_) | MapRouteError::Heights(_) => Failure::other(e.to_string()),
     }
 }
 
