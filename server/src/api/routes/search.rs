@@ -20,8 +20,9 @@ use planner_core::cancel::{CancelToken, Cancelled};
 use planner_core::geo::Issue;
 use planner_core::route::changes::{self, BlockedEnd, CellChanges, ChangeError, ChangedArea};
 use planner_core::route::{
-    BigRouteError, Cell, CoarseToFineOptions, CostGrid, DStarLite, Endpoint, MapRoute,
-    MapRouteError, Position, Route, RouteError, RouteMap, WindowedMap, WindowedRouteError, astar,
+    AveragedHeights, BigRouteError, Cell, CoarseToFineOptions, CostGrid, DStarLite, Endpoint,
+    MapRoute, MapRouteError, Position, Route, RouteError, RouteMap, WindowedMap,
+    WindowedRouteError, astar,
 };
 use planner_core::terrain::{Dem, DemLimits, GeoTiffWindows, RasterWindows};
 use serde::Deserialize;
@@ -33,6 +34,7 @@ use crate::db::{CHUNK_BYTES, CostmapRow, StoredFile};
 use crate::error::{ApiError, not_found};
 use crate::jobs::COSTMAP_TIF;
 use crate::state::AppState;
+use crate::state::dem_store::tiles::{StoredTiles, TILE_CACHE_BYTES, stored_set};
 
 /// Most cells of a coarse-to-fine corridor (its search state: about 21
 /// bytes a cell, 4.2 GB), as `terraplan route --max-corridor-cells`; the
@@ -60,6 +62,9 @@ struct Windowed {
     tif: Arc<StoredFileReader>,
     cells: u64,
     c2f: CoarseToFineOptions,
+    /// The DEM's stored tiles, for heights (`None` when the DEM is gone or
+    /// was stored before tiles).
+    dem: Option<StoredTiles>,
 }
 
 impl MapSource {
@@ -156,6 +161,25 @@ pub(super) async fn map_source(
     })
 }
 
+/// DEM `id`'s level-0 tiles, read by windows; `None` when it is gone or
+/// was stored before tiles.
+async fn dem_tiles(state: &AppState, id: &str) -> Result<Option<StoredTiles>, ApiError> {
+    let Some(meta) = state.db.get_dem_meta(id).await? else {
+        return Ok(None);
+    };
+    let info = crate::api::dems::stored_dem_info(&meta)?;
+    Ok(stored_set(&state.db, id, &info).await?.map(|(set, grid)| {
+        StoredTiles::new(
+            state.db.clone(),
+            tokio::runtime::Handle::current(),
+            id,
+            set,
+            0,
+            &grid,
+        )
+    }))
+}
+
 /// The stored costmap file to read by windows, with room in the budget
 /// for a coarse-to-fine search: the caches of what it reads and a
 /// corridor as large as the rest of the budget allows (at most
@@ -172,12 +196,16 @@ async fn windowed_source(
         usize::try_from(width).unwrap_or(usize::MAX),
         usize::try_from(height).unwrap_or(usize::MAX),
     );
+    let dem = dem_tiles(state, &costmap.dem_id).await?;
+    let dem_cells = dem.as_ref().map_or(0, |d| {
+        (d.grid().width as u64).saturating_mul(d.grid().height as u64)
+    });
     let sources = |search: u64| {
         crate::memory::route_coarse_to_fine_bytes(
             search,
             (cells, GeoTiffWindows::<std::fs::File>::CACHE_BYTES as u64),
             (file_bytes, (CACHED_CHUNKS * CHUNK_BYTES) as u64),
-            (0, 0),
+            (dem_cells, TILE_CACHE_BYTES as u64),
         )
     };
     let no_corridor = CoarseToFineOptions {
@@ -208,6 +236,7 @@ async fn windowed_source(
             tif: Arc::new(tif),
             cells,
             c2f,
+            dem,
         }),
         _room: room,
     })
@@ -454,8 +483,21 @@ fn plan_coarse_to_fine(
     let classes = GeoTiffWindows::open_band(Arc::clone(&windowed.tif), 2, 1, None, &ANY_SIZE)
         .or_else(|_| GeoTiffWindows::open_band(Arc::clone(&windowed.tif), 1, 2, None, &ANY_SIZE))
         .ok();
-    let map = WindowedMap::new(&costs, classes.as_ref().map(|c| c as &dyn RasterWindows)).map_err(
-        |e| match e {
+    let heights = windowed
+        .dem
+        .as_ref()
+        .map(|dem| AveragedHeights::new(dem, costs.grid()))
+        .transpose()
+        .unwrap_or_else(|why| {
+            tracing::warn!(costmap = %src.costmap_id, %why, "the DEM does not fit the costmap: planning without heights");
+            None
+        });
+    let map = WindowedMap::new(&costs, classes.as_ref().map(|c| c as &dyn RasterWindows))
+        .and_then(|map| match &heights {
+            Some(h) => map.with_heights(h),
+            None => Ok(map),
+        })
+        .map_err(|e| match e {
             MapRouteError::Grid(_) | MapRouteError::RotatedGrid => ApiError::Conflict(format!(
                 "no route can be planned on costmap {}: {e}",
                 src.costmap_id
@@ -464,8 +506,7 @@ fn plan_coarse_to_fine(
                 "costmap {} as a route map: {other}",
                 src.costmap_id
             )),
-        },
-    )?;
+        })?;
     let ends = Ends::Create;
     let mut issues = Vec::new();
     for (p, end) in [(start, Endpoint::Start), (goal, Endpoint::Goal)] {
