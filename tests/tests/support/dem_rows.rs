@@ -119,13 +119,22 @@ pub fn upload_in_background(
     query: &str,
     body: Vec<u8>,
 ) -> std::thread::JoinHandle<()> {
-    let url = server.url("");
-    let authority = url
+    upload_in_background_to(&server.url(""), &server.auth_line(), query, body)
+}
+
+/// [`upload_in_background`] to the server at `base` (`http://host:port`),
+/// with the header line `auth` (`Authorization: …\r\n`).
+pub fn upload_in_background_to(
+    base: &str,
+    auth: &str,
+    query: &str,
+    body: Vec<u8>,
+) -> std::thread::JoinHandle<()> {
+    let authority = base
         .trim_start_matches("http://")
         .trim_end_matches('/')
         .to_string();
-    let auth = server.auth_line();
-    let query = query.to_string();
+    let (auth, query) = (auth.to_string(), query.to_string());
     std::thread::spawn(move || {
         let Ok(mut s) = std::net::TcpStream::connect(&authority) else {
             return;
