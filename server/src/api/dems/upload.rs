@@ -264,10 +264,10 @@ async fn read_multipart(req: Request, state: &AppState, limit: usize) -> Result<
         (status = 201, description = "Read and stored", body = DemResponse,
             headers(("Location" = String, description = "URL of the new DEM"))),
         (status = 400, description = "Empty body, malformed form or query", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "File over the size limit, raster over the pixel limit, a raster whose declared size needs more than the memory budget to read, or a file that would take the project past its storage quota (--project-quota-mb)", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "File over the size limit, raster over the pixel limit, a raster whose declared size needs more than the memory budget to read, or a file or its tiles that would take the project past its storage quota (--project-quota-mb; the tiles are checked as they are stored, and nothing of the upload is kept)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported Content-Type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Not a readable DEM, its CRS is unknown (give `crs`), or no project `project_id` the caller may add to", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The planner is busy; retry", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The planner is busy, or the upload's lease ran out while the database was unreachable (what it stored was swept); retry", body = Problem, content_type = "application/problem+json"),
     )
 )]
 pub async fn upload_dem(
