@@ -3,6 +3,7 @@
 //! outputs made for `costmap_tiles` (what each stage stores: see the
 //! migration `costmap_tile_jobs`).
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -85,25 +86,37 @@ pub fn layer_kind(layer: planner_core::costmap::Layer) -> String {
     format!("layer:{}", layer.name())
 }
 
-/// Class tiles of kind `kind` read from the database as a stage's
-/// windows need them (from a blocking thread).
-pub fn stored_classes(
-    db: Db,
-    runtime: tokio::runtime::Handle,
-    id: String,
+/// The class tiles `reads` of kind `kind` of costmap `id`, read from the
+/// database before the stage runs (so its blocking thread never waits on
+/// the database for them), as the windows a stage reads.
+async fn stored_classes(
+    db: &Db,
+    id: &str,
     kind: &'static str,
     plan: &TilePlan,
-) -> ClassTiles<impl Fn(usize) -> Result<Vec<u8>, TiledError> + Sync> {
+    reads: Vec<usize>,
+) -> Result<ClassTiles<impl Fn(usize) -> Result<Arc<[u8]>, TiledError> + Sync + use<>>, StageError>
+{
     let layout = plan.layout();
-    ClassTiles::new(layout, move |k: usize| {
-        let stored = |m: String| TiledError::Stored(m.into());
-        let data = runtime
-            .block_on(db.costmap_tile(&id, kind, k as i64))
-            .map_err(|e| stored(format!("{kind} classes of tile {k}: {e}")))?
-            .ok_or_else(|| stored(format!("the {kind} classes of tile {k} are missing")))?;
-        let t = layout.tile(k);
-        decode_classes(&data, t.width * t.height).map_err(stored)
-    })
+    let mut tiles: HashMap<usize, Arc<[u8]>> = HashMap::with_capacity(reads.len());
+    for t in reads {
+        let data = db
+            .costmap_tile(id, kind, t as i64)
+            .await
+            .map_err(storage)?
+            .ok_or_else(|| {
+                StageError::Fault(format!("the {kind} classes of tile {t} are missing"))
+            })?;
+        let w = layout.tile(t);
+        let cells = decode_classes(&data, w.width * w.height)
+            .map_err(|m| StageError::Fault(format!("the {kind} classes of tile {t}: {m}")))?;
+        tiles.insert(t, cells.into());
+    }
+    Ok(ClassTiles::new(layout, move |t: usize| {
+        tiles.get(&t).cloned().ok_or_else(|| {
+            TiledError::Mismatch(format!("the {kind} classes of tile {t} were not read"))
+        })
+    }))
 }
 
 /// The memory a job of `stage` on tile `k` takes at most, bytes: the
@@ -143,7 +156,6 @@ pub async fn run_stage(
         .ok_or_else(|| {
             StageError::Fatal(format!("tile {} is not one of its {n} tiles", job.key.tile))
         })?;
-    let runtime = tokio::runtime::Handle::current();
     match job.key.stage {
         TileStage::Classify => {
             let (ctx, cancel) = (ctx.clone(), cancel.clone());
@@ -205,19 +217,21 @@ pub async fn run_stage(
                 .await
                 .map_err(storage)?
                 .ok_or_else(|| StageError::Fault(format!("the fill of tile {k} is missing")))?;
-            let (ctx, db) = (ctx.clone(), db.clone());
+            let reads = ctx.plan.fill_reads(k)?;
+            let prefill = stored_classes(db, &id, "prefill", &ctx.plan, reads).await?;
+            let ctx = ctx.clone();
             blocking(move || {
                 let fill = TileFill::from_bytes(&fill).map_err(TiledError::from)?;
-                let prefill = stored_classes(db, runtime, id, "prefill", &ctx.plan);
                 let core = ctx.plan.fill(k, &prefill, &fill)?;
                 Ok(vec![output("final", k, encoded(encode_classes(&core))?)])
             })
             .await
         }
         TileStage::Cost => {
-            let (ctx, db, cancel) = (ctx.clone(), db.clone(), cancel.clone());
+            let reads = ctx.plan.cost_reads(k)?;
+            let classes = stored_classes(db, &id, "final", &ctx.plan, reads).await?;
+            let (ctx, cancel) = (ctx.clone(), cancel.clone());
             blocking(move || {
-                let classes = stored_classes(db, runtime, id, "final", &ctx.plan);
                 let c = ctx
                     .plan
                     .cost(&*ctx.dem, ctx.landcover.as_deref(), &classes, k, &cancel)?;
