@@ -23,7 +23,7 @@ pgdir=$(mktemp -d)
 trap 'bash scripts/pg-cluster.sh stop "$pgdir"; rm -rf "$pgdir"' EXIT
 TERRAPLAN_TEST_DATABASE_URL=$(bash scripts/pg-cluster.sh start "$pgdir")
 export TERRAPLAN_TEST_DATABASE_URL
-cargo nextest run -p terraplan-e2e --no-fail-fast -E 'binary(service) | binary(load) | binary(dems) | binary(survey_terrain) | binary(flock) | binary(costmaps) | binary(routes) | binary(hostile_clients) | binary(memory) | binary(limits) | binary(isolation) | binary(accounts) | binary(auth_matrix) | binary(replicas) | binary(replicas_tiles)'
+cargo nextest run -p terraplan-e2e --no-fail-fast -E 'binary(service) | binary(load) | binary(dems) | binary(survey_terrain) | binary(flock) | binary(costmaps) | binary(routes) | binary(hostile_clients) | binary(memory) | binary(limits) | binary(isolation) | binary(accounts) | binary(auth_matrix) | binary(replicas) | binary(replicas_tiles) | binary(dem_upload_replicas)'
 unset TERRAPLAN_TEST_DATABASE_URL
 
 echo "== contract tests (schemathesis)"
