@@ -182,9 +182,15 @@ fn rows_of(server: &Server, table: &str, id: &str) -> u64 {
 #[test]
 fn deleting_a_tiled_costmap_mid_build_stops_its_tiles() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::start_logging(dir.path(), &TILED, LOG);
+    // 9 × 9 tiles of 32 and wide neighbourhoods (a PCA radius of 50
+    // cells, the most allowed): a minute of work in all, deleted after its
+    // first tile.
+    let server = Server::start_logging(
+        dir.path(),
+        &["--costmap-tile-cells", "10000", "--costmap-tile-side", "32"],
+        LOG,
+    );
     let dem = upload_dem(&server, &dtm());
-    // Wide neighbourhoods: seconds of work per tile.
     let id = post_costmap(&server, &dem, json!({"pca_radius_m": 100}));
     let url = server.url(&format!("/api/v1/costmaps/{id}"));
     wait_until(JOB_DEADLINE, "a tile done", || {

@@ -9,7 +9,8 @@
 //! - A replica running a tile job is killed (SIGKILL): the job is taken
 //!   over once its lease (2 s) runs out, run again (its second attempt)
 //!   elsewhere. Another is stopped with SIGTERM while it runs one: it gives
-//!   the job back and exits 0.
+//!   the job back (unless it finished it just before), run again elsewhere
+//!   as the same attempt, and exits 0.
 //! - The costmap still finishes, every job logged done once over all the
 //!   logs (none twice), and it is the costmap a server on another database
 //!   builds whole: the same answer, preview and legend, GDAL reads the same
@@ -185,12 +186,6 @@ fn replicas_and_a_worker_build_one_tiled_costmap_together() {
         .terminate(Duration::from_secs(30))
         .expect("r3 exits after SIGTERM");
     assert!(status.success(), "r3: {status}");
-    assert_eq!(
-        r3.logged(&["costmap tile jobs given back", &id]).len(),
-        1,
-        "{:?}",
-        r3.log_lines()
-    );
 
     let map = wait_finished(&r1, &id);
     assert_eq!(map["status"], "done", "{map}");
@@ -238,10 +233,12 @@ fn replicas_and_a_worker_build_one_tiled_costmap_together() {
         done_by(&r2, &killed) || again(&killed, killed_attempt + 1),
         "{killed:?}"
     );
+    // Unless r3 had done it just before the SIGTERM, it gave it back.
     let handed_attempt = attempt(&r3, &handed);
+    let given_back = r3.logged(&["costmap tile jobs given back", &id]);
     assert!(
-        done_by(&r3, &handed) || again(&handed, handed_attempt),
-        "{handed:?}"
+        done_by(&r3, &handed) || (given_back.len() == 1 && again(&handed, handed_attempt)),
+        "{handed:?}: {given_back:?}"
     );
 
     // Its progress reached r1's event stream, up to done.
