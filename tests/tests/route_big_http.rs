@@ -241,6 +241,32 @@ fn big_costmaps_are_routed_coarse_to_fine_through_the_api() {
             assert_invalid_at(&r, "epsilon", "/epsilon", "epsilon must be 1");
         }
     }
+    // The search entry is in the OpenAPI document, optional.
+    let doc = get(&server.url("/api/v1/openapi.json")).json();
+    let schemas = &doc["components"]["schemas"];
+    // (Its own members are the part of its allOf beside MapRoute's.)
+    let response = schemas["RouteResponse"]["allOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|part| part["properties"].is_object())
+        .expect("RouteResponse's own members");
+    assert!(response["properties"]["search"].is_object(), "{response}");
+    assert!(
+        !response["required"]
+            .as_array()
+            .unwrap()
+            .contains(&json!("search")),
+        "search is optional"
+    );
+    for field in ["method", "proven_optimal", "lower_bound", "gap", "stats"] {
+        assert!(
+            schemas["SearchReport"]["properties"][field].is_object(),
+            "SearchReport.{field}: {}",
+            schemas["SearchReport"]
+        );
+    }
+    assert!(schemas["CoarseToFineStats"]["properties"]["corridors"].is_object());
     // Endpoint faults are named as for A*.
     let t = &map.transform;
     let outside = json!({"utm": [t[0] - 10.0, t[3] + 10.0]});

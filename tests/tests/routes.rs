@@ -979,7 +979,10 @@ fn routes_in_the_openapi_document() {
         assert!(post["responses"][status].is_object(), "{status}");
     }
     let schemas = &doc["components"]["schemas"];
-    assert_eq!(schemas["Planner"]["enum"], json!(["dstar_lite", "astar"]));
+    assert_eq!(
+        schemas["Planner"]["enum"],
+        json!(["dstar_lite", "astar", "coarse_to_fine"])
+    );
     for s in [
         "CreateRoute",
         "ReplanRoute",

@@ -85,11 +85,9 @@ fn coarse_to_fine_for(state: &AppState, cells: u64, file_bytes: u64, dem_read: u
 }
 
 /// The memory reading costmap `costmap`'s DEM whole takes (its estimate
-/// at upload; 0 when it is gone or in the DEM cache).
+/// at upload; 0 when it is gone). Counted whether or not the DEM is in the
+/// cache now, so that a costmap is always searched the same way.
 async fn dem_read_bytes(state: &AppState, costmap: &CostmapRow) -> Result<u64, ApiError> {
-    if state.dems.cache.get(&costmap.dem_id).is_some() {
-        return Ok(0);
-    }
     let Some(meta) = state.db.get_dem_meta(&costmap.dem_id).await? else {
         return Ok(0);
     };
