@@ -55,7 +55,7 @@ enum Source {
     /// when the DEM has been deleted): plain A*, D* Lite for replans.
     Whole { tif: Vec<u8>, dem: Option<Arc<Dem>> },
     /// The costmap read a window at a time: coarse to fine.
-    Windowed(Windowed),
+    Windowed(Box<Windowed>),
 }
 
 struct Windowed {
@@ -230,12 +230,12 @@ async fn windowed_source(
         })?;
     Ok(MapSource {
         costmap_id: costmap.id.clone(),
-        map: Source::Windowed(Windowed {
+        map: Source::Windowed(Box::new(Windowed {
             tif: Arc::new(tif),
             cells,
             c2f,
             dem,
-        }),
+        })),
         _room: room,
     })
 }
