@@ -45,6 +45,8 @@ included); coverage = area of (each lane buffered by W/2, flat caps,
 united) within the field minus the obstacles, over that area; metres per
 covered hectare; the wall time of the planner's process (best of --runs);
 and the path's length inside obstacles (must be 0).
+Each side's lanes and path are kept in target/bench-coverage/CASE/
+(terraplan-plan.json, f2c-single-plan.json, f2c-decomp-plan.json).
 Prints a table and writes target/bench-coverage.json.
 """
 import argparse
@@ -217,6 +219,13 @@ def run_f2c(case_dir, width, mode, runs, timeout):
     return seconds, plan
 
 
+def dump_plan(path, lanes, flown):
+    """Keeps a side's lanes and path (UTM metres) in the case's directory,
+    to be looked at after the run."""
+    with open(path, "w") as f:
+        json.dump({"lanes": lanes, "path": flown}, f)
+
+
 def turns(path):
     pts = [path[0]]
     for p in path[1:]:
@@ -286,6 +295,7 @@ def run_case(name, field, width, with_obstacles, args):
         secs, mission = run_terraplan(case_dir, roi, nfz, field_utm.area / 1e6, width,
                                        args.runs, args.timeout_s)
         lanes, path = read_wpl_mission(mission, lambda lon, lat: fwd.transform(lon, lat))
+        dump_plan(os.path.join(case_dir, "terraplan-plan.json"), lanes, path)
         row["terraplan"] = {**measure(lanes, path, free_utm, obstacles_utm, width),
                             "seconds": secs}
     except (RuntimeError, subprocess.TimeoutExpired) as e:
@@ -303,6 +313,8 @@ def run_case(name, field, width, with_obstacles, args):
                               f"> {DECOMP_MAX_SWATHS} (Floyd-Warshall over every swath end)"})
                 continue
             secs, plan = run_f2c(case_dir, width, mode, args.runs, args.timeout_s)
+            dump_plan(os.path.join(case_dir, f"f2c-{mode}-plan.json"), plan["lanes"],
+                      plan["path"])
             m = measure(plan["lanes"], plan["path"], free_utm, obstacles_utm, width)
             tried.append({**m, "mode": mode, "cells": plan["cells"], "seconds": secs,
                           "angle_deg": plan["angle_deg"], "plan_s": plan["plan_s"]})

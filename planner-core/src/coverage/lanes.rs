@@ -10,13 +10,14 @@
 use geo::Area;
 use geo_types::{Coord, MultiPolygon, Polygon};
 
+use super::grid::LaneGrid;
 use super::links::LinkRouter;
 use super::region::{EPS, FreeSpace, Region, dot, is_positive};
 use super::{CellPlan, Lane};
 
 /// More lanes than this in one cell means the spacing is absurdly small for
 /// the cell; such a direction is not planned (memory would explode).
-const MAX_ROWS: usize = 100_000;
+pub(super) const MAX_ROWS: usize = 100_000;
 
 /// Plans the lanes of `cell` (index `cell_index` in the decomposition) with
 /// lanes at most `line_spacing_m` apart. `free` is the free space (ROI minus
@@ -124,6 +125,43 @@ impl CellLayouts {
     ) -> Option<CellLayouts> {
         let b = bearing_deg.rem_euclid(180.0);
         Self::with_bearings(cell_index, cell, line_spacing_m, |_| vec![b])
+    }
+
+    /// The layout of `cell` with its lanes on `grid`, the lane lines one
+    /// grid lays across the whole free space `free` (see [`LaneGrid`]):
+    /// cells side by side across the slice share lane lines, so a strip
+    /// that straddles the line between two cells is flown once. `None`
+    /// where [`CellLayouts::new`] gives `None`. `flown(p)` tells whether
+    /// the grid line through `p`, outside the cell, is flown there (by the
+    /// cell holding `p`, on the same grid): only then is a sliver of the
+    /// cell left to that line's strip.
+    pub fn on_grid(
+        cell_index: usize,
+        cell: &Polygon<f64>,
+        grid: &LaneGrid,
+        free: &FreeSpace,
+        flown: &dyn Fn(Coord<f64>) -> bool,
+    ) -> Option<CellLayouts> {
+        let ring = clean_ring(cell);
+        if ring.len() < 3
+            || ring.iter().any(|c| !c.x.is_finite() || !c.y.is_finite())
+            || cell.unsigned_area() <= EPS * EPS
+        {
+            return None;
+        }
+        let cell_region = Region::from_polygon(cell).indexed();
+        let frame = Frame::new(grid.bearing(), &ring);
+        let offsets = grid.rows(&frame, &ring, free.region(), flown)?;
+        let layout = Layout::new(frame, &offsets, &cell_region);
+        let lanes = layout.lane_count();
+        (lanes > 0).then(|| CellLayouts {
+            cell_index,
+            ring,
+            cell_region,
+            finalists: vec![layout],
+            pending: Vec::new(),
+            lanes,
+        })
     }
 
     fn with_bearings(
@@ -389,34 +427,41 @@ fn candidate_bearings(ring: &[Coord<f64>], slice_angle_deg: f64) -> Vec<f64> {
 /// The frame of one candidate direction: lanes run along `u` and are
 /// stacked along `v`.
 #[derive(Clone, Copy, Debug)]
-struct Frame {
-    bearing: f64,
+pub(super) struct Frame {
+    pub(super) bearing: f64,
     /// Origin of the local frame.
-    origin: Coord<f64>,
+    pub(super) origin: Coord<f64>,
     /// Unit vector along the lanes (bearing `bearing`).
-    d: Coord<f64>,
+    pub(super) d: Coord<f64>,
     /// Unit normal: lanes are stacked along it.
-    n: Coord<f64>,
+    pub(super) n: Coord<f64>,
     /// Extent of the cell along `d`.
-    u: (f64, f64),
+    pub(super) u: (f64, f64),
     /// Extent of the cell along `n`.
-    v: (f64, f64),
+    pub(super) v: (f64, f64),
+}
+
+/// The unit vectors of lanes of bearing `bearing`: along them (`d`) and
+/// the normal they are stacked along (`n`).
+pub(super) fn axes(bearing: f64) -> (Coord<f64>, Coord<f64>) {
+    let rad = bearing.to_radians();
+    let d = Coord {
+        x: rad.sin(),
+        y: rad.cos(),
+    };
+    // Stack the lanes eastwards (northwards for east–west lanes), as the
+    // decomposition sweeps its slices.
+    let n = if bearing < 90.0 {
+        Coord { x: d.y, y: -d.x }
+    } else {
+        Coord { x: -d.y, y: d.x }
+    };
+    (d, n)
 }
 
 impl Frame {
-    fn new(bearing: f64, ring: &[Coord<f64>]) -> Frame {
-        let rad = bearing.to_radians();
-        let d = Coord {
-            x: rad.sin(),
-            y: rad.cos(),
-        };
-        // Stack the lanes eastwards (northwards for east–west lanes), as the
-        // decomposition sweeps its slices.
-        let n = if bearing < 90.0 {
-            Coord { x: d.y, y: -d.x }
-        } else {
-            Coord { x: -d.y, y: d.x }
-        };
+    pub(super) fn new(bearing: f64, ring: &[Coord<f64>]) -> Frame {
+        let (d, n) = axes(bearing);
         let origin = ring[0];
         let (mut u, mut v) = (
             (f64::INFINITY, f64::NEG_INFINITY),
@@ -437,13 +482,13 @@ impl Frame {
         }
     }
 
-    fn point(&self, u: f64, v: f64) -> Coord<f64> {
+    pub(super) fn point(&self, u: f64, v: f64) -> Coord<f64> {
         self.origin + self.d * u + self.n * v
     }
 }
 
 /// A lane line's offset `v` and the band of `v` its strip must cover.
-type RowOffset = (f64, (f64, f64));
+pub(super) type RowOffset = (f64, (f64, f64));
 
 /// Lane offsets across an extent `(vmin, vmax)`: one lane in the middle of a
 /// narrow cell; otherwise the first and last half a spacing inside and the

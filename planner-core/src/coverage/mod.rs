@@ -7,6 +7,7 @@ mod camera;
 mod corridor;
 mod coverage_ratio;
 pub mod dubins;
+mod grid;
 mod lanes;
 mod links;
 mod oblique;
@@ -21,6 +22,7 @@ pub use corridor::{
     corridor_polygon, lane_offsets, offset_curve,
 };
 pub use coverage_ratio::coverage_ratio;
+pub use grid::LaneGrid;
 pub use lanes::{CellLayouts, is_one_lane, plan_cell, plan_cell_candidates_in, plan_cell_in};
 pub use oblique::{
     FAR_EDGE_BELOW_HORIZON_DEG, MIN_PITCH_DEG, NADIR_PITCH_DEG, PitchTooShallow, footprint_corners,

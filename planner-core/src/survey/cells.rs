@@ -47,6 +47,9 @@ pub(super) struct Decomposition {
     pub plans: Vec<CellPlan>,
     /// Lanes laid along a corridor's line: kept as laid (not re-planned).
     pub along_line: bool,
+    /// Every cell's lanes on one grid ([`coverage::LaneGrid`]): kept as
+    /// laid (a cell may leave a sliver to its neighbour's lane).
+    pub on_grid: bool,
 }
 
 /// Lays the request's pattern over every cell's plan: with `crosshatch`, a

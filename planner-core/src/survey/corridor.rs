@@ -166,6 +166,7 @@ pub(super) fn lay_corridor(
         cells: laid.cells,
         plans: laid.plans,
         along_line: true,
+        on_grid: false,
     })
 }
 

@@ -34,6 +34,19 @@ const WHOLE_PLAN_CELL_BUDGET: usize = 2000;
 /// that covers less only wins when no angle reaches it.
 const COVERAGE_TARGET: f64 = 0.995;
 
+/// Where the lines of a lane grid are tried, as fractions of a spacing
+/// back from half a spacing inside the free space (see
+/// [`coverage::LaneGrid::shifted`]).
+const GRID_PHASES: [f64; 4] = [0.0, 0.25, 0.5, 0.75];
+
+/// How much more of the surveyed space (a share) a grid plan's lane strips
+/// must cover than the plan it would replace: a grid plan leaves slivers
+/// of cells to neighbours' lines, and a measure of its strips made apart
+/// from the planner's (other rounding, the lanes read back from a mission
+/// file) may find a few millionths less; with this margin it never finds
+/// less than the plan replaced.
+const GRID_STRIP_MARGIN: f64 = 1e-5;
+
 /// How `auto` compares the candidate angles.
 pub(super) enum Compare<'a> {
     /// Fewest turns, then the shortest lanes and links (planes).
@@ -122,6 +135,7 @@ impl Laid {
             joined: self.joined,
             plans,
             along_line: false,
+            on_grid: false,
         }
     }
 }
@@ -227,7 +241,29 @@ pub(super) fn decompose_and_cover(
                 footprint_side_m: *footprint_side_m,
                 spacing,
             };
-            shortest_whole_plan(small, &judge, &free_space)?
+            // A plain decomposition of more than one cell: its cells side
+            // by side may share lane lines. Cells smaller than a spacing
+            // squared (rounding slivers along a curved outline) do not
+            // count: their lanes are too short to be worth a grid.
+            let several: Vec<f64> = small
+                .iter()
+                .filter(|l| {
+                    let big = l
+                        .cells
+                        .iter()
+                        .filter(|c| geo::Area::unsigned_area(*c) >= spacing * spacing);
+                    big.count() > 1 || l.joined.iter().any(|&j| j)
+                })
+                .map(|l| l.angle)
+                .collect();
+            let (best, length_m, planned_cells) = shortest_whole_plan(small, &judge, &free_space)?;
+            let grid = GridSearch {
+                prepared: &prepared,
+                free,
+                judge: &judge,
+                free_space: &free_space,
+            };
+            grid.shorter(best, length_m, &several, planned_cells)?
         }
         _ => {
             // Too big to be planned whole (or a plane's): small angles
@@ -340,11 +376,12 @@ impl Fare {
 /// must keep. Then the other angles are planned whole in order of their
 /// estimate, within the cell budget; the best [`Fare`] wins, the first in
 /// that order on a tie.
+/// Returns the plan, its flown length and how many cells were planned.
 fn shortest_whole_plan(
     small: Vec<Laid>,
     judge: &Judge,
     free_space: &coverage::FreeSpace,
-) -> Result<Decomposition, PlanError> {
+) -> Result<(Decomposition, f64, usize), PlanError> {
     let fewest = small.iter().map(|l| l.turns).min().unwrap_or(0);
     let mut reference: Option<(f64, usize, Vec<CellPlan>)> = None;
     let mut planned: Vec<Option<Vec<CellPlan>>> = vec![None; small.len()];
@@ -421,13 +458,209 @@ fn shortest_whole_plan(
             best = Some((fare, i, plans));
         }
     }
-    let (_, i, plans) =
+    let (fare, i, plans) =
         best.ok_or_else(|| PlanError::Internal("no slice angle could be planned".into()))?;
     let laid = small
         .into_iter()
         .nth(i)
         .ok_or_else(|| PlanError::Internal("lost the best slice angle".into()))?;
-    Ok(laid.into_decomposition(plans))
+    Ok((laid.into_decomposition(plans), fare.length_m, planned_cells))
+}
+
+/// The angles planned whole, planned again on one lane grid each
+/// ([`coverage::LaneGrid`]): the plain cells of the angle (none joined),
+/// every one flown along the slice on the grid's lines, so cells side by
+/// side share lines instead of each rounding its lane count up.
+struct GridSearch<'a> {
+    prepared: &'a decompose::PreparedFree<'a>,
+    /// The space decomposed, over which the grid is laid.
+    free: &'a MultiPolygon<f64>,
+    judge: &'a Judge<'a>,
+    free_space: &'a coverage::FreeSpace,
+}
+
+impl GridSearch<'_> {
+    /// `best` (flown `best_m` long), or the plan on a grid of one of
+    /// `angles` that flies shorter while its footprints cover as the
+    /// best's do and its lane strips cover more (by [`GRID_STRIP_MARGIN`]):
+    /// so a grid plan never leaves out more than the plan it replaces. Within the cell budget
+    /// (`planned_cells` spent already).
+    fn shorter(
+        &self,
+        best: Decomposition,
+        best_m: f64,
+        angles: &[f64],
+        mut planned_cells: usize,
+    ) -> Result<Decomposition, PlanError> {
+        if angles.is_empty() {
+            return Ok(best);
+        }
+        let spacing = self.judge.spacing;
+        let best_covers = self.judge.covers(&best.plans);
+        let best_strips = self.judge.strip_coverage(&best.plans);
+        let mut best = (best, best_m);
+        let token = crate::cancel::current();
+        for &a in angles {
+            crate::cancel::check()?;
+            let cells = self.prepared.decompose(a).map_err(decompose_error)?;
+            if cells.len() < 2 {
+                continue;
+            }
+            let Some(grid) = coverage::LaneGrid::new(self.free, spacing, a) else {
+                continue;
+            };
+            let boxes = CellBoxes::new(&cells);
+            // Each cell's layouts on its own, laid when first needed.
+            let mut own: Vec<Option<Option<coverage::CellLayouts>>> =
+                (0..cells.len()).map(|_| None).collect();
+            for phase in GRID_PHASES {
+                if planned_cells + cells.len() > WHOLE_PLAN_CELL_BUDGET {
+                    break;
+                }
+                planned_cells += cells.len();
+                let grid = grid.shifted(phase);
+                let layouts = self.layouts_on(&grid, &cells, &boxes, &mut own)?;
+                crate::cancel::check()?;
+                let lower_bound: f64 = layouts
+                    .iter()
+                    .flatten()
+                    .map(coverage::CellLayouts::length_lower_bound)
+                    .sum();
+                if lower_bound >= best.1 {
+                    continue;
+                }
+                let plans: Vec<CellPlan> = layouts
+                    .par_iter()
+                    .zip(&cells)
+                    .filter_map(|(l, c)| token.scope(|| l.as_ref()?.best_plan(c, self.free_space)))
+                    .collect();
+                crate::cancel::check()?;
+                let Some(length_m) = self.judge.flown_length(&plans, &cells)? else {
+                    continue;
+                };
+                if length_m >= best.1 - 1e-6
+                    || (best_covers && !self.judge.covers(&plans))
+                    || self.judge.strip_coverage(&plans) < best_strips + GRID_STRIP_MARGIN
+                {
+                    continue;
+                }
+                let n = cells.len();
+                best = (
+                    Decomposition {
+                        slice_angle_deg: a,
+                        cells: cells.clone(),
+                        joined: vec![false; n],
+                        plans,
+                        along_line: false,
+                        on_grid: true,
+                    },
+                    length_m,
+                );
+            }
+        }
+        Ok(best.0)
+    }
+
+    /// Every cell's layout on `grid`, or on its own where that needs fewer
+    /// lanes (a cell whose strips reach past its sides into cells whose
+    /// lines do not cover them flies lanes of its own there): a cell's
+    /// sliver is left to a neighbour's line only while that neighbour
+    /// flies the grid, so cells leave the grid one round after another
+    /// until none does. `own[i]` caches cell `i`'s own layouts.
+    fn layouts_on(
+        &self,
+        grid: &coverage::LaneGrid,
+        cells: &[Polygon<f64>],
+        boxes: &CellBoxes,
+        own: &mut [Option<Option<coverage::CellLayouts>>],
+    ) -> Result<Vec<Option<coverage::CellLayouts>>, PlanError> {
+        let token = crate::cancel::current();
+        let spacing = self.judge.spacing;
+        let mut on_grid = vec![true; cells.len()];
+        loop {
+            let flown = |p: Coord<f64>| boxes.cell_at(cells, p).is_some_and(|j| on_grid[j]);
+            let laid: Vec<Option<coverage::CellLayouts>> = cells
+                .par_iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    if !on_grid[i] {
+                        return None;
+                    }
+                    token.scope(|| {
+                        coverage::CellLayouts::on_grid(i, c, grid, self.free_space, &flown)
+                    })
+                })
+                .collect();
+            crate::cancel::check()?;
+            let mut left = false;
+            for (i, l) in laid.iter().enumerate() {
+                if !on_grid[i] {
+                    continue;
+                }
+                let own_lanes = own[i]
+                    .get_or_insert_with(|| {
+                        coverage::CellLayouts::new(i, &cells[i], spacing, grid.bearing())
+                    })
+                    .as_ref()
+                    .map_or(usize::MAX, coverage::CellLayouts::lanes);
+                if l.as_ref().is_none_or(|l| l.lanes() > own_lanes) {
+                    on_grid[i] = false;
+                    left = true;
+                }
+            }
+            if !left {
+                return Ok(laid
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, l)| {
+                        if on_grid[i] {
+                            l
+                        } else {
+                            own[i].take().flatten()
+                        }
+                    })
+                    .collect());
+            }
+        }
+    }
+}
+
+/// The cells' bounding boxes, to find the cell holding a point.
+struct CellBoxes {
+    tree: rstar::RTree<
+        rstar::primitives::GeomWithData<rstar::primitives::Rectangle<[f64; 2]>, usize>,
+    >,
+}
+
+impl CellBoxes {
+    fn new(cells: &[Polygon<f64>]) -> CellBoxes {
+        use geo::BoundingRect;
+        let boxes = cells
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| {
+                let r = c.bounding_rect()?;
+                let rect = rstar::primitives::Rectangle::from_corners(
+                    [r.min().x, r.min().y],
+                    [r.max().x, r.max().y],
+                );
+                Some(rstar::primitives::GeomWithData::new(rect, i))
+            })
+            .collect();
+        CellBoxes {
+            tree: rstar::RTree::bulk_load(boxes),
+        }
+    }
+
+    /// The first cell (by index) that holds `p`, its boundary included.
+    fn cell_at(&self, cells: &[Polygon<f64>], p: Coord<f64>) -> Option<usize> {
+        use geo::Intersects;
+        self.tree
+            .locate_all_at_point(&[p.x, p.y])
+            .map(|g| g.data)
+            .filter(|&i| cells[i].intersects(&p))
+            .min()
+    }
 }
 
 /// A decomposition's fault as the survey reports it.
@@ -482,6 +715,84 @@ mod tests {
     }
 
     /// An L-shaped field with a square hole near its corner.
+    /// A cell between two no-fly zones whose lines on the grid miss it by
+    /// a few metres on both sides would fly two sliver lanes of its own
+    /// (4 in all) where it needs 3 laid on its own: it leaves the grid, the
+    /// others keep it, and the field is still covered.
+    #[test]
+    fn a_cell_leaves_the_grid_when_its_slivers_cost_a_lane() {
+        let hole = |x0: f64, x1: f64| {
+            geo_types::LineString::from(vec![
+                (x0, 30.0),
+                (x1, 30.0),
+                (x1, 70.0),
+                (x0, 70.0),
+                (x0, 30.0),
+            ])
+        };
+        let field = Polygon::new(
+            geo_types::LineString::from(vec![
+                (0.0, 0.0),
+                (200.0, 0.0),
+                (200.0, 100.0),
+                (0.0, 100.0),
+                (0.0, 0.0),
+            ]),
+            vec![hole(45.0, 75.0), hole(125.0, 155.0)],
+        );
+        let free = MultiPolygon(vec![field]);
+        let holes = MultiPolygon(vec![
+            Polygon::new(hole(45.0, 75.0), vec![]),
+            Polygon::new(hole(125.0, 155.0), vec![]),
+        ]);
+        let spacing = 20.0;
+        let obstacles = ObstacleMap::new(&holes, 0.0);
+        let free_space = coverage::FreeSpace::new(&free);
+        let prepared = decompose::PreparedFree::new(&free).unwrap();
+        let judge = Judge {
+            start: Coord { x: 0.0, y: -50.0 },
+            obstacles: &obstacles,
+            flyable: &free_space,
+            surveyed: &free,
+            footprint_side_m: spacing / 0.7,
+            spacing,
+        };
+        let search = GridSearch {
+            prepared: &prepared,
+            free: &free,
+            judge: &judge,
+            free_space: &free_space,
+        };
+        let cells = prepared.decompose(0.0).unwrap();
+        assert_eq!(cells.len(), 7);
+        let grid = coverage::LaneGrid::new(&free, spacing, 0.0).unwrap();
+        let boxes = CellBoxes::new(&cells);
+        let mut own: Vec<Option<Option<coverage::CellLayouts>>> =
+            (0..cells.len()).map(|_| None).collect();
+        let layouts = search.layouts_on(&grid, &cells, &boxes, &mut own).unwrap();
+        let plans: Vec<CellPlan> = layouts
+            .iter()
+            .zip(&cells)
+            .map(|(l, c)| l.as_ref().unwrap().best_plan(c, &free_space).unwrap())
+            .collect();
+        let between = cells
+            .iter()
+            .position(|c| {
+                let r = geo::BoundingRect::bounding_rect(c).unwrap();
+                (r.min().x - 75.0).abs() < 1e-6 && (r.max().x - 125.0).abs() < 1e-6
+            })
+            .unwrap();
+        // On the grid: lines 90 and 110, and slivers at 77.5 and 122.5
+        // (lines 70 and 130 run into the zones there).
+        assert_eq!(plans[between].lanes.len(), 3);
+        let lanes: usize = plans.iter().map(|p| p.lanes.len()).sum();
+        // 3 + 2 + 2 + 3 + 2 + 2 + 3: the outer cells fly their slivers
+        // against the zones, 42.5 and 157.5 m.
+        assert_eq!(lanes, 17);
+        let strips = judge.strip_coverage(&plans);
+        assert!(strips > 1.0 - 1e-5, "strips cover {strips}");
+    }
+
     fn l_field() -> MultiPolygon<f64> {
         let outer = polygon![
             (x: 0.0, y: 0.0), (x: 600.0, y: 0.0), (x: 600.0, y: 250.0),

@@ -69,9 +69,10 @@ pub(super) fn follow_terrain(
         .into_iter()
         .map(|p| {
             let joined = d.joined.get(p.cell_index).copied().unwrap_or(false);
-            if d.along_line || joined || crate::cancel::check().is_err() {
-                // A corridor's lanes, or a joined cell's (only they cover
-                // it whole); or cancelled, checked again below.
+            if d.along_line || d.on_grid || joined || crate::cancel::check().is_err() {
+                // A corridor's lanes, a joined cell's (only they cover it
+                // whole) or lanes on one grid (cells share their lines);
+                // or cancelled, checked again below.
                 return p;
             }
             let candidates = coverage::plan_cell_candidates_in(
