@@ -537,13 +537,12 @@ fn rss(pid: u32) -> (u64, u64) {
 /// the fault, stores nothing when refused, never panics the server nor
 /// grows its memory; a file stored reads back whole from its tiles. Its
 /// cells are compared with GDAL's read of the same bytes, and the files
-/// where they differ (gaps of the streamed reader, see the ignored test
-/// below) are printed.
+/// where they differ are printed (the test below requires there are none).
 #[test]
 fn hostile_geotiff_uploads_are_4xx_naming_the_fault_and_store_nothing() {
     let differ = fuzz_uploads();
     eprintln!(
-        "{} stored files differ from GDAL's read (see the ignored test):",
+        "{} stored files differ from GDAL's read (see the test below):",
         differ.len()
     );
     for d in &differ {
@@ -551,15 +550,12 @@ fn hostile_geotiff_uploads_are_4xx_naming_the_fault_and_store_nothing() {
     }
 }
 
-/// The hostile files the server stores read back as GDAL reads them.
-/// Fails today on gaps of `GeoTiffWindows` (planner-core
-/// terrain/geotiff/windows.rs): a chunk's byte count is not honoured (a
-/// count of 0 or 1 with a valid offset still decodes the whole chunk,
-/// where GDAL reads a sparse block or refuses), an IFD whose entry count
-/// runs past the file is read, and a strip that inflates to more rows
-/// than its width allows is taken. Run with `--run-ignored only`.
+/// The hostile files the server stores read back as GDAL reads them:
+/// the reader honours byte counts (a count of 0 is a sparse chunk, a
+/// Deflate chunk must end within its count with a valid checksum and
+/// inflate to the chunk's size), refuses an IFD of more than 4096 entries
+/// and ignores a `GDAL_NODATA` tag that is not text, as GDAL does.
 #[test]
-#[ignore = "gaps of the streamed GeoTIFF reader, reported for windows.rs"]
 fn hostile_geotiffs_the_server_stores_read_back_as_gdal_reads_them() {
     let differ = fuzz_uploads();
     assert!(

@@ -151,6 +151,9 @@ pub(super) struct Header {
     pub(super) first_chunk: u64,
     /// Rows the decoder produces for a chunk, at most (see `parse_header`).
     pub(super) decoded_rows: u64,
+    /// Deflate-compressed (Compression 8 or 32946): its chunks are checked
+    /// whole before they are decoded (see `deflate_check`).
+    pub(super) deflate: bool,
     pub(super) offsets: Vec<u64>,
     pub(super) byte_counts: Vec<u64>,
     pub(super) transform: GeoTransform,
@@ -162,6 +165,33 @@ pub(super) struct Header {
     pub(super) width_entry: Option<u64>,
     pub(super) le: bool,
     pub(super) big: bool,
+}
+
+impl Header {
+    /// Whether chunk `chunk` (its index in the offsets) is sparse: a byte
+    /// count of 0, whatever its offset, reads as nodata (0 if none), as
+    /// GDAL reads it.
+    pub(super) fn is_sparse(&self, chunk: usize) -> bool {
+        self.byte_counts.get(chunk) == Some(&0)
+    }
+
+    /// The bytes chunk row `cy`'s chunks hold decoded (a strip cut at the
+    /// bottom holds fewer rows), and the bytes of a whole chunk.
+    pub(super) fn chunk_bytes(&self, cy: u64) -> (u64, u64) {
+        let rows = if self.grid.tiled {
+            self.grid.ch
+        } else {
+            self.grid
+                .ch
+                .min(self.height.saturating_sub(cy.saturating_mul(self.grid.ch)))
+        };
+        let row = self
+            .grid
+            .cw
+            .saturating_mul(self.chunk_samples as u64)
+            .saturating_mul(self.sample.bytes());
+        (row.saturating_mul(rows), row.saturating_mul(self.grid.ch))
+    }
 }
 
 /// The header of page `page` (0-based) of a GeoTIFF, for reading band
@@ -211,7 +241,7 @@ pub(super) fn parse_header_of(
     let spp = ifd.uint(SAMPLES_PER_PIXEL, Some(1))?;
     let sample_index = sample_index(spp, band)?;
     let (sample, planar) = sample_layout(&ifd, spp)?;
-    check_compression(&ifd, sample)?;
+    let deflate = check_compression(&ifd, sample)?;
     let white_is_zero = white_is_zero(&ifd, sample, spp)?;
     let (grid, chunk_samples, planes, decoded_rows) = chunk_layout(
         &ifd,
@@ -239,6 +269,7 @@ pub(super) fn parse_header_of(
             0
         },
         decoded_rows,
+        deflate,
         offsets,
         byte_counts,
         transform,
@@ -314,8 +345,9 @@ fn sample_layout(ifd: &Ifd, spp: u64) -> Result<(SampleType, bool), TerrainError
     Ok((sample, planar))
 }
 
-/// Refuses compressions and predictors the decoder does not undo.
-fn check_compression(ifd: &Ifd, sample: SampleType) -> Result<(), TerrainError> {
+/// Refuses compressions and predictors the decoder does not undo; whether
+/// the page is Deflate-compressed.
+fn check_compression(ifd: &Ifd, sample: SampleType) -> Result<bool, TerrainError> {
     let compression = ifd.uint(COMPRESSION, Some(1))?;
     let compression_name = match compression {
         1 | 5 | 8 | 32946 | 32773 => None,
@@ -350,7 +382,7 @@ fn check_compression(ifd: &Ifd, sample: SampleType) -> Result<(), TerrainError> 
             )));
         }
     }
-    Ok(())
+    Ok(matches!(compression, 8 | 32946))
 }
 
 /// Whether the page is WhiteIsZero (else MinIsBlack; nothing else is an
@@ -503,9 +535,14 @@ fn georeferencing_and_units(
         Some(k) => k.epsg(),
         None => Err("the TIFF has no GeoKeyDirectory tag, so no coordinate system".to_string()),
     };
-    let nodata = ifd
-        .ascii(GDAL_NODATA)?
-        .map(|t| c_atof(t.split('\0').next().unwrap_or("")).0);
+    // libtiff reads GDAL_NODATA as ASCII, or as bytes taken for ASCII;
+    // GDAL ignores it when it has any other type.
+    let nodata = match ifd.entry(GDAL_NODATA) {
+        Some(e) if matches!(e.typ, 1 | 2 | 6 | 7) => ifd
+            .ascii(GDAL_NODATA)?
+            .map(|t| c_atof(t.split('\0').next().unwrap_or("")).0),
+        _ => None,
+    };
     // Heights in feet would be flown as metres: convert them.
     let vertical_scale = match keys.as_ref().and_then(|k| k.short(VERTICAL_UNITS)) {
         None | Some(9001) | Some(USER_DEFINED) => 1.0,

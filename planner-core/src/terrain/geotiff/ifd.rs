@@ -8,6 +8,18 @@ use super::tags::{
 };
 use crate::terrain::TerrainError;
 
+/// The most entries an IFD may have: libtiff refuses more ("Sanity check
+/// on directory count failed"), and so GDAL cannot open such a file.
+pub(super) const MAX_IFD_ENTRIES: u64 = 4096;
+
+/// The error for an IFD claiming `n` entries, more than [`MAX_IFD_ENTRIES`].
+pub(super) fn too_many_entries(ifd: u64, n: u64) -> TerrainError {
+    invalid(format!(
+        "the TIFF's image directory at offset {ifd} claims {n} entries, more than the \
+         {MAX_IFD_ENTRIES} a TIFF reader accepts: the file is corrupt"
+    ))
+}
+
 /// One IFD entry: where its `count` values of `typ` are in the file.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Entry {
@@ -134,6 +146,9 @@ impl<'a> TiffBytes<'a> {
             return Err(invalid(format!(
                 "the TIFF's image directory at offset {ifd} is empty"
             )));
+        }
+        if n > MAX_IFD_ENTRIES {
+            return Err(too_many_entries(ifd, n));
         }
         let table_end = n.checked_mul(entry_len).and_then(|l| l.checked_add(first));
         if table_end.is_none_or(|end| end > self.len()) {

@@ -19,7 +19,12 @@
 //!   and so are infinite ones (GDAL reads them as heights; no ground is
 //!   infinitely high, and an infinite height would poison every slope,
 //!   mean and hillshade computed over it);
-//! - sparse chunks (offset and byte count 0) read as nodata (0 if none).
+//! - sparse chunks (byte count 0, whatever the offset) read as nodata (0
+//!   if none);
+//! - a Deflate chunk must be one whole zlib stream within its byte count,
+//!   with a valid checksum, inflating to the chunk's size (`deflate_check`);
+//! - an IFD of more than 4096 entries is refused (libtiff's sanity check),
+//!   and a `GDAL_NODATA` tag of a type other than ASCII (or bytes) ignored.
 //!
 //! A DEM has one band; `read_geotiff_band` reads one band of a file with
 //! several through the same path: PlanarConfiguration 1 chunks hold every
@@ -38,6 +43,7 @@
 //! `read` (its pixels), `windows` (its pixels a window at a time), `raster` (what the writer is given), `write_ifd`
 //! (the writer's IFDs), `write` (the writer).
 
+mod deflate_check;
 mod geokeys;
 mod header;
 mod ifd;

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use tiff::TiffError;
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 
+use super::deflate_check::check_deflate_chunk;
 use super::header::{Header, NoDataMatch, parse_header};
 use super::{invalid, unsupported};
 use crate::terrain::common::resolve_crs;
@@ -242,7 +243,7 @@ fn decode_chunk_row(
         let (x0, cw) = (x0 as usize, cw as usize);
         let chunk = h.first_chunk + i;
         let idx = usize::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
-        if h.byte_counts.get(idx) == Some(&0) && h.offsets.get(idx) == Some(&0) {
+        if h.is_sparse(idx) {
             // Sparse chunk: GDAL reads nodata (or 0).
             for r in 0..ch {
                 let start = r * width + x0;
@@ -251,6 +252,13 @@ fn decode_chunk_row(
                 }
             }
             continue;
+        }
+        if h.deflate {
+            let file: &[u8] = dec.inner().get_ref();
+            let compressed = chunk_data(file, h, idx)?;
+            let (wanted, most) = h.chunk_bytes(cy);
+            check_deflate_chunk(compressed, wanted, most)
+                .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
         }
         let chunk_index =
             u32::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
@@ -274,6 +282,19 @@ fn decode_chunk_row(
         .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
     }
     Ok(())
+}
+
+/// The bytes of chunk `idx` (its index in the offsets), exactly its byte
+/// count (inside the file: checked by the header).
+fn chunk_data<'a>(bytes: &'a [u8], h: &Header, idx: usize) -> Result<&'a [u8], TerrainError> {
+    let (Some(&at), Some(&len)) = (h.offsets.get(idx), h.byte_counts.get(idx)) else {
+        return Err(invalid("the TIFF has too many chunks"));
+    };
+    usize::try_from(at)
+        .ok()
+        .zip(usize::try_from(len).ok())
+        .and_then(|(at, len)| bytes.get(at..at.checked_add(len)?))
+        .ok_or_else(|| invalid("a chunk of the TIFF lies outside the file"))
 }
 
 /// A copy of the file whose ImageWidth entry says `new_width` (as a LONG).

@@ -13,8 +13,10 @@ use std::sync::{Arc, Mutex};
 
 use tiff::decoder::{Decoder, Limits};
 
+use super::deflate_check::check_deflate_chunk;
 use super::header::{Header, NoDataMatch, SampleType, parse_header_of};
-use super::ifd::tiff_pieces;
+use super::ifd::too_many_entries;
+use super::ifd::{MAX_IFD_ENTRIES, tiff_pieces};
 use super::read::{put_chunk, tiff_error, width_entry};
 use super::tags::type_size;
 use super::{invalid, is_tiff, unsupported};
@@ -37,9 +39,6 @@ const CACHE_BYTES: usize = 16 << 20;
 /// The largest tag value read from the header (e.g. the offsets of
 /// 8 M chunks); larger ones are refused.
 const MAX_TAG_BYTES: u64 = 64 << 20;
-
-/// The most IFD entries read (a classic TIFF has at most 65 535).
-const MAX_IFD_ENTRIES: u64 = 65_535;
 
 /// A compressed chunk may hold at most this many times its decoded size
 /// (plus [`CHUNK_SLACK`]): LZW's worst case is 1.5×, Deflate's and
@@ -202,6 +201,7 @@ impl<R: ReadAt> GeoTiffWindows<R> {
             len: self.len,
             pos: 0,
             patch: self.width_patch.clone(),
+            chunk: None,
         };
         let inconsistent = || {
             invalid(format!(
@@ -282,19 +282,35 @@ impl<R: ReadAt> GeoTiffWindows<R> {
         let chunk = h.first_chunk + i;
         let idx = usize::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
         let mut cells = vec![0.0f64; cw * ch];
-        if h.byte_counts.get(idx) == Some(&0) && h.offsets.get(idx) == Some(&0) {
+        if h.is_sparse(idx) {
             // Sparse chunk: GDAL reads nodata (or 0).
             cells.fill(self.nodata_match.fill());
         } else {
             let chunk_index =
                 u32::try_from(chunk).map_err(|_| invalid("the TIFF has too many chunks"))?;
+            // A Deflate chunk is checked whole, then decoded from the bytes
+            // read for the check (not read twice).
+            let held = if h.deflate {
+                let (Some(&at), Some(&count)) = (h.offsets.get(idx), h.byte_counts.get(idx)) else {
+                    return Err(invalid("the TIFF has too many chunks"));
+                };
+                let compressed = read_piece(&*self.file, at, count, self.len)?;
+                let (wanted, most) = h.chunk_bytes(cy);
+                check_deflate_chunk(&compressed, wanted, most)
+                    .map_err(|e| invalid(format!("{} {i} of {n}: {e}", h.grid.kind())))?;
+                Some((at, compressed))
+            } else {
+                None
+            };
             let mut dec = self.take_decoder()?;
+            dec.inner().get_mut().chunk = held;
             let decoded = catch_unwind(AssertUnwindSafe(|| {
                 dec.read_chunk(chunk_index).map_err(|e| {
                     let e = tiff_error(e);
                     invalid(format!("{} {i} of {n}: {e}", h.grid.kind()))
                 })
             }));
+            dec.inner().get_mut().chunk = None;
             let res = match decoded {
                 Ok(r) => r?,
                 Err(_) => {
@@ -489,9 +505,7 @@ fn read_header_pieces(
         }
         .ok_or_else(|| view.ifd_outside(ifd))?;
         if n > MAX_IFD_ENTRIES {
-            return Err(invalid(format!(
-                "the TIFF's image directory at offset {ifd} claims {n} entries"
-            )));
+            return Err(too_many_entries(ifd, n));
         }
         let table = count_len + n * entry_len + ptr_len;
         if view.slice(ifd, table).is_none() {
@@ -543,6 +557,9 @@ struct FileReader<R> {
     len: u64,
     pos: u64,
     patch: Option<Arc<(u64, Vec<u8>)>>,
+    /// The chunk being decoded, already read (its offset and bytes):
+    /// reads inside it are served from it.
+    chunk: Option<(u64, Vec<u8>)>,
 }
 
 impl<R: ReadAt> Read for FileReader<R> {
@@ -552,7 +569,18 @@ impl<R: ReadAt> Read for FileReader<R> {
         if want == 0 {
             return Ok(0);
         }
-        let n = self.file.read_at(self.pos, &mut buf[..want])?;
+        let held = self.chunk.as_ref().and_then(|(at, bytes)| {
+            let start = usize::try_from(self.pos.checked_sub(*at)?).ok()?;
+            bytes.get(start..).filter(|rest| !rest.is_empty())
+        });
+        let n = match held {
+            Some(rest) => {
+                let n = want.min(rest.len());
+                buf[..n].copy_from_slice(&rest[..n]);
+                n
+            }
+            None => self.file.read_at(self.pos, &mut buf[..want])?,
+        };
         if let Some(patch) = &self.patch {
             let (at, bytes) = (patch.0, &patch.1);
             let (a, b) = (self.pos, self.pos + n as u64);

@@ -863,8 +863,16 @@ fn hostile_ifds() {
     );
     // Entry count beyond the file.
     let mut b = good.clone();
-    b[ifd..ifd + 2].copy_from_slice(&u16::MAX.to_le_bytes());
+    b[ifd..ifd + 2].copy_from_slice(&4000u16.to_le_bytes());
     assert!(read(&b).unwrap_err().to_string().contains("past the end"));
+    // More entries than libtiff reads (4096).
+    let mut b = good.clone();
+    b[ifd..ifd + 2].copy_from_slice(&u16::MAX.to_le_bytes());
+    let e = read(&b).unwrap_err().to_string();
+    assert!(
+        e.contains("claims 65535 entries, more than the 4096"),
+        "{e}"
+    );
     // A tag whose count overflows and one whose values lie outside.
     for count in [u32::MAX, 1 << 30] {
         let b = Builder::image(2, 1, 2, 16)

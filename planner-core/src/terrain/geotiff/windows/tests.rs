@@ -521,6 +521,16 @@ fn hostile_headers_are_errors_without_large_allocations() {
                 b[at..at + 2].copy_from_slice(&u16::MAX.to_le_bytes());
                 b
             },
+            "claims 65535 entries, more than the 4096",
+        ),
+        (
+            "an IFD whose entries run past the end",
+            {
+                let mut b = base().build();
+                let at = u32::from_le_bytes(b[4..8].try_into().unwrap()) as usize;
+                b[at..at + 2].copy_from_slice(&4000u16.to_le_bytes());
+                b
+            },
             "truncated",
         ),
         ("not a TIFF", b"GIF89a and more".to_vec(), "not a TIFF file"),
