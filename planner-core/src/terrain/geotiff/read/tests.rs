@@ -1430,3 +1430,150 @@ fn costmap_written_by_our_writer_round_trips() {
         let _ = read_geotiff_page_band(&bad, 2, 1, None, &limits);
     }
 }
+
+// ---- Hostile files GDAL reads in its own way (the gaps found by the
+// e2e dem_fuzz test): both readers must read them as GDAL does, or refuse. ----
+
+/// What GDAL does with a hand-made file: the cells it reads (nodata
+/// `NaN`), or the refusal the reader must give (a part of its message).
+pub(in crate::terrain::geotiff) enum GdalReads {
+    Cells(Vec<f64>),
+    Refused(&'static str),
+}
+
+fn zlib(data: &[u8], level: flate2::Compression) -> Vec<u8> {
+    use std::io::Write;
+    let mut e = flate2::write::ZlibEncoder::new(Vec::new(), level);
+    e.write_all(data).unwrap();
+    e.finish().unwrap()
+}
+
+/// One hand-made Int16 file per gap, with what GDAL reads of it.
+pub(in crate::terrain::geotiff) fn gdal_gap_cases() -> Vec<(&'static str, Vec<u8>, GdalReads)> {
+    let nan = f64::NAN;
+    let deflate = |rows: &[i16]| zlib(&i16_le(rows), flate2::Compression::default());
+    let deflated = || {
+        Builder::image(2, 2, 2, 16)
+            .tag(COMPRESSION, V::Short(vec![8]))
+            .tag(GDAL_NODATA, V::Ascii("-1"))
+    };
+    // Noise over a stored (uncompressed) Deflate block's bytes: the stream
+    // still inflates to the strip's size, only its checksum tells.
+    let mut noisy = zlib(&i16_le(&[6, 7]), flate2::Compression::none());
+    noisy[8] ^= 0x5A;
+    vec![
+        (
+            "a byte count of 0 with a real offset is a sparse strip",
+            Builder::image(2, 2, 2, 16)
+                .tag(GDAL_NODATA, V::Ascii("-1"))
+                .strips(1, vec![i16_le(&[4, 5]), i16_le(&[6, 7])])
+                .tag(STRIP_BYTE_COUNTS, V::Long(vec![4, 0]))
+                .build(),
+            GdalReads::Cells(vec![4.0, 5.0, nan, nan]),
+        ),
+        (
+            "a byte count of 0 with a real offset is a sparse tile, 0 without nodata",
+            Builder::image(2, 2, 2, 16)
+                .tiles(16, 16, vec![i16_le(&[9; 256]); 1])
+                .tag(TILE_BYTE_COUNTS, V::Long(vec![0]))
+                .build(),
+            GdalReads::Cells(vec![0.0; 4]),
+        ),
+        (
+            "a Deflate strip's byte count of 1 cuts its stream",
+            {
+                let chunks = vec![deflate(&[4, 5]), deflate(&[6, 7])];
+                let first = chunks[0].len() as u32;
+                deflated()
+                    .strips(1, chunks)
+                    .tag(STRIP_BYTE_COUNTS, V::Long(vec![first, 1]))
+                    .build()
+            },
+            GdalReads::Refused("strip 1 of 2: its Deflate data"),
+        ),
+        (
+            "a Deflate tile's byte count of 2 cuts its stream",
+            Builder::image(2, 2, 2, 16)
+                .tag(COMPRESSION, V::Short(vec![8]))
+                .tiles(16, 16, vec![deflate(&[3; 256])])
+                .tag(TILE_BYTE_COUNTS, V::Long(vec![2]))
+                .build(),
+            GdalReads::Refused("tile 0 of 1: its Deflate data ends early"),
+        ),
+        (
+            "a width lowered by one on predictor-2 Deflate strips",
+            // Strips written 3 cells wide, the header says 2.
+            deflated()
+                .tag(PREDICTOR, V::Short(vec![2]))
+                .strips(1, vec![deflate(&[4, 1, 1]), deflate(&[6, 1, 1])])
+                .build(),
+            GdalReads::Refused("inflates to more than the 4 bytes it holds"),
+        ),
+        (
+            "noise in Deflate data that still inflates",
+            deflated().strips(1, vec![deflate(&[4, 5]), noisy]).build(),
+            GdalReads::Refused("strip 1 of 2: its Deflate data is corrupt"),
+        ),
+        (
+            "a Deflate strip that inflates short",
+            deflated()
+                .strips(1, vec![deflate(&[4, 5]), deflate(&[6])])
+                .build(),
+            GdalReads::Refused("inflates to 2 bytes, fewer than the 4"),
+        ),
+        (
+            "a GDAL_NODATA tag of type SHORT is ignored",
+            Builder::image(2, 1, 2, 16)
+                .tag(GDAL_NODATA, V::Raw(3, 1, (-9999i16).to_le_bytes().to_vec()))
+                .strips(1, vec![i16_le(&[-9999, 5])])
+                .build(),
+            GdalReads::Cells(vec![-9999.0, 5.0]),
+        ),
+        (
+            "a GDAL_NODATA tag of type BYTE is read as text",
+            Builder::image(2, 1, 2, 16)
+                .tag(GDAL_NODATA, V::Raw(1, 4, b"-99\0".to_vec()))
+                .strips(1, vec![i16_le(&[-99, 5])])
+                .build(),
+            GdalReads::Cells(vec![nan, 5.0]),
+        ),
+        (
+            "valid Deflate strips, the last one cut at the bottom",
+            Builder::image(2, 3, 2, 16)
+                .tag(COMPRESSION, V::Short(vec![8]))
+                .tag(PREDICTOR, V::Short(vec![2]))
+                .strips(2, vec![deflate(&[4, 1, 6, 1]), deflate(&[8, 1])])
+                .build(),
+            GdalReads::Cells(vec![4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
+        ),
+    ]
+}
+
+/// `got` (a reader's answer) is what GDAL reads, `want`.
+pub(in crate::terrain::geotiff) fn assert_read_as_gdal(
+    what: &str,
+    got: Result<Vec<f64>, TerrainError>,
+    want: &GdalReads,
+) {
+    match (got, want) {
+        (Ok(cells), GdalReads::Cells(want)) => {
+            assert_eq!(cells.len(), want.len(), "{what}");
+            for (a, b) in cells.iter().zip(want) {
+                assert!(a == b || (a.is_nan() && b.is_nan()), "{what}: {cells:?}");
+            }
+        }
+        (Err(e), GdalReads::Refused(says)) => {
+            assert!(matches!(e, TerrainError::Invalid(_)), "{what}: {e}");
+            assert!(e.to_string().contains(says), "{what}: {e}");
+        }
+        (Ok(cells), GdalReads::Refused(says)) => panic!("{what}: read {cells:?}, not {says}"),
+        (Err(e), GdalReads::Cells(_)) => panic!("{what}: {e}"),
+    }
+}
+
+#[test]
+fn hostile_files_read_as_gdal_reads_them_or_are_refused() {
+    for (what, bytes, want) in gdal_gap_cases() {
+        assert_read_as_gdal(what, read(&bytes).map(|d| d.values), &want);
+    }
+}

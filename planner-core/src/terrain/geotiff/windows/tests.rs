@@ -610,3 +610,16 @@ fn the_cache_keeps_at_most_its_budget_and_the_newest_chunk() {
     assert!(c.get(9).is_none());
     assert!(c.get(100).is_some());
 }
+
+#[test]
+fn hostile_files_read_as_gdal_reads_them_or_are_refused() {
+    use crate::terrain::geotiff::read::tests::{assert_read_as_gdal, gdal_gap_cases};
+    for (what, bytes, want) in gdal_gap_cases() {
+        let got = open_bytes_band(&bytes, None, Some(32633)).and_then(|w| {
+            let (gw, gh) = (w.grid().width, w.grid().height);
+            let mut out = vec![0.0; gw * gh];
+            w.read_window(0, 0, gw, gh, &mut out).map(|()| out)
+        });
+        assert_read_as_gdal(what, got, &want);
+    }
+}
