@@ -481,10 +481,17 @@ fn a_large_download_is_streamed() {
 #[test]
 fn a_dem_over_the_memory_budget_is_stored_and_served_by_tiles() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::start(
-        dir.path(),
-        &["--max-dem-pixels", "900000000", "--memory-budget-mb", "400"],
-    );
+    // Costmaps are built whole up to 900 M cells here: this one would be,
+    // and does not fit.
+    let whole_only = [
+        "--max-dem-pixels",
+        "900000000",
+        "--memory-budget-mb",
+        "400",
+        "--costmap-tile-cells",
+        "900000000",
+    ];
+    let server = Server::start(dir.path(), &whole_only);
     let work = tempfile::tempdir().unwrap();
     let file = resampled(
         &shared_data("dems/opengeos_data__elevation_dtm.tif"),
@@ -517,6 +524,24 @@ fn a_dem_over_the_memory_budget_is_stored_and_served_by_tiles() {
         p["detail"].as_str().unwrap().contains("9000 × 9000 pixels"),
         "{p}"
     );
+    assert_eq!(get(&server.url("/healthz")).status, 200);
+
+    // With the default --costmap-tile-cells (64 M) the same costmap is
+    // built as tiles, a tile's room at a time: accepted. (Deleted at once:
+    // building 81 M cells takes minutes in a debug build.)
+    drop(server);
+    let server = Server::start(
+        dir.path(),
+        &["--max-dem-pixels", "900000000", "--memory-budget-mb", "400"],
+    );
+    let r = terraplan_e2e::post_json(
+        &server.url("/api/v1/costmaps"),
+        &serde_json::json!({"dem_id": id}),
+    );
+    assert_eq!(r.status, 202, "{}", r.text());
+    let costmap = r.json()["id"].as_str().unwrap().to_string();
+    let r = terraplan_e2e::delete(&server.url(&format!("/api/v1/costmaps/{costmap}")));
+    assert_eq!(r.status, 204, "{}", r.text());
     assert_eq!(get(&server.url("/healthz")).status, 200);
 }
 

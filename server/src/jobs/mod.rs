@@ -18,3 +18,4 @@ pub use record::{
 };
 pub use runner::{CostmapJobs, MIN_LEASE};
 pub use tiles::TileSettings;
+pub use tiles::context::dem_source;

@@ -139,6 +139,11 @@ impl CostmapJobs {
         &self.dems.db
     }
 
+    /// When costmaps are built as tiles, and their tiles' side.
+    pub fn tile_settings(&self) -> TileSettings {
+        self.tile_settings
+    }
+
     /// This process' name as a job holder.
     pub fn instance(&self) -> &str {
         &self.instance

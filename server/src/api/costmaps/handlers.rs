@@ -7,7 +7,9 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use planner_core::costmap::pipeline::check_against_dem;
 use planner_core::geo::Issue;
+use planner_core::terrain::Dem;
 use serde::Serialize;
+use std::sync::Arc;
 
 use super::model::{CostmapList, CostmapResponse, CreateCostmap, response};
 use super::request::{landcover_crs_fault, parse_request};
@@ -69,10 +71,13 @@ pub async fn create_costmap(
     visible_dem(&state, &caller, &req.dem_id, Role::Viewer)
         .await
         .map_err(|e| dem_fault(e, "/dem_id", &req.dem_id))?;
-    let dem = state
-        .load_dem(&req.dem_id)
+    // The DEM's grid, never its heights: a DEM stored as tiles is not
+    // read here (a 30 000² DEM's heights are 7 GB), the checks need only
+    // its size, georeferencing and CRS.
+    let source = crate::jobs::dem_source(&state.dem_loader(), &req.dem_id)
         .await
         .map_err(|e| dem_fault(e, "/dem_id", &req.dem_id))?;
+    let dem = Arc::new(grid_shell(source.grid()));
     let mut issues = Vec::new();
     if let Some(l) = &req.options.landcover {
         // Loaded (and cached for the job) to check its CRS against the
@@ -102,13 +107,28 @@ pub async fn create_costmap(
         &req.options,
         "/options",
     ));
-    // A build that alone needs more than the memory budget never runs.
+    // A build that alone needs more than the memory budget never runs; a
+    // costmap built as tiles needs a tile's room at a time (each tile job
+    // checks its own), so only a whole build is checked here.
     let layers = req.options.layers.len() as u64 + u64::from(req.options.landcover.is_some());
     let (w, h) = (dem.width as u64, dem.height as u64);
     let what = format!("a costmap of DEM {} ({w} × {h} pixels)", req.dem_id);
-    if let Err(e) = state
-        .memory
-        .check(costmap_build_bytes(w.saturating_mul(h), layers), &what)
+    let tiles = state.costmaps.tile_settings();
+    let tiled = planner_core::costmap::TilePlan::new(
+        source.grid(),
+        &req.vehicle,
+        &req.options,
+        None,
+        tiles.side,
+    )
+    .is_ok_and(|plan| {
+        let layout = plan.layout();
+        (layout.width as u64).saturating_mul(layout.height as u64) > tiles.cells
+    });
+    if !tiled
+        && let Err(e) = state
+            .memory
+            .check(costmap_build_bytes(w.saturating_mul(h), layers), &what)
     {
         issues.push(Issue::new("/dem_id", &e.to_string()));
     }
@@ -250,4 +270,18 @@ pub async fn delete_costmap(
     // row is gone at its next stage and stops.
     state.costmaps.cancel(&id);
     deleted(gone, "costmap", &id)
+}
+
+/// A [`Dem`] of `grid`'s size and georeferencing without heights: what the
+/// request's checks read.
+fn grid_shell(grid: &planner_core::terrain::RasterGrid) -> Dem {
+    Dem {
+        width: grid.width,
+        height: grid.height,
+        values: Vec::new(),
+        nodata: grid.nodata,
+        transform: grid.transform,
+        crs: grid.crs.clone(),
+        format: planner_core::terrain::DemFormat::GeoTiff,
+    }
 }

@@ -18,7 +18,7 @@
 //! back, queued and not counted, and tells the others.
 
 mod codec;
-pub(super) mod context;
+pub(crate) mod context;
 mod finish;
 mod stages;
 
