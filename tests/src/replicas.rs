@@ -592,3 +592,15 @@ mod tests {
         assert_eq!(with_database("postgres://h", "x"), "postgres://h/x");
     }
 }
+
+/// The first admin's API token, which the first replica on an empty
+/// database prints (waiting up to `wait` for it).
+pub fn first_token(wait: Duration, r: &Replica) -> String {
+    wait_until(wait, "the first start's token", || {
+        r.stdout_lines().iter().find_map(|l| {
+            l.split("Bearer ")
+                .nth(1)
+                .map(|t| t.trim_end_matches('"').trim().to_string())
+        })
+    })
+}

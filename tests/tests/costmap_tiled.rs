@@ -13,51 +13,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use terraplan_e2e::{GDAL_PYTHON, shared_data, terraplan, text};
-
-/// Compares one raster of each output with GDAL: size, geotransform, CRS,
-/// nodata, description, unit, metadata, data type and every value (NaN
-/// where NaN); the second in blocks of `tile` (unless 0). Prints the cells
-/// compared. One pair per process: GDAL 3.6's Python bindings crashed
-/// (SIGSEGV) reading the 10th of 10 datasets opened in one script, the
-/// whole-raster files compared with themselves too.
-const COMPARE: &str = r#"
-import sys, math
-import numpy as np
-from osgeo import gdal
-gdal.UseExceptions()
-pa, pb, tile = sys.argv[1], sys.argv[2], int(sys.argv[3])
-a = gdal.Open(pa)
-b = gdal.Open(pb)
-ba, bb = a.GetRasterBand(1), b.GetRasterBand(1)
-assert (a.RasterXSize, a.RasterYSize) == (b.RasterXSize, b.RasterYSize)
-assert a.GetGeoTransform() == b.GetGeoTransform()
-assert a.GetProjection() == b.GetProjection()
-assert tile == 0 or bb.GetBlockSize() == [tile, tile], bb.GetBlockSize()
-for f in ("GetNoDataValue", "GetDescription", "GetUnitType", "GetMetadata"):
-    va, vb = getattr(ba, f)(), getattr(bb, f)()
-    same = va == vb or (isinstance(va, float) and math.isnan(va) and math.isnan(vb))
-    assert same, (f, va, vb)
-assert ba.DataType == bb.DataType
-xa, xb = ba.ReadAsArray(), bb.ReadAsArray()
-assert np.array_equal(xa, xb, equal_nan=xa.dtype.kind == "f")
-print(xa.size)
-"#;
-
-/// [`COMPARE`] of `a` and `b`; the cells compared.
-fn gdal_same(a: &str, b: &str, tile: usize) -> u64 {
-    let o = Command::new(GDAL_PYTHON)
-        .args(["-c", COMPARE, a, b, &tile.to_string()])
-        .output()
-        .expect("run python3");
-    assert!(
-        o.status.success(),
-        "{a} vs {b}: {}{}",
-        text(&o.stdout),
-        text(&o.stderr)
-    );
-    text(&o.stdout).trim().parse().unwrap()
-}
+use terraplan_e2e::replicas::gdal_same_raster;
+use terraplan_e2e::{shared_data, terraplan, text};
 
 fn run(dem: &Path, extra: &[&str], out: &Path) {
     let mut args = vec![
@@ -111,7 +68,7 @@ fn tiled_equals_whole(dem: &str, crs: Option<&str>, tile: usize) {
     }
     let mut cells = 0;
     for f in &files {
-        cells += gdal_same(&f.replace("{}", &w), &f.replace("{}", &t), tile);
+        cells += gdal_same_raster(&f.replace("{}", &w), &f.replace("{}", &t), tile);
     }
     // gdal_translate reads the tiled file and writes the same values.
     let copy = dir.path().join("copy.tif");
@@ -121,7 +78,7 @@ fn tiled_equals_whole(dem: &str, crs: Option<&str>, tile: usize) {
         .output()
         .expect("run gdal_translate");
     assert!(o.status.success(), "{}", text(&o.stderr));
-    gdal_same(&format!("{w}/costmap.tif"), copy.to_str().unwrap(), 0);
+    gdal_same_raster(&format!("{w}/costmap.tif"), copy.to_str().unwrap(), 0);
     // The same statistics (the mean but for the order of its sum), the
     // same preview.
     let (mw, mt) = (

@@ -26,7 +26,7 @@ use std::time::Duration;
 
 use serde_json::{Value, json};
 use terraplan_e2e::replicas::{
-    EventClient, Replica, Role, TestDatabase, logged_anywhere, wait_until,
+    EventClient, Replica, Role, TestDatabase, first_token, logged_anywhere, wait_until,
 };
 use terraplan_e2e::{dtm, example_survey_request, get, post, post_json};
 
@@ -61,18 +61,6 @@ fn start(name: &str, role: Role, db: &TestDatabase, token: Option<&str>) -> Repl
         r.use_token(token);
     }
     r
-}
-
-/// The first admin's API token, which the first replica on an empty
-/// database prints.
-fn first_token(r: &Replica) -> String {
-    wait_until(WAIT, "the first start's token", || {
-        r.stdout_lines().iter().find_map(|l| {
-            l.split("Bearer ")
-                .nth(1)
-                .map(|t| t.trim_end_matches('"').trim().to_string())
-        })
-    })
 }
 
 fn job(r: &Replica, id: &str) -> Value {
@@ -220,7 +208,7 @@ fn replicas_survive_each_other() {
         return;
     };
     let mut r1 = start("r1", Role::Serve, &db, None);
-    let token = first_token(&r1);
+    let token = first_token(WAIT, &r1);
     r1.use_token(&token);
     let mut r2 = start("r2", Role::Serve, &db, Some(&token));
     let mut r3 = start("r3", Role::Serve, &db, Some(&token));

@@ -27,7 +27,7 @@ use std::time::Duration;
 use serde_json::{Value, json};
 use terraplan_e2e::replicas::{
     EventClient, Replica, Role, TestDatabase, assert_same_costmap_files, costmap_content,
-    download_costmap_files, logged_anywhere, wait_until,
+    download_costmap_files, first_token, logged_anywhere, wait_until,
 };
 use terraplan_e2e::{dtm, get, post, post_json};
 
@@ -63,18 +63,6 @@ fn start(name: &str, role: Role, db: &TestDatabase, token: Option<&str>) -> Repl
         r.use_token(token);
     }
     r
-}
-
-/// The first admin's API token, which the first replica on an empty
-/// database prints.
-fn first_token(r: &Replica) -> String {
-    wait_until(WAIT, "the first start's token", || {
-        r.stdout_lines().iter().find_map(|l| {
-            l.split("Bearer ")
-                .nth(1)
-                .map(|t| t.trim_end_matches('"').trim().to_string())
-        })
-    })
 }
 
 fn upload(r: &Replica) -> String {
@@ -157,11 +145,11 @@ fn replicas_and_a_worker_build_one_tiled_costmap_together() {
     };
     // The reference: the same request built whole, on another database.
     let whole = Replica::start("whole", Role::Serve, &whole_db.url, &[]);
-    whole.use_token(&first_token(&whole));
+    whole.use_token(&first_token(WAIT, &whole));
     let whole_id = post_costmap(&whole, &upload(&whole));
 
     let r1 = start("r1", Role::Serve, &db, None);
-    let token = first_token(&r1);
+    let token = first_token(WAIT, &r1);
     r1.use_token(&token);
     let mut r2 = start("r2", Role::Serve, &db, Some(&token));
     let mut r3 = start("r3", Role::Serve, &db, Some(&token));
