@@ -575,6 +575,18 @@ pub fn costmap_content(map: &serde_json::Value) -> serde_json::Value {
     m
 }
 
+/// The first admin's API token, which the first replica on an empty
+/// database prints (waiting up to `wait` for it).
+pub fn first_token(wait: Duration, r: &Replica) -> String {
+    wait_until(wait, "the first start's token", || {
+        r.stdout_lines().iter().find_map(|l| {
+            l.split("Bearer ")
+                .nth(1)
+                .map(|t| t.trim_end_matches('"').trim().to_string())
+        })
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -591,16 +603,4 @@ mod tests {
         );
         assert_eq!(with_database("postgres://h", "x"), "postgres://h/x");
     }
-}
-
-/// The first admin's API token, which the first replica on an empty
-/// database prints (waiting up to `wait` for it).
-pub fn first_token(wait: Duration, r: &Replica) -> String {
-    wait_until(wait, "the first start's token", || {
-        r.stdout_lines().iter().find_map(|l| {
-            l.split("Bearer ")
-                .nth(1)
-                .map(|t| t.trim_end_matches('"').trim().to_string())
-        })
-    })
 }
