@@ -79,6 +79,7 @@ pub async fn create_costmap(
         .map_err(|e| dem_fault(e, "/dem_id", &req.dem_id))?;
     let dem = Arc::new(grid_shell(source.grid()));
     let mut issues = Vec::new();
+    let mut landcover = None;
     if let Some(l) = &req.options.landcover {
         // Loaded (and cached for the job) to check its CRS against the
         // DEM's now rather than fail the job later.
@@ -87,7 +88,10 @@ pub async fn create_costmap(
             Err(e) => Err(e),
         };
         match loaded {
-            Ok(landcover) => issues.extend(landcover_crs_fault(&dem, landcover).await?),
+            Ok(raster) => {
+                issues.extend(landcover_crs_fault(&dem, raster.clone()).await?);
+                landcover = Some(raster);
+            }
             Err(ApiError::NotFound(_)) => issues.push(Issue::new(
                 "/options/landcover/source",
                 &format!(
@@ -118,7 +122,7 @@ pub async fn create_costmap(
         source.grid(),
         &req.vehicle,
         &req.options,
-        None,
+        landcover.as_deref(),
         tiles.side,
     )
     .is_ok_and(|plan| {
